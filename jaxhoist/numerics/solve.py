@@ -1,0 +1,242 @@
+"""`simulate`: validate on the host, then one `eqx.filter_jit` core that solves the elastic model with
+diffrax and evaluates every output at the saved times."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from jaxtyping import Array, Float, Int
+
+from .._errors import ScenarioError, SolveStatus, require_x64
+from ..physics import energy as energy_mod
+from ..physics import kinematics
+from ..physics.elastic import Constants, State, snapshot, vector_field
+from ..physics.energy import Energy
+from ..physics.equilibrium import initial_state
+from ..physics.params import Scenario
+
+
+class Trajectory(eqx.Module):
+    """The outputs of one solve at the saved times `ts` (leading axis n_t; in a vmap, a batch axis first).
+
+    - `ts`: saved times [s].
+    - `position`, `velocity`: mass centre C in world axes [m], [m/s].
+    - `euler`: (φ, ψ, ϑ) [rad], R = R_Z(ψ) R_Y(ϑ) R_X(φ); φ and ψ unwrapped along time.
+    - `angular_velocity`: ω in body axes ξηζ [rad/s].
+    - `corners`: D, E, F, H in world axes [m], shape (n_t, 4, 3).
+    - `normal_forces`: N_i [N], (n_t, 4); `friction_forces`: T_i in world axes [N], (n_t, 4, 3).
+    - `ground_reaction`: R = Σ N_i [N]; `rope_tension`: S [N].
+    - `tip_position`: boom tip A [m].
+    - `energy`: `Energy` terms [J]; `hoist_work`, `damping_loss`, `friction_work`: accumulated [J].
+    - `states`: the raw `State` at each saved time.
+    - `status`: a `SolveStatus` code (0 = ok); `num_accepted_steps`, `num_rejected_steps`.
+    """
+
+    ts: Float[Array, " n_t"]
+    position: Float[Array, "n_t 3"]
+    velocity: Float[Array, "n_t 3"]
+    euler: Float[Array, "n_t 3"]
+    angular_velocity: Float[Array, "n_t 3"]
+    corners: Float[Array, "n_t 4 3"]
+    normal_forces: Float[Array, "n_t 4"]
+    friction_forces: Float[Array, "n_t 4 3"]
+    ground_reaction: Float[Array, " n_t"]
+    rope_tension: Float[Array, " n_t"]
+    tip_position: Float[Array, "n_t 3"]
+    energy: Energy
+    hoist_work: Float[Array, " n_t"]
+    damping_loss: Float[Array, " n_t"]
+    friction_work: Float[Array, " n_t"]
+    states: State
+    status: Int[Array, ""]
+    num_accepted_steps: Int[Array, ""]
+    num_rejected_steps: Int[Array, ""]
+
+    @property
+    def ok(self):
+        """True where the solve reached t1 with a finite state."""
+        return self.status == SolveStatus.OK
+
+    def energy_residual(self) -> Float[Array, " n_t"]:
+        """E(t) - E(0) - [W_hoist - D_damping - W_friction](t) [J]: zero up to the solver error."""
+        e = self.energy
+        mech = e.kinetic + e.potential + e.ground_spring + e.rope_spring + e.boom_spring
+        supplied = self.hoist_work - self.damping_loss - self.friction_work
+        return (mech - mech[..., :1]) - (supplied - supplied[..., :1])
+
+
+@dataclasses.dataclass(frozen=True)
+class SolverOptions:
+    """Numerical settings (static: a change recompiles).
+
+    - `solver`: a diffrax solver (default Tsit5).
+    - `rtol`, `atol`: tolerances of the adaptive step-size controller; `dt0`: first step [s] (None: automatic).
+    - `max_steps`: the step budget; reaching it is reported as `SolveStatus.MAX_STEPS`.
+    - `adjoint`: "reverse" (checkpointed, for `jax.grad`) or "forward" (for `jax.jacfwd`, cheaper).
+    """
+
+    solver: diffrax.AbstractSolver = dataclasses.field(default_factory=diffrax.Tsit5)
+    rtol: float = 1e-6
+    atol: float = 1e-8
+    dt0: float | None = None
+    max_steps: int = 200_000
+    adjoint: str = "reverse"
+
+    def __post_init__(self):
+        for name in ("rtol", "atol"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ScenarioError(f"solver option {name} must be a positive number, got {v}")
+        if self.dt0 is not None and not (np.isfinite(self.dt0) and self.dt0 > 0):
+            raise ScenarioError(f"solver option dt0 must be a positive time [s] or None, got {self.dt0}")
+        if int(self.max_steps) < 1:
+            raise ScenarioError(f"solver option max_steps must be >= 1, got {self.max_steps}")
+        if self.adjoint not in ("reverse", "forward"):
+            raise ScenarioError(f"solver option adjoint must be 'reverse' or 'forward', got {self.adjoint!r}")
+
+
+def _adjoint(name: str) -> diffrax.AbstractAdjoint:
+    return diffrax.ForwardMode() if name == "forward" else diffrax.RecursiveCheckpointAdjoint()
+
+
+def _status(result, y1: State) -> Int[Array, ""]:
+    finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(y1)]))
+    return jnp.where(
+        result == diffrax.RESULTS.successful,
+        jnp.where(finite, SolveStatus.OK, SolveStatus.NONFINITE),
+        jnp.where(result == diffrax.RESULTS.max_steps_reached, SolveStatus.MAX_STEPS, SolveStatus.SOLVER_FAILED),
+    ).astype(jnp.int32)
+
+
+def outputs(ts, ys: State, scenario: Scenario, c: Constants, status, stats) -> Trajectory:
+    """Evaluate every output at the saved states."""
+
+    def one(t, y):
+        snap = snapshot(t, y, scenario, c)
+        return snap, energy_mod.energy(y, snap, scenario, c)
+
+    snaps, energies = jax.vmap(one)(ts, ys)
+    euler = jax.vmap(kinematics.matrix_to_euler)(snaps.rotation)
+    euler = euler.at[:, :2].set(jnp.unwrap(euler[:, :2], axis=0))
+    return Trajectory(
+        ts=ts,
+        position=ys.position,
+        velocity=ys.velocity,
+        euler=euler,
+        angular_velocity=ys.angular_velocity,
+        corners=snaps.corners,
+        normal_forces=snaps.normal,
+        friction_forces=snaps.friction,
+        ground_reaction=jnp.sum(snaps.normal, axis=-1),
+        rope_tension=snaps.rope_tension,
+        tip_position=ys.tip_position,
+        energy=energies,
+        hoist_work=ys.hoist_work,
+        damping_loss=ys.damping_loss,
+        friction_work=ys.friction_work,
+        states=ys,
+        status=status,
+        num_accepted_steps=stats["num_accepted_steps"],
+        num_rejected_steps=stats["num_rejected_steps"],
+    )
+
+
+def solve(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOptions) -> Trajectory:
+    """The traceable core: initial state, one diffeqsolve with `throw=False`, outputs. Never raises."""
+    y0, c = initial_state(scenario)
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(vector_field),
+        options.solver,
+        t0=ts[0] * 0.0,
+        t1=ts[-1],
+        dt0=options.dt0,
+        y0=y0,
+        args=(scenario, c),
+        saveat=diffrax.SaveAt(ts=ts),
+        stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
+        max_steps=options.max_steps,
+        adjoint=_adjoint(options.adjoint),
+        throw=False,
+    )
+    y1 = jax.tree_util.tree_map(lambda x: x[-1], sol.ys)
+    return outputs(ts, sol.ys, scenario, c, _status(sol.result, y1), sol.stats)
+
+
+_solve_jit = eqx.filter_jit(solve)
+
+
+def _raise_on_failure(traj: Trajectory) -> Trajectory:
+    msgs = [s.message for s in SolveStatus]
+    return eqx.branched_error_if(traj, traj.status != SolveStatus.OK, traj.status, msgs)
+
+
+def _concrete_float(x):
+    return None if isinstance(x, jax.core.Tracer) else float(np.asarray(x))
+
+
+def check_times(t1, ts) -> None:
+    """Host-side checks of the time grid (concrete values only)."""
+    t1c = _concrete_float(t1)
+    if t1c is not None and not (np.isfinite(t1c) and t1c > 0):
+        raise ScenarioError(f"t1 must be a positive finite time [s], got {t1c}")
+    if ts is not None and not isinstance(ts, jax.core.Tracer):
+        a = np.asarray(ts)
+        if a.ndim != 1 or a.size < 2:
+            raise ScenarioError(f"ts must be a 1-D array of at least 2 times [s], got shape {a.shape}")
+        if not np.all(np.isfinite(a)) or a[0] != 0.0 or np.any(np.diff(a) <= 0):
+            raise ScenarioError("ts must start at 0 s and be finite and strictly increasing")
+
+
+def simulate(
+    scenario: Scenario,
+    t1: float | None = None,
+    *,
+    ts: Float[Array, " n_t"] | None = None,
+    n_save: int = 501,
+    solver: diffrax.AbstractSolver | None = None,
+    rtol: float = 1e-6,
+    atol: float = 1e-8,
+    dt0: float | None = None,
+    max_steps: int = 200_000,
+    adjoint: str = "reverse",
+    throw: bool = True,
+) -> Trajectory:
+    """Simulate a lift with the elastic-foundation model (paper §3) from rest at t = 0 to `t1`.
+
+    Works under `jax.jit`, `jax.vmap` over any scenario leaf, `jax.grad` (adjoint="reverse") and
+    `jax.jacfwd` (adjoint="forward").
+
+    **Arguments**
+    - `scenario`: a `Scenario` (see `load_scenario`).
+    - `t1`: end time [s]; default `scenario.t1`.
+    - `ts`: saved times [s], starting at 0 and ending at t1; default `n_save` equally spaced times.
+    - `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`: see `SolverOptions`.
+    - `throw`: raise if the solve fails (max steps, non-finite state); with False, read `Trajectory.status`.
+
+    **Returns** a `Trajectory`.
+
+    **Raises** `ScenarioError` for invalid input (before compiling), `Float64Error` without x64,
+    and (with `throw=True`) an `EquinoxRuntimeError` naming the failure.
+    """
+    require_x64()
+    if not isinstance(scenario, Scenario):
+        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
+    scenario.check()
+    options = SolverOptions(solver=diffrax.Tsit5() if solver is None else solver, rtol=rtol, atol=atol,
+                            dt0=dt0, max_steps=max_steps, adjoint=adjoint)
+    if t1 is None:
+        t1 = scenario.t1 if ts is None else ts[-1]
+    check_times(t1, ts)
+    if ts is None:
+        if int(n_save) < 2:
+            raise ScenarioError(f"n_save must be >= 2, got {n_save}")
+        ts = jnp.linspace(0.0, 1.0, int(n_save)) * jnp.asarray(t1, dtype=jnp.float64)
+    else:
+        ts = jnp.asarray(ts, dtype=jnp.float64)
+    traj = _solve_jit(scenario, ts, options)
+    return _raise_on_failure(traj) if throw else traj
