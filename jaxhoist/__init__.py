@@ -1,0 +1,29 @@
+"""jaxhoist: a differentiable, vectorised simulator of a crane lifting a 3D load off the ground,
+after Grabski & Strzałko, "Dynamic analysis of the load hoisting process" (2003)."""
+
+from ._errors import Float64Error as Float64Error
+from ._errors import ScenarioError as ScenarioError
+from ._errors import SolveStatus as SolveStatus
+from .io.scenario import load_scenario as load_scenario
+from .io.scenario import scenario_from_dict as scenario_from_dict
+from .numerics.solve import SolverOptions as SolverOptions
+from .numerics.solve import Trajectory as Trajectory
+from .numerics.solve import simulate as simulate
+from .physics.elastic import State as State
+from .physics.energy import Energy as Energy
+from .physics.equilibrium import initial_state as initial_state
+from .physics.equilibrium import linear_corner_loads as linear_corner_loads
+from .physics.params import AbstractFrictionLaw as AbstractFrictionLaw
+from .physics.params import AbstractHoistLaw as AbstractHoistLaw
+from .physics.params import Boom as Boom
+from .physics.params import BristleFriction as BristleFriction
+from .physics.params import ConstantSpeedHoist as ConstantSpeedHoist
+from .physics.params import Foundation as Foundation
+from .physics.params import Load as Load
+from .physics.params import ProfileHoist as ProfileHoist
+from .physics.params import RampedHoist as RampedHoist
+from .physics.params import RegularisedCoulomb as RegularisedCoulomb
+from .physics.params import Rope as Rope
+from .physics.params import Scenario as Scenario
+
+__version__ = "0.1.0"
