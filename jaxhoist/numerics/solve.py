@@ -78,6 +78,7 @@ class SolverOptions:
     - `rtol`, `atol`: tolerances of the adaptive step-size controller; `dt0`: first step [s] (None: automatic).
     - `max_steps`: the step budget; reaching it is reported as `SolveStatus.MAX_STEPS`.
     - `adjoint`: "reverse" (checkpointed, for `jax.grad`) or "forward" (for `jax.jacfwd`, cheaper).
+    - `progress`: print the solve's progress (`diffrax.TextProgressMeter`); for single solves.
     """
 
     solver: diffrax.AbstractSolver = dataclasses.field(default_factory=diffrax.Tsit5)
@@ -86,6 +87,7 @@ class SolverOptions:
     dt0: float | None = None
     max_steps: int = 200_000
     adjoint: str = "reverse"
+    progress: bool = False
 
     def __post_init__(self):
         for name in ("rtol", "atol"):
@@ -161,6 +163,7 @@ def solve(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOptions) 
         stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
         max_steps=options.max_steps,
         adjoint=_adjoint(options.adjoint),
+        progress_meter=diffrax.TextProgressMeter() if options.progress else diffrax.NoProgressMeter(),
         throw=False,
     )
     y1 = jax.tree_util.tree_map(lambda x: x[-1], sol.ys)
@@ -204,6 +207,7 @@ def simulate(
     dt0: float | None = None,
     max_steps: int = 200_000,
     adjoint: str = "reverse",
+    progress: bool = False,
     throw: bool = True,
 ) -> Trajectory:
     """Simulate a lift with the elastic-foundation model (paper §3) from rest at t = 0 to `t1`.
@@ -215,7 +219,7 @@ def simulate(
     - `scenario`: a `Scenario` (see `load_scenario`).
     - `t1`: end time [s]; default `scenario.t1`.
     - `ts`: saved times [s], starting at 0 and ending at t1; default `n_save` equally spaced times.
-    - `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`: see `SolverOptions`.
+    - `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`, `progress`: see `SolverOptions`.
     - `throw`: raise if the solve fails (max steps, non-finite state); with False, read `Trajectory.status`.
 
     **Returns** a `Trajectory`.
@@ -228,7 +232,7 @@ def simulate(
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()
     options = SolverOptions(solver=diffrax.Tsit5() if solver is None else solver, rtol=rtol, atol=atol,
-                            dt0=dt0, max_steps=max_steps, adjoint=adjoint)
+                            dt0=dt0, max_steps=max_steps, adjoint=adjoint, progress=progress)
     if t1 is None:
         t1 = scenario.t1 if ts is None else ts[-1]
     check_times(t1, ts)
