@@ -9,8 +9,8 @@ A scenario file (see `presets/paper-4.2.toml` for a commented one):
 
     [load]        size, mass | density, mass_centre, inertia
     [foundation]  stiffness, damping, friction_coefficient
-    [foundation.friction]  law = "bristle" (deflection, breakaway_ratio, relaxation_time)
-                           | "regularised-coulomb" (regularisation_velocity)
+    [foundation.friction]  law = "regularised-coulomb" (regularisation_velocity; the default)
+                           | "bristle" (deflection, breakaway_ratio, relaxation_time)
     [rope]        stiffness, damping, attachment, slack
     [hoist]       law = "constant-speed" (speed) | "ramped" (speed, ramp_time, travel)
     [boom]        tip_position, tip_mass, stiffness, damping
@@ -152,7 +152,7 @@ def scenario_from_dict(data: dict, source: str = "<dict>") -> P.Scenario:
         ld = r.table(data["load"], "load")
         load = P.Load(ld["size"], ld.get("mass"), density=ld.get("density"),
                       mass_centre=ld.get("mass_centre"), inertia=ld.get("inertia"))
-        fr_data = data["foundation"].get("friction", {"law": "bristle"})
+        fr_data = data["foundation"].get("friction", {"law": "regularised-coulomb"})
         law = _law(r, fr_data, "foundation.friction", FRICTION_LAWS, None)
         fr = r.table(fr_data, "foundation.friction", f"foundation.friction:{law}")
         fr.pop("law")

@@ -162,7 +162,7 @@ class RegularisedCoulomb(AbstractFrictionLaw):
     regularisation_velocity: Scalar
     state_size = 0
 
-    def __init__(self, regularisation_velocity=1e-2):
+    def __init__(self, regularisation_velocity=1e-3):
         self.regularisation_velocity = _f64(regularisation_velocity)
 
     def force(self, mu, normal, velocity, state):
@@ -201,7 +201,7 @@ class BristleFriction(AbstractFrictionLaw):
     relaxation_time: Scalar
     state_size = 2
 
-    def __init__(self, deflection=1e-3, breakaway_ratio=0.7, relaxation_time=0.01):
+    def __init__(self, deflection=1e-3, breakaway_ratio=0.5, relaxation_time=0.01):
         self.deflection = _f64(deflection)
         self.breakaway_ratio = _f64(breakaway_ratio)
         self.relaxation_time = _f64(relaxation_time)
@@ -240,7 +240,7 @@ class Foundation(eqx.Module):
     - `stiffness`: k, vertical spring per corner [N/m].
     - `damping`: h, vertical damper per corner [N s/m].
     - `friction_coefficient`: μ [-].
-    - `friction`: the friction law (`BristleFriction` or `RegularisedCoulomb`).
+    - `friction`: the friction law (default `RegularisedCoulomb(1e-3)`, see README "Friction laws").
 
     N_i = max(0, k p_i + h dp_i/dt) for a corner below the ground by p_i > 0, else 0: the ground pushes,
     never pulls.
@@ -255,7 +255,7 @@ class Foundation(eqx.Module):
         self.stiffness = _f64(stiffness)
         self.damping = _f64(damping)
         self.friction_coefficient = _f64(friction_coefficient)
-        self.friction = BristleFriction() if friction is None else friction
+        self.friction = RegularisedCoulomb(1e-3) if friction is None else friction
 
     def check(self):
         _check("foundation.stiffness", self.stiffness, unit="N/m", low=0.0, low_open=True, symbol="k")
