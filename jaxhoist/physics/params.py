@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import abc
 from collections.abc import Callable
+from typing import ClassVar
 
 import equinox as eqx
 import jax
@@ -160,7 +161,7 @@ class RegularisedCoulomb(AbstractFrictionLaw):
     """
 
     regularisation_velocity: Scalar
-    state_size = 0
+    state_size: ClassVar[int] = 0
 
     def __init__(self, regularisation_velocity=1e-3):
         self.regularisation_velocity = _f64(regularisation_velocity)
@@ -199,7 +200,7 @@ class BristleFriction(AbstractFrictionLaw):
     deflection: Scalar
     breakaway_ratio: Scalar
     relaxation_time: Scalar
-    state_size = 2
+    state_size: ClassVar[int] = 2
 
     def __init__(self, deflection=1e-3, breakaway_ratio=0.5, relaxation_time=0.01):
         self.deflection = _f64(deflection)
