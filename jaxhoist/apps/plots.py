@@ -142,47 +142,59 @@ def plot_corner_forces(data, *, title: str | None = None) -> Figure:
     return fig
 
 
-def plot_corner_tracks(data, *, n_arrows: int = 30, n_outlines: int = 6, title: str | None = None) -> Figure:
-    """The bottom corners D, E, F, H seen from above (world X-Y [m]), with arrows along the friction force T_i
-    at `n_arrows` equally spaced saved times where the corner touches the ground (the paper's Fig. 9 kind).
-    Arrows have a fixed length: they show direction, not magnitude. Light outlines show the footprint
-    D-E-F-H at `n_outlines` times, from t = 0 (solid) to the end (fading)."""
+def plot_corner_tracks(data, *, n_arrows: int = 40, n_outlines: int = 6, title: str | None = None) -> Figure:
+    """The bottom corners D, E, F, H seen from above (world X-Y [m]) (the paper's Fig. 9 kind).
+
+    Tracks are thick while the corner touches the ground (N_i > 0) and thin where it is in the air. Arrows point
+    along the friction force T_i at up to `n_arrows` equally spaced saved times at which the corner touches
+    the ground; they have a fixed length (direction, not magnitude). Grey outlines show the footprint D-E-F-H
+    at `n_outlines` equally spaced times from t = 0 to lift-off (or the end), labelled with the time at
+    corner D; dots mark the start."""
     d = as_arrays(data)
     fig, axes = _figure(1, 1, figsize=(7.0, 7.0), sharex=False)
     ax = axes[0, 0]
-    c = d["corners"]
-    t = d["ts"]
+    c, t, n = d["corners"], d["ts"], d["normal_forces"]
     span = float(np.ptp(c[..., :2].reshape(-1, 2), axis=0).max()) or 1.0
-    arrow_len = 0.05 * span
-    for k, idx in enumerate(np.linspace(0, len(t) - 1, max(n_outlines, 2)).round().astype(int)):
+    arrow_len = 0.04 * span
+    lift = liftoff_time(t, n)
+    last = len(t) - 1 if lift is None else int(np.searchsorted(t, lift))
+    for k, idx in enumerate(np.linspace(0, last, max(n_outlines, 2)).round().astype(int)):
         poly = np.vstack([c[idx, :, :2], c[idx, :1, :2]])
-        ax.plot(poly[:, 0], poly[:, 1], color="0.6", lw=0.8, alpha=1.0 - 0.8 * k / max(n_outlines - 1, 1),
-                ls="-" if k == 0 else ":")
-        ax.annotate(f"{t[idx]:.1f} s", poly[0], fontsize="x-small", color="0.4",
-                    xytext=(3, 3), textcoords="offset points")
+        ax.plot(poly[:, 0], poly[:, 1], color="0.55", lw=0.9 if k == 0 else 0.7, ls="-" if k == 0 else "--",
+                zorder=1)
+        ax.annotate(f"{t[idx]:.1f} s", poly[0], fontsize="x-small", color="0.35", xytext=(3, -9),
+                    textcoords="offset points")
     sample = np.linspace(0, len(t) - 1, max(n_arrows, 1)).round().astype(int)
     for i in range(4):
-        ax.plot(c[:, i, 0], c[:, i, 1], color=CORNER_COLOURS[i], lw=1.3, label=CORNERS[i])
-        ax.plot(c[0, i, 0], c[0, i, 1], "o", color=CORNER_COLOURS[i], ms=4)
+        col = CORNER_COLOURS[i]
+        x, y = c[:, i, 0], c[:, i, 1]
+        touch = n[:, i] > 0.0
+        # contact segments: keep a point if it or a neighbour touches, so short contacts still show as lines
+        near = touch | np.r_[touch[1:], False] | np.r_[False, touch[:-1]]
+        ax.plot(x, y, color=col, lw=0.7, alpha=0.45, zorder=2)
+        ax.plot(np.where(near, x, np.nan), np.where(near, y, np.nan), color=col, lw=2.0, zorder=3,
+                label=f"{CORNERS[i]}")
+        ax.plot(x[0], y[0], "o", color=col, ms=5, zorder=4)
         T = d["friction_forces"][sample, i, :2]
         mag = np.linalg.norm(T, axis=-1)
-        on = (d["normal_forces"][sample, i] > 0.0) & (mag > 0.0)
+        on = touch[sample] & (mag > 0.0)
         if np.any(on):
             u = T[on] / mag[on, None]
-            ax.quiver(c[sample[on], i, 0], c[sample[on], i, 1], u[:, 0] * arrow_len, u[:, 1] * arrow_len,
-                      angles="xy", scale_units="xy", scale=1.0, color=CORNER_COLOURS[i], width=0.004,
-                      alpha=0.9)
+            ax.quiver(x[sample[on]], y[sample[on]], u[:, 0] * arrow_len, u[:, 1] * arrow_len, angles="xy",
+                      scale_units="xy", scale=1.0, color=col, width=0.0045, zorder=5)
+    ax.plot([], [], color="0.3", lw=2.0, label="on the ground")
+    ax.plot([], [], color="0.3", lw=0.7, alpha=0.45, label="in the air")
     ax.set_aspect("equal", adjustable="datalim")
     ax.set_xlabel("X [m]")
     ax.set_ylabel("Y [m]")
     ax.grid(alpha=0.3)
     ax.legend(title="corner", loc="best", fontsize="small")
-    _title(fig, "Corner tracks from above, arrows: friction-force direction", title)
+    _title(fig, "Corner tracks from above; arrows: friction-force direction", title)
     return fig
 
 
 def plot_energy(data, *, title: str | None = None) -> Figure:
-    """Energy balance [kJ] vs time [s]: the change of mechanical energy E(t) - E(0) against the hoist work minus
+    """Energy balance [kJ] (residual [J]) vs time [s]: the change of mechanical energy E(t) - E(0) against the hoist work minus
     the damping and friction losses (top), and their difference, the residual (bottom), which measures the
     solver error."""
     d = as_arrays(data)
@@ -198,8 +210,8 @@ def plot_energy(data, *, title: str | None = None) -> Figure:
     ax.set_ylabel("energy [kJ]")
     ax.legend(loc="best", fontsize="small")
     ax = axes[1, 0]
-    ax.plot(t, d["energy_residual"] / 1e3, color="tab:red", lw=1.0)
-    ax.set_ylabel("residual [kJ]")
+    ax.plot(t, d["energy_residual"], color="tab:red", lw=1.0)
+    ax.set_ylabel("residual [J]")
     ax.set_xlabel("t [s]")
     for ax in axes[:, 0]:
         ax.grid(alpha=0.3)
