@@ -63,6 +63,10 @@ TRAJECTORY_ARRAYS: dict[str, tuple[str, str]] = {
 def trajectory_arrays(traj) -> dict[str, np.ndarray]:
     """Every output of a `Trajectory` as a numpy array, under the names of `TRAJECTORY_ARRAYS`."""
     e = traj.energy
+    # mechanical energy and balance residual in numpy: `Energy.mechanical` and `Trajectory.energy_residual`
+    # are annotated for one solve, and a scan's trajectory carries a batch axis first.
+    mech = sum(np.asarray(x) for x in (e.kinetic, e.potential, e.ground_spring, e.rope_spring, e.boom_spring))
+    supplied = np.asarray(traj.hoist_work) - np.asarray(traj.damping_loss) - np.asarray(traj.friction_work)
     out = {
         "ts": traj.ts,
         "position": traj.position,
@@ -83,11 +87,11 @@ def trajectory_arrays(traj) -> dict[str, np.ndarray]:
         "energy_ground_spring": e.ground_spring,
         "energy_rope_spring": e.rope_spring,
         "energy_boom_spring": e.boom_spring,
-        "energy_mechanical": e.mechanical,
+        "energy_mechanical": mech,
         "hoist_work": traj.hoist_work,
         "damping_loss": traj.damping_loss,
         "friction_work": traj.friction_work,
-        "energy_residual": traj.energy_residual(),
+        "energy_residual": (mech - mech[..., :1]) - (supplied - supplied[..., :1]),
         "status": traj.status,
         "num_accepted_steps": traj.num_accepted_steps,
         "num_rejected_steps": traj.num_rejected_steps,

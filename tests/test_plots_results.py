@@ -1,0 +1,128 @@
+"""Result files (npz + JSON sidecar) and plots: round trip of every array and unit, scenario metadata,
+lift-off detection, and every plot function returning a Figure with unit-labelled axes."""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import json  # noqa: E402
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import jaxhoist as jh  # noqa: E402
+from jaxhoist.apps import plots  # noqa: E402
+from jaxhoist.io import results  # noqa: E402
+
+try:  # share the compiled core with the physics tests (same saved-time count and solver options)
+    from conftest import N_SAVE, SOLVE_KW
+except ImportError:  # pragma: no cover - running this file alone without the shared conftest
+    N_SAVE, SOLVE_KW = 201, dict(rtol=1e-8, atol=1e-9)
+
+T1 = 1.0  # [s]: corners D and H of paper-4.2 leave the ground within 0.3 s, so every plot has content
+
+
+@pytest.fixture(scope="module")
+def traj42():
+    scenario = jh.load_scenario("paper-4.2")
+    ts = jnp.linspace(0.0, T1, N_SAVE)
+    return scenario, jh.simulate(scenario, ts=ts, **SOLVE_KW)
+
+
+def test_npz_round_trip_preserves_arrays_units_and_scenario(traj42, tmp_path):
+    scenario, traj = traj42
+    arrays = results.trajectory_arrays(traj)
+    npz, meta = results.save_trajectory(tmp_path / "run" / "trajectory", traj, scenario,
+                                        command=["jaxhoist", "simulate", "paper-4.2"], options={"rtol": 1e-8})
+    assert npz.suffix == ".npz" and meta.suffix == ".json" and npz.parent == meta.parent
+
+    loaded = results.load_trajectory(npz)
+    assert set(loaded) == set(results.TRAJECTORY_ARRAYS) == set(arrays)
+    for name, a in arrays.items():
+        assert loaded[name].shape == a.shape and loaded[name].dtype == a.dtype, name
+        np.testing.assert_array_equal(loaded[name], a, err_msg=name)
+    # the same file by stem or by sidecar path
+    np.testing.assert_array_equal(results.load_trajectory(tmp_path / "run" / "trajectory.json")["position"],
+                                  arrays["position"])
+
+    units = results.units(npz)
+    assert units == {k: u for k, (u, _) in results.TRAJECTORY_ARRAYS.items()}
+    assert (units["position"], units["normal_forces"], units["euler"], units["ts"]) == ("m", "N", "rad", "s")
+
+    md = json.loads(meta.read_text())
+    assert md["versions"]["jaxhoist"] == jh.__version__
+    assert md["command"] == ["jaxhoist", "simulate", "paper-4.2"]
+    assert md["status"] == "ok"
+    assert md["scenario"]["name"] == "paper-4.2"
+    leaves = md["scenario"]["leaves"]
+    assert leaves["foundation.friction_coefficient"] == float(scenario.foundation.friction_coefficient)
+    assert leaves["load.mass"] == pytest.approx(850.0 * 2.5 * 6.0 * 2.5)  # ρ a b c [kg], paper §4.2
+    assert leaves["load.mass_centre"] == [1.0, 2.5, 1.0]
+    assert md["scenario"]["types"]["foundation.friction"] == type(scenario.foundation.friction).__name__
+    assert md["arrays"]["friction_forces"]["shape"] == [N_SAVE, 4, 3]
+
+    # derived arrays stay consistent through the file: R = ΣN_i, E_mech = Σ terms
+    np.testing.assert_allclose(loaded["ground_reaction"], loaded["normal_forces"].sum(axis=1), rtol=1e-12)
+    terms = sum(loaded[f"energy_{k}"] for k in ("kinetic", "potential", "ground_spring", "rope_spring",
+                                                 "boom_spring"))
+    np.testing.assert_allclose(loaded["energy_mechanical"], terms, rtol=1e-12)
+    np.testing.assert_allclose(loaded["energy_residual"], np.asarray(traj.energy_residual()), rtol=0, atol=1e-9)
+
+
+def test_liftoff_and_detach_times():
+    ts = np.linspace(0.0, 4.0, 5)
+    n = np.array([[1.0, 1.0, 1.0, 1.0], [0.0, 2.0, 1.0, 1.0], [0.0, 0.0, 3.0, 0.0],
+                  [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])  # F touches down again at t = 4 s
+    assert results.liftoff_time(ts, n) == 3.0
+    assert results.corner_detach_times(ts, n) == [1.0, 2.0, 3.0, 2.0]
+    assert results.liftoff_time(ts, np.ones((5, 4))) is None
+
+
+def test_liftoff_on_the_paper_run(traj42):
+    _, traj = traj42
+    a = results.trajectory_arrays(traj)
+    detach = results.corner_detach_times(a["ts"], a["normal_forces"])
+    # the rope pulls at the top corner above D: D lifts first, and the load is not yet off the ground at 1 s
+    assert detach[0] is not None and detach[0] < 0.5
+    assert results.liftoff_time(a["ts"], a["normal_forces"]) is None
+    assert a["rope_tension"].max() > 0.0
+
+
+def _labels_ok(fig):
+    from matplotlib.figure import Figure
+
+    assert isinstance(fig, Figure)
+    axes = [ax for ax in fig.axes if ax.get_visible()]
+    assert axes
+    for ax in axes:
+        y = ax.get_ylabel()
+        assert "[" in y and "]" in y, f"y label without a unit: {y!r}"
+        assert ax.has_data()
+    xlabels = [ax.get_xlabel() for ax in axes if ax.get_xlabel()]
+    assert xlabels and all("[" in x and "]" in x for x in xlabels), xlabels
+    assert fig.get_suptitle()
+
+
+@pytest.mark.parametrize("name", [*plots.PLOTS, "motion"])
+def test_plot_functions_return_labelled_figures(traj42, name):
+    _, traj = traj42
+    fn = plots.PLOTS.get(name) or getattr(plots, f"plot_{name}")
+    _labels_ok(fn(traj))  # from a Trajectory
+
+
+def test_plots_from_loaded_file_and_save_all(traj42, tmp_path):
+    scenario, traj = traj42
+    npz, _ = results.save_trajectory(tmp_path / "t", traj, scenario)
+    d = results.load_trajectory(npz)
+    fig = plots.plot_corner_tracks(d)
+    _labels_ok(fig)
+    assert fig.axes[0].get_xlabel() == "X [m]" and fig.axes[0].get_ylabel() == "Y [m]"
+    fig = plots.plot_euler(d)
+    # the angles are plotted in degrees
+    np.testing.assert_allclose(fig.axes[0].lines[0].get_ydata(), np.degrees(d["euler"][:, 0]))
+    paths = plots.save_all(d, tmp_path / "png")
+    assert len(paths) == len(plots.PLOTS)
+    for p in paths:
+        assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+        assert 5_000 < p.stat().st_size < 300_000
