@@ -10,7 +10,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, ArrayLike, Float, Int
 
 from .._errors import ScenarioError, SolveStatus, require_x64
 from ..physics import energy as energy_mod
@@ -197,9 +197,9 @@ def check_times(t1, ts) -> None:
 
 def simulate(
     scenario: Scenario,
-    t1: float | None = None,
+    t1: float | Float[ArrayLike, ""] | None = None,
     *,
-    ts: Float[Array, " n_t"] | None = None,
+    ts: Float[ArrayLike, " n_t"] | None = None,
     n_save: int = 501,
     solver: diffrax.AbstractSolver | None = None,
     rtol: float = 1e-6,
