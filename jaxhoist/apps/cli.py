@@ -167,7 +167,7 @@ def run_simulate(args: argparse.Namespace) -> int:
             command=[PROG, *args.argv] if args.argv is not None else sys.argv,
             options={"solver": "Tsit5", "rtol": args.rtol, "atol": args.atol, "max_steps": args.max_steps,
                      "t1": t1, "n_save": args.n_save},
-            extra={"overrides": overrides,
+            extra={"source": str(args.scenario), "overrides": overrides,
                    "timings_s": {k: round(v, 4) for k, v in progress.times.items()}},
         )
     pngs = []
@@ -185,7 +185,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     resid = float(np.max(np.abs(arrays["energy_residual"])))
     lines = [
         f"scenario      {scenario.name} (t = 0 .. {ts_np[-1]:g} s, {len(ts_np)} saved times)",
-        f"status        {status.name.lower()}: {status.message}",
+        f"status        {status.name.lower()}" + ("" if status == SolveStatus.OK else f": {status.message}"),
         f"final C       {_fmt_vec(arrays['position'][-1])} m",
         f"final angles  (φ, ψ, ϑ) = {_fmt_vec(np.degrees(arrays['euler'][-1]))} deg",
         "lift-off      " + (f"{lift:g} s (first saved time with every N_i = 0)" if lift is not None

@@ -1,0 +1,173 @@
+"""The `jaxhoist` command line, called in-process through `main([...])` so that compiled code is shared:
+a short simulate writes npz/json/PNGs and a summary; invalid input exits 2 with a one-line message naming
+the field, before anything is compiled; subcommand modules plug in through `configure_parser`."""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import json  # noqa: E402
+import sys  # noqa: E402
+import types  # noqa: E402
+from importlib import resources  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from jaxhoist.apps import cli  # noqa: E402
+from jaxhoist.io import results  # noqa: E402
+from jaxhoist.io.scenario import SCHEMA  # noqa: E402
+
+SHORT = ["--t1", "0.5", "--n-save", "11"]
+
+
+def _no_compile(monkeypatch):
+    """Make any attempt to compile fail the test (invalid input must be refused before compiling)."""
+    def boom(*a, **k):
+        raise AssertionError("compiled despite invalid input")
+
+    monkeypatch.setattr(cli, "_compiled_solve", boom)
+
+
+@pytest.fixture(scope="module")
+def short_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("cli") / "paper-4.2"
+    code = cli.main(["simulate", "paper-4.2", *SHORT, "--out", str(out), "--quiet"])
+    return code, out
+
+
+def test_simulate_writes_results_and_plots(short_run, capsys):
+    code, out = short_run
+    assert code == 0
+    npz, meta = out / "trajectory.npz", out / "trajectory.json"
+    assert npz.is_file() and meta.is_file()
+    d = results.load_trajectory(npz)
+    assert d["ts"].shape == (11,) and d["ts"][-1] == pytest.approx(0.5)
+    assert d["normal_forces"].shape == (11, 4) and d["corners"].shape == (11, 4, 3)
+    # at t = 0 the load rests: corner loads carry the weight minus the rope's vertical pull (here S(0) = 0)
+    m, g = 850.0 * 2.5 * 6.0 * 2.5, 9.81
+    assert d["ground_reaction"][0] == pytest.approx(m * g, rel=1e-6)
+    assert int(d["status"]) == 0
+    md = json.loads(meta.read_text())
+    assert md["command"][:3] == ["jaxhoist", "simulate", "paper-4.2"] and "--t1" in md["command"]
+    assert md["solver"]["t1"] == 0.5 and md["solver"]["n_save"] == 11
+    assert md["scenario"]["name"] == "paper-4.2"
+    assert md["arrays"]["rope_tension"]["unit"] == "N"
+    pngs = sorted(p.name for p in out.glob("*.png"))
+    assert pngs == sorted(f"{n}.png" for n in cli_plots())
+    assert all((out / p).stat().st_size > 5_000 for p in pngs)
+
+
+def cli_plots():
+    from jaxhoist.apps import plots
+
+    return plots.PLOTS
+
+
+def test_summary_and_progress_lines(short_run, tmp_path, capsys):
+    # same shapes and options as short_run: the compiled core is reused, so this is quick
+    code = cli.main(["simulate", "paper-4.2", *SHORT, "--out", str(tmp_path), "--no-plots",
+                     "--set", "foundation.friction_coefficient=0.3"])
+    assert code == 0
+    cap = capsys.readouterr()
+    assert "compiling (cached in this process)" in cap.err and "solving ..." in cap.err
+    assert "loading scenario paper-4.2 ..." in cap.err
+    for key in ("status        ok", "final C", "lift-off      none within the horizon", "steps", "wall time"):
+        assert key in cap.out, key
+    assert not list(tmp_path.glob("*.png"))
+    md = results.load_metadata(tmp_path / "trajectory.npz")
+    assert md["scenario"]["leaves"]["foundation.friction_coefficient"] == 0.3
+    assert md["overrides"] == {"foundation.friction_coefficient": 0.3}
+
+
+def test_misspelled_field_exits_2_naming_the_field(tmp_path, capsys, monkeypatch):
+    _no_compile(monkeypatch)
+    text = resources.files("jaxhoist.io.presets").joinpath("paper-4.2.toml").read_text()
+    assert "friction_coefficient = 0.25" in text
+    bad = tmp_path / "typo.toml"
+    bad.write_text(text.replace("friction_coefficient = 0.25", "friction_coeficient = 0.25"))
+    code = cli.main(["simulate", str(bad), *SHORT, "--out", str(tmp_path / "o"), "--quiet"])
+    assert code == 2
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert len(lines) == 1 and lines[0].startswith("jaxhoist: error:")
+    assert "foundation.friction_coeficient" in err and "did you mean 'friction_coefficient'" in err
+    assert "Traceback" not in err
+    assert not (tmp_path / "o").exists()
+
+
+def test_invalid_value_and_bad_override_exit_2(tmp_path, capsys, monkeypatch):
+    _no_compile(monkeypatch)
+    text = resources.files("jaxhoist.io.presets").joinpath("paper-4.2.toml").read_text()
+    assert text.count("stiffness = 1.4e7") == 1  # c_l of paper §4.2, only in [rope]
+    neg = tmp_path / "neg.toml"
+    neg.write_text(text.replace("stiffness = 1.4e7", "stiffness = -1.4e7"))
+    assert cli.main(["simulate", str(neg), "--quiet"]) == 2
+    assert "rope.stiffness" in capsys.readouterr().err
+
+    assert cli.main(["simulate", "paper-4.2", "--quiet", "--set", "rope.stifness=1e7"]) == 2
+    assert "stifness" in capsys.readouterr().err
+    assert cli.main(["simulate", "paper-4.2", "--quiet", "--set", "rope.stiffness=-5"]) == 2
+    assert "rope.stiffness" in capsys.readouterr().err
+    assert cli.main(["simulate", "paper-4.2", "--quiet", "--t1", "-1"]) == 2
+    assert "t1" in capsys.readouterr().err
+    assert cli.main(["simulate", "paper-4.2", "--quiet", "--rtol", "0"]) == 2
+    assert "rtol" in capsys.readouterr().err
+
+
+def test_unknown_preset_gives_a_hint(capsys, monkeypatch):
+    _no_compile(monkeypatch)
+    assert cli.main(["simulate", "paper-4.3", "--quiet"]) == 2
+    err = capsys.readouterr().err
+    assert "paper-4.3" in err and "did you mean 'paper-4.2'" in err and "Traceback" not in err
+
+
+def test_no_command_prints_help_and_version(capsys):
+    assert cli.main([]) == 2
+    assert "simulate" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as e:
+        cli.main(["--version"])
+    assert e.value.code == 0
+    assert "jaxhoist" in capsys.readouterr().out
+
+
+def test_extension_subcommands_plug_in(monkeypatch, capsys):
+    calls = []
+
+    def configure_parser(subparsers):
+        p = subparsers.add_parser("scan", help="fake scan")
+        p.add_argument("--n", type=int, default=3)
+        p.set_defaults(func=lambda args: calls.append(args.n) or 0)
+
+    fake = types.ModuleType("fake_scan_module")
+    fake.configure_parser = configure_parser
+    broken = types.ModuleType("fake_broken_module")  # exists, but has no configure_parser: skipped
+    monkeypatch.setitem(sys.modules, "fake_scan_module", fake)
+    monkeypatch.setitem(sys.modules, "fake_broken_module", broken)
+    monkeypatch.setattr(cli, "EXTENSIONS", {"scan": "fake_scan_module", "other": "fake_broken_module",
+                                            "missing": "jaxhoist.apps.no_such_module"})
+    assert cli.main(["scan", "--n", "7"]) == 0
+    assert calls == [7]
+    help_text = cli.build_parser().format_help()
+    assert "scan" in help_text and "missing" not in help_text and "other" not in help_text
+
+
+def test_readme_scenario_reference_lists_every_field():
+    readme = (Path(__file__).resolve().parents[1] / "README.md").read_text()
+    section = readme.split("## Scenario files", 1)[1].split("\n## ", 1)[0]
+    for table, fields in SCHEMA.items():
+        tbl = table.split(":")[0]
+        for field in fields:
+            assert f"`{field}`" in section, f"README scenario reference lacks {tbl}.{field}"
+    for cmd in ('python3.11 -m venv .venv && .venv/bin/pip install -e . && .venv/bin/jaxhoist simulate '
+                'paper-4.2 --out out/paper-4.2',
+                'python3.11 -m venv .venv && .venv/bin/pip install -e ".[test]" && .venv/bin/python -m pytest -q'):
+        assert cmd in readme
+
+
+def test_numpy_only_reader(short_run):
+    # the npz is readable with numpy alone, without jaxhoist
+    _, out = short_run
+    with np.load(out / "trajectory.npz") as f:
+        assert "position" in f.files and f["position"].shape == (11, 3)
