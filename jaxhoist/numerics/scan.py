@@ -1,0 +1,882 @@
+"""Parameter scans: many solves of one scenario with some float leaves swept, as one compiled, vmapped,
+sharded computation per chunk, with per-member status, resumable chunk files and a progress report.
+
+    import jaxhoist as jh
+    sc = jh.load_scenario("paper-4.2")
+    res = jh.scan(sc, {"foundation.friction_coefficient": np.linspace(0.1, 0.6, 4000)}, 25.0,
+                  observables=["final_psi", "liftoff_time"], out_dir="out/mu-scan", progress=True)
+    res["final_psi"], res.status, res.coords["foundation.friction_coefficient"]
+
+How the work is laid out (and why results do not depend on the chunk size or the device count):
+
+- members (parameter points) are sorted by their values, so that neighbours take similar numbers of
+  steps, and split into *groups* of `lanes` consecutive members (the last one padded by repeating its
+  last member). A group is solved by one `jax.vmap` of the traceable core `numerics.solve.solve`, in lock
+  step: it costs what its slowest member costs, which sorting keeps close to the others;
+- a *chunk* is a whole number of groups per device; on each device the chunk's groups run one after the
+  other (`lax.map`), and the devices (a 1-D mesh over `jax.devices()`, via `shard_map`) run in parallel,
+  each with its own loop, so a slow group on one device does not hold up the other;
+- each group is the same compiled computation on the same inputs whatever the chunk size and the number
+  of devices, so the results are bit-for-bit identical. (`lanes` is a numerical setting, like the
+  tolerances: XLA may round differently in a vmap of another width, so changing it can move results by
+  about the solver tolerance.)
+
+Failures are data: a member whose solve fails (step budget, non-finite state) gets its `ScanStatus` and
+NaN observables, and every other member is computed exactly as in a clean scan. A member whose parameter
+values are invalid (checked on the host, e.g. μ = NaN or a negative stiffness) is not solved: its status
+is `INVALID_PARAMETER` and `ScanResult.reason(i)` gives the message.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import enum
+import functools
+import hashlib
+import json
+import math
+import os
+import re
+import sys
+import time
+from collections.abc import Callable, Mapping, Sequence
+from pathlib import Path
+from typing import Any
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import ScenarioError, SolveStatus, require_x64
+from ..physics.params import Scenario, get_leaf
+from .solve import SolverOptions, check_times, solve
+
+FORMAT = "jaxhoist-scan/1"
+MANIFEST = "manifest.json"
+
+
+class ScanStatus(enum.IntEnum):
+    """Outcome of one member of a scan (0-3 are the `SolveStatus` codes)."""
+
+    OK = 0
+    MAX_STEPS = 1
+    NONFINITE = 2
+    SOLVER_FAILED = 3
+    INVALID_PARAMETER = 4
+    NAN_OBSERVABLE = 5
+
+    @property
+    def message(self) -> str:
+        if self.value < 4:
+            return SolveStatus(self.value).message
+        return {4: "invalid parameter values (not solved)",
+                5: "the solve succeeded but an observable is NaN"}[self.value]
+
+
+# ------------------------------------------------------------------------------------ parameter paths
+
+_PATH_RE = re.compile(r"^([A-Za-z_][\w]*(?:\.[A-Za-z_][\w]*)*)(?:\[(\d+)\])?$")
+
+
+def parse_path(path: str) -> tuple[str, int | None]:
+    """`"load.mass_centre[0]"` -> `("load.mass_centre", 0)`; `"hoist.speed"` -> `("hoist.speed", None)`."""
+    m = _PATH_RE.match(path.strip())
+    if not m:
+        raise ScenarioError(f"{path!r} is not a parameter path: use dotted field names with an optional "
+                            f"component index, e.g. 'foundation.friction_coefficient' or 'load.mass_centre[0]'")
+    return m.group(1), (None if m.group(2) is None else int(m.group(2)))
+
+
+def check_path(scenario: Scenario, path: str) -> None:
+    """Raise `ScenarioError` unless `path` names a float scalar leaf or one component of a float vector leaf."""
+    dotted, index = parse_path(path)
+    leaf = np.asarray(get_leaf(scenario, dotted))
+    if not np.issubdtype(leaf.dtype, np.floating):
+        raise ScenarioError(f"{path!r} is not a float leaf (dtype {leaf.dtype})")
+    if index is None and leaf.ndim != 0:
+        raise ScenarioError(f"{path!r} is a vector of shape {leaf.shape}: sweep one component, e.g. "
+                            f"'{dotted}[0]'")
+    if index is not None and (leaf.ndim != 1 or not 0 <= index < leaf.shape[0]):
+        raise ScenarioError(f"{path!r}: index {index} out of range for a leaf of shape {leaf.shape}")
+
+
+def _getter(dotted: str):
+    parts = dotted.split(".")
+
+    def where(s):
+        for p in parts:
+            s = getattr(s, p)
+        return s
+
+    return where
+
+
+def set_param(scenario: Scenario, path: str, value) -> Scenario:
+    """A copy of `scenario` with the leaf (or leaf component) at `path` set to `value` (traceable)."""
+    dotted, index = parse_path(path)
+    where = _getter(dotted)
+    value = jnp.asarray(value, dtype=jnp.float64)
+    if index is not None:
+        value = where(scenario).at[index].set(value)
+    return eqx.tree_at(where, scenario, value)
+
+
+def param_unit(scenario: Scenario, path: str) -> str:
+    """The SI unit of a parameter, read from the docstring of the class that owns the field."""
+    dotted, _ = parse_path(path)
+    *owner_path, field = dotted.split(".")
+    owner = scenario
+    for p in owner_path:
+        owner = getattr(owner, p)
+    for cls in type(owner).__mro__:
+        m = re.search(rf"`{re.escape(field)}`:[^\n]*?\[([^\]\n]+)\]", cls.__doc__ or "")
+        if m:
+            return m.group(1)
+    return "?"
+
+
+def parse_values(spec) -> np.ndarray:
+    """Values of a swept parameter: an array-like, or a string `"start:stop:num"` (inclusive, like
+    `numpy.linspace`) or `"v1,v2,..."`."""
+    if isinstance(spec, str):
+        s = spec.strip()
+        try:
+            if ":" in s:
+                a, b, n = s.split(":")
+                if int(n) < 1:
+                    raise ValueError
+                return np.linspace(float(a), float(b), int(n))
+            return np.array([float(x) for x in s.split(",") if x.strip()])
+        except ValueError:
+            raise ScenarioError(f"parameter values {spec!r}: expected 'start:stop:num' or 'v1,v2,...'") from None
+    a = np.asarray(spec, dtype=np.float64)
+    if a.ndim == 0:
+        a = a[None]
+    if a.ndim != 1:
+        raise ScenarioError(f"parameter values must be 1-D, got shape {a.shape}")
+    return a
+
+
+def _members(params: Mapping[str, Any], mode: str | None):
+    """-> (mode, coords, shape, member values (n, P))."""
+    names = list(params)
+    if not names:
+        raise ScenarioError("scan needs at least one parameter to sweep")
+    vals = [parse_values(params[p]) for p in names]
+    for p, v in zip(names, vals, strict=True):
+        if v.size == 0:
+            raise ScenarioError(f"scan parameter {p!r} has no values")
+    if mode is None:
+        mode = "sweep" if len(names) == 1 else None
+    if mode == "sweep":
+        if len(names) != 1:
+            raise ScenarioError(f"mode='sweep' sweeps one parameter, got {len(names)}: use mode='grid' "
+                                f"(every combination) or mode='points' (zipped lists)")
+        return mode, {names[0]: vals[0]}, (vals[0].size,), vals[0][:, None]
+    if mode == "grid":
+        mesh = np.meshgrid(*vals, indexing="ij")
+        return mode, dict(zip(names, vals, strict=True)), tuple(v.size for v in vals), \
+            np.stack([m.ravel() for m in mesh], axis=1)
+    if mode == "points":
+        n = {v.size for v in vals}
+        if len(n) != 1:
+            raise ScenarioError(f"mode='points' needs equally long value lists, got lengths "
+                                f"{dict(zip(names, [v.size for v in vals], strict=True))}")
+        return mode, dict(zip(names, vals, strict=True)), (vals[0].size,), np.stack(vals, axis=1)
+    if mode is None:
+        raise ScenarioError("several parameters: say mode='grid' (every combination) or mode='points' (zipped)")
+    raise ScenarioError(f"mode must be 'sweep', 'grid' or 'points', got {mode!r}")
+
+
+def _validate_members(scenario: Scenario, paths: Sequence[str], members: np.ndarray) -> dict[int, str]:
+    """Host-side check of every member's parameter values. Returns {member index: error message}."""
+
+    def check(rows: np.ndarray) -> None:
+        sc = scenario
+        for k, p in enumerate(paths):
+            dotted, index = parse_path(p)
+            leaf = np.asarray(get_leaf(scenario, dotted))
+            if index is None:
+                new = rows[:, k]
+            else:
+                new = np.broadcast_to(leaf, (rows.shape[0], *leaf.shape)).copy()
+                new[:, index] = rows[:, k]
+            sc = eqx.tree_at(_getter(dotted), sc, jnp.asarray(new))
+        sc.check()
+
+    bad: dict[int, str] = {}
+    try:
+        check(members)  # every member at once: the checks broadcast over a leading axis
+        return bad
+    except ScenarioError:
+        pass
+    for i in range(members.shape[0]):
+        try:
+            check(members[i:i + 1])
+        except ScenarioError as e:
+            bad[i] = str(e)
+    return bad
+
+
+# ---------------------------------------------------------------------------------------- the core
+
+
+_HISTORY_UNITS = {
+    "position": "m", "velocity": "m/s", "euler": "rad", "angular_velocity": "rad/s", "corners": "m",
+    "normal_forces": "N", "friction_forces": "N", "ground_reaction": "N", "rope_tension": "N",
+    "tip_position": "m", "hoist_work": "J", "damping_loss": "J", "friction_work": "J",
+}
+
+
+@dataclasses.dataclass(frozen=True)
+class _Spec:
+    """Everything static about one scan's compiled computation."""
+
+    paths: tuple[str, ...]
+    observables: tuple  # tuple[Observable, ...]
+    histories: tuple[str, ...]
+    options: SolverOptions
+    lanes: int
+    devices: tuple
+
+
+def _member(scenario, ts, row, spec: _Spec):
+    sc = scenario
+    for k, p in enumerate(spec.paths):
+        sc = set_param(sc, p, row[k])
+    traj = solve(sc, ts, spec.options)
+    ok = traj.status == SolveStatus.OK
+    obs = {o.name: o(traj, sc) for o in spec.observables}
+    nan_obs = jnp.any(jnp.stack([jnp.any(jnp.isnan(v)) for v in obs.values()])) if obs else False
+    status = jnp.where(ok & nan_obs, ScanStatus.NAN_OBSERVABLE, traj.status).astype(jnp.int32)
+    obs = {k: jnp.where(ok, v, jnp.nan) for k, v in obs.items()}
+    hist = {h: jnp.where(ok, getattr(traj, h), jnp.nan) for h in spec.histories}
+    return {"obs": obs, "hist": hist, "status": status,
+            "num_accepted_steps": traj.num_accepted_steps.astype(jnp.int32),
+            "num_rejected_steps": traj.num_rejected_steps.astype(jnp.int32)}
+
+
+def _device_fn(scenario, ts, values, active, spec: _Spec):
+    """values (G, L, P), active (G,) -> outputs with leading (G, L). Groups run one after another."""
+    group = jax.vmap(lambda row: _member(scenario, ts, row, spec))
+    shapes = jax.eval_shape(group, values[0])
+
+    def body(args):
+        v, a = args
+        return jax.lax.cond(a, group, lambda _: jax.tree_util.tree_map(
+            lambda s: jnp.zeros(s.shape, s.dtype), shapes), v)
+
+    return jax.lax.map(body, (values, active))
+
+
+@functools.lru_cache(maxsize=32)
+def _chunk_fn(spec: _Spec):
+    n_dev = len(spec.devices)
+    if n_dev == 1:
+        return eqx.filter_jit(lambda sc, ts, v, a: _device_fn(sc, ts, v, a, spec))
+    from jax.sharding import Mesh
+    from jax.sharding import PartitionSpec as P
+
+    mesh = Mesh(np.array(spec.devices), ("members",))
+    f = jax.shard_map(lambda sc, ts, v, a: _device_fn(sc, ts, v, a, spec), mesh=mesh,
+                      in_specs=(P(), P(), P("members"), P("members")), out_specs=P("members"),
+                      check_vma=False)
+    return eqx.filter_jit(f)
+
+
+# ------------------------------------------------------------------------------------------ results
+
+
+def _json_default(x):
+    if isinstance(x, np.ndarray | np.generic):
+        return x.tolist()
+    return repr(x)
+
+
+class ScanResult:
+    """A labelled scan dataset: parameter coordinates × observables (× optional time histories).
+
+    - `params`: the swept parameter paths, in order; `mode`: "sweep", "grid" or "points".
+    - `coords`: path -> values. For a grid, the axis values (the data have one axis per parameter);
+      otherwise the value of that parameter for each member (one data axis).
+    - `shape`: the shape of the member axes.
+    - `data`: observable name -> array of shape `shape + observable shape` (NaN where a member failed).
+    - `components`: observable name -> labels of its last axis (or None).
+    - `status`: `ScanStatus` codes, shape `shape`; `reasons`: flat member index -> message for failures.
+    - `num_accepted_steps`, `num_rejected_steps`: solver steps per member.
+    - `ts`, `histories`: saved times [s] and name -> array of shape `shape + (n_t, ...)` if requested.
+    - `units`: name -> SI unit for every parameter, observable and history; `descriptions` likewise.
+    - `attrs`: JSON-able metadata (scenario, t1, solver options, lanes, devices, timings).
+    """
+
+    def __init__(self, *, params, mode, coords, shape, data, components, status, reasons, num_accepted_steps,
+                 num_rejected_steps, ts, histories, units, descriptions, attrs):
+        self.params = tuple(params)
+        self.mode = mode
+        self.coords = {k: np.asarray(v) for k, v in coords.items()}
+        self.shape = tuple(shape)
+        self.data = {k: np.asarray(v) for k, v in data.items()}
+        self.components = dict(components)
+        self.status = np.asarray(status)
+        self.reasons = {int(k): str(v) for k, v in reasons.items()}
+        self.num_accepted_steps = np.asarray(num_accepted_steps)
+        self.num_rejected_steps = np.asarray(num_rejected_steps)
+        self.ts = None if ts is None else np.asarray(ts)
+        self.histories = {k: np.asarray(v) for k, v in (histories or {}).items()}
+        self.units = dict(units)
+        self.descriptions = dict(descriptions)
+        self.attrs = dict(attrs)
+
+    # ---- access
+    def __getitem__(self, name: str) -> np.ndarray:
+        if name in self.data:
+            return self.data[name]
+        if name in self.histories:
+            return self.histories[name]
+        if name in self.params:
+            return self.values(name)
+        raise KeyError(f"{name!r}: not an observable, history or parameter of this scan "
+                       f"(observables {list(self.data)}, histories {list(self.histories)})")
+
+    def values(self, path: str) -> np.ndarray:
+        """The value of parameter `path` for every member, shape `shape`."""
+        if self.mode != "grid":
+            return self.coords[path]
+        axes = [self.coords[p] for p in self.params]
+        return np.meshgrid(*axes, indexing="ij")[self.params.index(path)]
+
+    @property
+    def ok(self) -> np.ndarray:
+        """True where the member was solved and every observable is defined."""
+        return self.status == ScanStatus.OK
+
+    @property
+    def size(self) -> int:
+        return int(np.prod(self.shape))
+
+    def reason(self, i) -> str:
+        """Why member i (flat index, or an index tuple for a grid) failed ("ok" if it did not)."""
+        flat = int(np.ravel_multi_index(i, self.shape)) if isinstance(i, tuple) else int(i)
+        code = ScanStatus(int(self.status.ravel()[flat]))
+        return self.reasons.get(flat, code.message)
+
+    def failures(self) -> list[dict[str, Any]]:
+        """One dict per failed member: flat index, parameter values, status name and reason."""
+        out = []
+        for flat in np.flatnonzero(self.status.ravel() != ScanStatus.OK):
+            out.append({"index": int(flat),
+                        "params": {p: float(self.values(p).ravel()[flat]) for p in self.params},
+                        "status": ScanStatus(int(self.status.ravel()[flat])).name.lower(),
+                        "reason": self.reason(int(flat))})
+        return out
+
+    def __repr__(self) -> str:
+        n_fail = int(np.sum(~self.ok))
+        return (f"ScanResult(mode={self.mode!r}, params={list(self.params)}, shape={self.shape}, "
+                f"observables={list(self.data)}, histories={list(self.histories)}, failed={n_fail})")
+
+    # ---- files
+    def _arrays(self) -> tuple[dict[str, np.ndarray], dict[str, tuple[str, str]]]:
+        arrays: dict[str, np.ndarray] = {}
+        units: dict[str, tuple[str, str]] = {}
+        for p in self.params:
+            arrays[f"coord:{p}"] = self.coords[p]
+            units[f"coord:{p}"] = (self.units.get(p, "?"), f"swept parameter {p}")
+        for k, v in self.data.items():
+            arrays[f"obs:{k}"] = v
+            units[f"obs:{k}"] = (self.units.get(k, "?"), self.descriptions.get(k, ""))
+        for k, v in self.histories.items():
+            arrays[f"hist:{k}"] = v
+            units[f"hist:{k}"] = (self.units.get(k, "?"), f"time history of {k} at the saved times ts")
+        arrays["status"] = self.status
+        units["status"] = ("-", "ScanStatus: " + ", ".join(f"{s.value} {s.name.lower()}" for s in ScanStatus))
+        arrays["num_accepted_steps"] = self.num_accepted_steps
+        units["num_accepted_steps"] = ("-", "accepted solver steps")
+        arrays["num_rejected_steps"] = self.num_rejected_steps
+        units["num_rejected_steps"] = ("-", "rejected solver steps")
+        if self.ts is not None:
+            arrays["ts"] = self.ts
+            units["ts"] = ("s", "saved times")
+        return arrays, units
+
+    def save(self, path: str | Path) -> tuple[Path, Path]:
+        """Write `<stem>.npz` (plain arrays: `coord:<path>`, `obs:<name>`, `hist:<name>`, `status`, ...) and a
+        self-describing `<stem>.json` sidecar (units, meanings, shapes, parameters, failures, metadata)."""
+        from ..io.results import save_arrays
+
+        arrays, units = self._arrays()
+        meta = {"scan": {"mode": self.mode, "params": list(self.params), "shape": list(self.shape),
+                         "components": {k: (list(v) if v else None) for k, v in self.components.items()},
+                         "reasons": {str(k): v for k, v in self.reasons.items()},
+                         "units": self.units, "descriptions": self.descriptions},
+                "attrs": self.attrs}
+        return save_arrays(path, arrays, units, json.loads(json.dumps(meta, default=_json_default)), kind=FORMAT)
+
+    @classmethod
+    def load(cls, path: str | Path) -> ScanResult:
+        """Read a result written by `save` (give the `.npz`, the `.json` or the stem)."""
+        from ..io.results import load_arrays, load_metadata
+
+        arrays, meta = load_arrays(path), load_metadata(path)
+        s = meta["scan"]
+        return cls(params=s["params"], mode=s["mode"], coords={p: arrays[f"coord:{p}"] for p in s["params"]},
+                   shape=tuple(s["shape"]),
+                   data={k[4:]: v for k, v in arrays.items() if k.startswith("obs:")},
+                   components={k: (tuple(v) if v else None) for k, v in s["components"].items()},
+                   status=arrays["status"], reasons=s["reasons"], num_accepted_steps=arrays["num_accepted_steps"],
+                   num_rejected_steps=arrays["num_rejected_steps"], ts=arrays.get("ts"),
+                   histories={k[5:]: v for k, v in arrays.items() if k.startswith("hist:")},
+                   units=s["units"], descriptions=s["descriptions"], attrs=meta.get("attrs", {}))
+
+    def to_xarray(self):
+        """An `xarray.Dataset` (only if xarray is installed; it is not a dependency of jaxhoist)."""
+        try:
+            import xarray as xr
+        except ImportError:
+            raise ImportError("to_xarray() needs xarray, which jaxhoist does not depend on: "
+                              "`pip install xarray`, or use ScanResult.data / .coords directly") from None
+        if self.mode == "grid":
+            dims = list(self.params)
+            coords = {p: (p, self.coords[p], {"units": self.units.get(p, "?")}) for p in self.params}
+        else:
+            dims = ["member"]
+            coords = {p: ("member", self.coords[p], {"units": self.units.get(p, "?")}) for p in self.params}
+        if self.ts is not None:
+            coords["t"] = ("t", self.ts, {"units": "s"})
+        data_vars = {}
+        for k, v in self.data.items():
+            extra = [f"{k}_component"] if v.ndim > len(dims) else []
+            if extra and self.components.get(k):
+                coords[extra[0]] = (extra[0], list(self.components[k]))
+            data_vars[k] = (dims + extra, v, {"units": self.units.get(k, "?"),
+                                               "description": self.descriptions.get(k, "")})
+        for k, v in self.histories.items():
+            extra = ["t"] + [f"{k}_dim{i}" for i in range(v.ndim - len(dims) - 1)]
+            data_vars[f"history_{k}"] = (dims + extra, v, {"units": self.units.get(k, "?")})
+        data_vars["status"] = (dims, self.status, {"meaning": "ScanStatus code, 0 = ok"})
+        data_vars["num_accepted_steps"] = (dims, self.num_accepted_steps)
+        return xr.Dataset(data_vars, coords=coords, attrs={"format": FORMAT})
+
+
+# ------------------------------------------------------------------------------------------ progress
+
+
+@dataclasses.dataclass(frozen=True)
+class Progress:
+    """What a progress callback receives after each chunk.
+
+    - `chunk`, `n_chunks`: the chunk just finished (0-based) and the total.
+    - `done`, `total`: members finished (incl. those loaded from disk) and in all.
+    - `elapsed`: wall time of this call so far [s]; `eta`: estimated time left [s] (None before the first
+      computed chunk); `rate`: members per second over the computed chunks.
+    - `loaded`: True if the chunk was read from `out_dir` rather than computed.
+    - `compile_time`: time spent compiling [s] (0 until the first computed chunk).
+    """
+
+    chunk: int
+    n_chunks: int
+    done: int
+    total: int
+    elapsed: float
+    eta: float | None
+    rate: float | None
+    loaded: bool
+    compile_time: float
+    failed: int
+
+
+def _fmt_time(s: float | None) -> str:
+    if s is None or not np.isfinite(s):
+        return "?"
+    s = int(round(s))
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+
+
+def print_progress(p: Progress, stream=None) -> None:
+    """The default progress report: one line per chunk on stderr."""
+    stream = sys.stderr if stream is None else stream
+    rate = f"{p.rate:.3g} members/s" if p.rate else "-"
+    src = " (loaded)" if p.loaded else ""
+    print(f"scan: chunk {p.chunk + 1}/{p.n_chunks}{src}  {p.done}/{p.total} members  "
+          f"{100.0 * p.done / p.total:5.1f}%  elapsed {_fmt_time(p.elapsed)}  left ~{_fmt_time(p.eta)}  "
+          f"{rate}  failed {p.failed}", file=stream, flush=True)
+
+
+# ------------------------------------------------------------------------------------------ the scan
+
+
+def _fingerprint(scenario, spec: _Spec, members, ts, sort) -> str:
+    h = hashlib.sha256()
+    leaves, treedef = jax.tree_util.tree_flatten(scenario)
+    h.update(str(treedef).encode())
+    for x in leaves:
+        h.update(np.ascontiguousarray(np.asarray(x)).tobytes())
+    h.update(np.ascontiguousarray(members).tobytes())
+    h.update(np.ascontiguousarray(np.asarray(ts)).tobytes())
+    o = spec.options
+    h.update(repr((spec.paths, spec.histories, spec.lanes, sort, type(o.solver).__name__, o.rtol, o.atol, o.dt0,
+                   o.max_steps)).encode())
+    for ob in spec.observables:
+        code = getattr(ob.fn, "__code__", None)
+        h.update(f"{ob.name}|{getattr(ob.fn, '__module__', '')}.{getattr(ob.fn, '__qualname__', '')}".encode())
+        if code is not None:
+            h.update(code.co_code)
+    return h.hexdigest()[:32]
+
+
+def _write_atomic_npz(path: Path, arrays: Mapping[str, np.ndarray]) -> None:
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez(tmp, **arrays)
+    os.replace(tmp, path)
+
+
+def _write_manifest(out: Path, manifest: dict) -> None:
+    tmp = out / (MANIFEST + ".tmp")
+    tmp.write_text(json.dumps(manifest, indent=1, default=_json_default) + "\n")
+    os.replace(tmp, out / MANIFEST)
+
+
+def _flatten_out(out: Mapping, n: int) -> dict[str, np.ndarray]:
+    """Device output {obs:{}, hist:{}, ...} with leading (G, L) -> flat numpy arrays, first n members."""
+    flat: dict[str, np.ndarray] = {}
+    for k, v in out["obs"].items():
+        flat[f"obs:{k}"] = np.asarray(v).reshape(-1, *np.shape(v)[2:])[:n]
+    for k, v in out["hist"].items():
+        flat[f"hist:{k}"] = np.asarray(v).reshape(-1, *np.shape(v)[2:])[:n]
+    for k in ("status", "num_accepted_steps", "num_rejected_steps"):
+        flat[k] = np.asarray(out[k]).reshape(-1)[:n]
+    return flat
+
+
+def scan(
+    scenario: Scenario,
+    params: Mapping[str, Any],
+    t1: float | None = None,
+    *,
+    mode: str | None = None,
+    observables=None,
+    histories: Sequence[str] = (),
+    ts=None,
+    n_save: int = 201,
+    solver: diffrax.AbstractSolver | None = None,
+    rtol: float = 1e-6,
+    atol: float = 1e-8,
+    dt0: float | None = None,
+    max_steps: int = 200_000,
+    lanes: int = 16,
+    chunk_size: int | None = None,
+    max_memory: float = 1e9,
+    devices: Sequence | None = None,
+    sort: bool = True,
+    out_dir: str | Path | None = None,
+    resume: bool = True,
+    progress: bool | Callable[[Progress], None] | None = None,
+) -> ScanResult:
+    """Solve `scenario` for many values of some of its float leaves and evaluate observables of each solve.
+
+    **Arguments**
+    - `scenario`: the base `Scenario`.
+    - `params`: parameter path -> values. A path is a dotted field name, with `[i]` for one component of a
+      vector leaf: `"foundation.friction_coefficient"`, `"hoist.speed"`, `"load.mass_centre[0]"`. Values are
+      array-like or a string `"start:stop:num"` / `"v1,v2,..."`; units are those of the field (SI).
+    - `t1`: end time [s] (default `scenario.t1`); `ts`: saved times [s] starting at 0 (default `n_save`
+      equally spaced times; observables such as event times are interpolated on this grid).
+    - `mode`: "sweep" (one parameter, the default), "grid" (every combination: one data axis per
+      parameter) or "points" (equally long lists zipped together: one data axis).
+    - `observables`: names of built-in observables (`jaxhoist.apps.observables`), callables
+      `fn(traj[, scenario])`, `Observable`s, or a dict name -> any of these.
+    - `histories`: `Trajectory` fields to keep at every saved time, e.g. `("position", "euler")`.
+    - `solver`, `rtol`, `atol`, `dt0`, `max_steps`: as in `simulate` (one budget for every member).
+    - `lanes`: members solved together in one vmapped, lock-step solve (a numerical setting: results
+      are independent of the chunk size and devices, not of `lanes`); capped at the number of members.
+    - `chunk_size`: members per compiled call (rounded up to whole groups on every device); default: up
+      to 8 groups per device, fewer if the saved histories would exceed `max_memory` bytes.
+    - `devices`: the JAX devices to shard over (default all of `jax.devices()`).
+    - `sort`: solve members in order of their parameter values (cuts lock-step waste; no effect on results
+      beyond the grouping).
+    - `out_dir`: write each finished chunk there (`chunk_#####.npz` + `manifest.json`) and the final
+      `scan.npz` + `scan.json`; with `resume=True` an interrupted scan continues from the chunks on disk.
+    - `progress`: True to print a line per chunk on stderr, or a callable receiving a `Progress`.
+
+    **Returns** a `ScanResult`.
+
+    **Raises** `ScenarioError` for invalid paths, values or options (before compiling); a member with an
+    invalid value is marked `INVALID_PARAMETER` instead, unless every member is invalid.
+    """
+    from ..apps import observables as obs_mod  # built-in observables live with the applications
+
+    require_x64()
+    wall0 = time.perf_counter()
+    if not isinstance(scenario, Scenario):
+        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
+    scenario.check()
+    mode, coords, shape, members = _members(params, mode)
+    paths = tuple(coords)
+    for p in paths:
+        check_path(scenario, p)
+    try:
+        obs = obs_mod.resolve(observables)
+    except (ValueError, TypeError) as e:
+        raise ScenarioError(str(e)) from None
+    histories = tuple(histories)
+    for h in histories:
+        if h not in _HISTORY_UNITS:
+            raise ScenarioError(f"history {h!r} is not a Trajectory output; choose from {sorted(_HISTORY_UNITS)}")
+    options = SolverOptions(solver=diffrax.Tsit5() if solver is None else solver, rtol=rtol, atol=atol, dt0=dt0,
+                            max_steps=max_steps)
+    if t1 is None:
+        t1 = scenario.t1 if ts is None else float(np.asarray(ts)[-1])
+    check_times(t1, ts)
+    if ts is None:
+        if int(n_save) < 2:
+            raise ScenarioError(f"n_save must be >= 2, got {n_save}")
+        ts = np.linspace(0.0, 1.0, int(n_save)) * float(t1)
+    ts = jnp.asarray(ts, dtype=jnp.float64)
+    if int(lanes) < 1:
+        raise ScenarioError(f"lanes must be >= 1, got {lanes}")
+    devs = tuple(jax.devices() if devices is None else devices)
+    n = members.shape[0]
+    n_dev = len(devs)
+    lanes = int(min(int(lanes), 1 << max(0, math.ceil(math.log2(n)))))
+
+    # Host-side validation: invalid members are marked, and solved with a valid neighbour's values.
+    invalid = _validate_members(scenario, paths, members)
+    if len(invalid) == n:
+        raise ScenarioError(f"every member of the scan is invalid; the first: {invalid[0]}")
+    order = np.lexsort(members.T[::-1]) if sort else np.arange(n)
+    solve_rows = members.copy()
+    if invalid:
+        valid_sorted = [i for i in order if i not in invalid]
+        pos = {int(i): k for k, i in enumerate(order)}
+        vpos = np.array([pos[int(i)] for i in valid_sorted])
+        for i in invalid:
+            nearest = valid_sorted[int(np.argmin(np.abs(vpos - pos[i])))]
+            solve_rows[i] = members[nearest]
+
+    # Layout: groups of `lanes` members; chunks of whole groups on every device.
+    n_groups = math.ceil(n / lanes)
+    obs_shapes = {}
+    hist_bytes = 8 * len(ts) * sum(int(np.prod(_hist_shape(h))) for h in histories)
+    if chunk_size is None:
+        per_dev = max(1, min(8, math.ceil(n_groups / n_dev)))
+        mem_groups = max(1, int(max_memory // max(1, (hist_bytes + 4096) * lanes * n_dev)))
+        per_dev = min(per_dev, mem_groups)
+    else:
+        if int(chunk_size) < 1:
+            raise ScenarioError(f"chunk_size must be >= 1, got {chunk_size}")
+        per_dev = max(1, math.ceil(int(chunk_size) / (lanes * n_dev)))
+    chunk = per_dev * lanes * n_dev
+    spec = _Spec(paths=paths, observables=obs, histories=histories, options=options, lanes=lanes, devices=devs)
+    fp = _fingerprint(scenario, spec, members, ts, sort)
+
+    # Resume from disk.
+    out = Path(out_dir) if out_dir is not None else None
+    done_chunks: dict[int, dict[str, np.ndarray]] = {}
+    manifest: dict[str, Any] = {}
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        mpath = out / MANIFEST
+        if mpath.exists() and resume:
+            old = json.loads(mpath.read_text())
+            if old.get("fingerprint") != fp:
+                raise ScenarioError(f"{out} holds chunks of a different scan (other scenario, values, times, "
+                                    f"observables or solver options): use another out_dir, or resume=False to "
+                                    f"overwrite it")
+            chunk = int(old["chunk_size"])  # the files' layout wins
+            for k_str in old.get("chunks", {}):
+                f = out / f"chunk_{int(k_str):05d}.npz"
+                try:
+                    with np.load(f, allow_pickle=False) as z:
+                        done_chunks[int(k_str)] = {k: z[k] for k in z.files}
+                except (OSError, ValueError, KeyError):
+                    pass  # missing or truncated: recompute
+        manifest = {"format": FORMAT + "-manifest", "fingerprint": fp, "chunk_size": chunk, "n_members": n,
+                    "params": list(paths), "mode": mode, "t1": float(ts[-1]), "lanes": lanes,
+                    "chunks": {str(k): {"file": f"chunk_{k:05d}.npz"} for k in sorted(done_chunks)}}
+        _write_manifest(out, manifest)
+
+    n_chunks = math.ceil(n / chunk)
+    groups_per_chunk = chunk // lanes
+    fn = _chunk_fn(spec)
+    results: dict[int, dict[str, np.ndarray]] = {}
+    report = print_progress if progress is True else (progress if callable(progress) else None)
+    compile_time = 0.0
+    computed = 0
+    compute_time = 0.0
+    failed = 0
+    for k in range(n_chunks):
+        lo, hi = k * chunk, min(n, (k + 1) * chunk)
+        idx = order[lo:hi]
+        t_start = time.perf_counter()
+        loaded = k in done_chunks
+        if loaded:
+            res = done_chunks[k]
+        else:
+            rows = solve_rows[idx]
+            pad = chunk - rows.shape[0]
+            rows_p = np.concatenate([rows, np.repeat(rows[-1:], pad, axis=0)]) if pad else rows
+            n_active = math.ceil(rows.shape[0] / lanes)
+            active = np.arange(groups_per_chunk) < n_active
+            vals = jnp.asarray(rows_p.reshape(groups_per_chunk, lanes, len(paths)))
+            key = _cache_key(spec, scenario, ts, vals)
+            if key not in _COMPILED:
+                t_c = time.perf_counter()
+                _COMPILED[key] = fn.lower(scenario, ts, vals, jnp.asarray(active)).compile()
+                compile_time += time.perf_counter() - t_c
+                t_start = time.perf_counter()
+            fn_c = _COMPILED[key]
+            dev_out = jax.block_until_ready(fn_c(scenario, ts, vals, jnp.asarray(active)))
+            res = _flatten_out(dev_out, rows.shape[0])
+            computed += rows.shape[0]
+            compute_time += time.perf_counter() - t_start
+            if out is not None:
+                _write_atomic_npz(out / f"chunk_{k:05d}.npz", res)
+                manifest["chunks"][str(k)] = {"file": f"chunk_{k:05d}.npz", "members": [lo, hi],
+                                              "wall_s": round(time.perf_counter() - t_start, 4)}
+                _write_manifest(out, manifest)
+        results[k] = res
+        failed += int(np.sum(res["status"] != 0))
+        if report is not None:
+            done = min(n, (k + 1) * chunk)
+            rate = computed / compute_time if compute_time > 0 else None
+            remaining = sum(min(n, (j + 1) * chunk) - j * chunk for j in range(k + 1, n_chunks)
+                            if j not in done_chunks)
+            eta = remaining / rate if rate else (0.0 if remaining == 0 else None)
+            report(Progress(chunk=k, n_chunks=n_chunks, done=done, total=n,
+                            elapsed=time.perf_counter() - wall0, eta=eta, rate=rate, loaded=loaded,
+                            compile_time=compile_time, failed=failed))
+
+    # Assemble in the original member order.
+    keys = list(results[0])
+    flat = {key: np.concatenate([results[k][key] for k in range(n_chunks)]) for key in keys}
+    inv = np.empty(n, dtype=np.int64)
+    inv[order] = np.arange(n)
+    flat = {key: v[inv] for key, v in flat.items()}
+    status = flat["status"].astype(np.int32)
+    reasons: dict[int, str] = {}
+    for i, msg in invalid.items():
+        status[i] = ScanStatus.INVALID_PARAMETER
+        reasons[i] = msg
+    bad = status != ScanStatus.OK
+    data = {}
+    for o in obs:
+        v = flat[f"obs:{o.name}"].astype(np.float64)
+        v[bad] = np.nan
+        data[o.name] = v.reshape(*shape, *v.shape[1:])
+        obs_shapes[o.name] = v.shape[1:]
+    hist = {}
+    for h in histories:
+        v = flat[f"hist:{h}"].astype(np.float64)
+        v[bad] = np.nan
+        hist[h] = v.reshape(*shape, *v.shape[1:])
+    for i in np.flatnonzero(bad):
+        if int(i) not in reasons:
+            reasons[int(i)] = ScanStatus(int(status[i])).message
+    units = {p: param_unit(scenario, p) for p in paths}
+    units.update({o.name: o.unit for o in obs})
+    units.update({h: _HISTORY_UNITS[h] for h in histories})
+    descriptions = {o.name: o.description for o in obs}
+    attrs = {
+        "scenario": scenario.name, "t1": float(ts[-1]), "n_save": int(len(ts)),
+        "solver": {"solver": type(options.solver).__name__, "rtol": rtol, "atol": atol, "dt0": dt0,
+                   "max_steps": max_steps},
+        "lanes": lanes, "chunk_size": chunk, "devices": [str(d) for d in devs], "sorted": bool(sort),
+        "timings_s": {"compile": round(compile_time, 4), "compute": round(compute_time, 4),
+                      "total": round(time.perf_counter() - wall0, 4), "members_computed": computed},
+        "fingerprint": fp,
+    }
+    result = ScanResult(params=paths, mode=mode, coords=coords, shape=shape, data=data,
+                        components={o.name: o.components for o in obs}, status=status.reshape(shape),
+                        reasons=reasons, num_accepted_steps=flat["num_accepted_steps"].reshape(shape),
+                        num_rejected_steps=flat["num_rejected_steps"].reshape(shape),
+                        ts=np.asarray(ts), histories=hist, units=units,
+                        descriptions=descriptions, attrs=attrs)
+    if out is not None:
+        result.save(out / "scan")
+    return result
+
+
+_COMPILED: dict = {}
+
+
+def _cache_key(spec, scenario, ts, vals):
+    leaves, treedef = jax.tree_util.tree_flatten(scenario)
+    return (spec, treedef, tuple(np.shape(x) for x in leaves), ts.shape, vals.shape)
+
+
+def _hist_shape(name: str) -> tuple[int, ...]:
+    return {"corners": (4, 3), "friction_forces": (4, 3), "normal_forces": (4,), "ground_reaction": (),
+            "rope_tension": (), "hoist_work": (), "damping_loss": (), "friction_work": ()}.get(name, (3,))
+
+
+# ---------------------------------------------------------------------------------------------- CLI
+
+
+def configure_parser(subparsers) -> None:
+    """Add `jaxhoist scan SCENARIO --param PATH --values a:b:n [...] --t1 T --out DIR`."""
+    p = subparsers.add_parser(
+        "scan", help="sweep scenario parameters; observables per member as npz/json",
+        description="Solve a scenario for many values of one or more float leaves (vmapped, chunked, "
+                    "sharded over all devices, resumable) and save the observables of every member.")
+    p.add_argument("scenario", metavar="SCENARIO", help="preset name (e.g. paper-4.2) or TOML file")
+    p.add_argument("--param", action="append", required=True, metavar="PATH",
+                   help="dotted parameter path, e.g. foundation.friction_coefficient or load.mass_centre[0] "
+                        "(repeat for several parameters, each followed by its --values)")
+    p.add_argument("--values", action="append", required=True, metavar="SPEC",
+                   help="values of the matching --param: start:stop:num (inclusive) or v1,v2,...")
+    p.add_argument("--mode", choices=("sweep", "grid", "points"), default=None,
+                   help="several parameters: grid (every combination) or points (zipped)")
+    p.add_argument("--observable", action="append", default=None, metavar="NAME",
+                   help="built-in observable to record (repeatable); default final_position, final_euler, "
+                        "max_tilt, liftoff_time")
+    p.add_argument("--history", action="append", default=[], metavar="FIELD",
+                   help="Trajectory field to keep at every saved time (e.g. position, euler)")
+    p.add_argument("--t1", type=float, default=None, help="end time [s] (default: the scenario's t1)")
+    p.add_argument("--n-save", type=int, default=201, help="saved times (event times are interpolated on them)")
+    p.add_argument("--rtol", type=float, default=1e-6)
+    p.add_argument("--atol", type=float, default=1e-8)
+    p.add_argument("--max-steps", type=int, default=200_000)
+    p.add_argument("--lanes", type=int, default=16, help="members per vmapped lock-step solve (default 16)")
+    p.add_argument("--chunk-size", type=int, default=None, help="members per compiled call (default: automatic)")
+    p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
+    p.add_argument("--out", default=None, help="output folder (chunk files, manifest, scan.npz/json); resumable")
+    p.add_argument("--no-resume", action="store_true", help="recompute even if --out holds finished chunks")
+    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.set_defaults(func=run_cli)
+
+
+def run_cli(args) -> int:
+    jax.config.update("jax_enable_x64", True)
+    from ..io.scenario import load_scenario
+
+    if len(args.param) != len(args.values):
+        raise ScenarioError(f"give one --values per --param (got {len(args.param)} --param and "
+                            f"{len(args.values)} --values)")
+    scenario = load_scenario(args.scenario)
+    overrides = {}
+    for item in args.set:
+        path, sep, value = item.partition("=")
+        try:
+            overrides[path.strip()] = float(value)
+        except ValueError:
+            raise ScenarioError(f"--set expects PATH=VALUE with a number, got {item!r}") from None
+        get_leaf(scenario, path.strip())
+    if overrides:
+        scenario = scenario.replace(**overrides)
+        scenario.check()
+    params = {p: parse_values(v) for p, v in zip(args.param, args.values, strict=True)}
+    out = Path(args.out) if args.out else Path("out") / f"scan-{scenario.name}"
+    res = scan(scenario, params, args.t1, mode=args.mode, observables=args.observable, histories=args.history,
+               n_save=args.n_save, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps, lanes=args.lanes,
+               chunk_size=args.chunk_size, out_dir=out, resume=not args.no_resume, progress=not args.quiet)
+    n_fail = int(np.sum(~res.ok))
+    t = res.attrs["timings_s"]
+    print(f"scan          {scenario.name}: {res.size} members over {', '.join(res.params)} ({res.mode})")
+    print(f"failed        {n_fail}" + (f" (first: {res.failures()[0]})" if n_fail else ""))
+    print(f"steps         median {int(np.median(res.num_accepted_steps))}, max {int(res.num_accepted_steps.max())}")
+    print(f"wall time     compile {t['compile']:.3g} s, solve {t['compute']:.3g} s "
+          f"({1e3 * t['compute'] / max(1, t['members_computed']):.3g} ms per member), total {t['total']:.3g} s")
+    print(f"wrote         {out / 'scan.npz'}, {out / 'scan.json'}")
+    return 0 if n_fail == 0 else 1
