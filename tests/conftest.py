@@ -1,0 +1,84 @@
+"""Shared test set-up: float64, two host CPU devices, session-scoped presets and scenarios.
+
+Compile once, reuse: the fixtures below derive every scenario from the `paper-4.2` preset (so the static
+fields `name` and `t1` and the pytree structure are the same) and change leaf *values* only
+(`Scenario.replace`, `eqx.tree_at`). Tests that simulate pass `N_SAVE` saved times and the shared
+`SOLVE_KW`, so the jit cache of the solve core hits across tests and test files. Only the friction law
+(`RegularisedCoulomb` in the preset, `BristleFriction` in `paper42_bristle`) changes the structure.
+"""
+
+import os
+
+import jax
+
+# Two CPU devices so that sharding code paths are exercised; this must happen before the backend starts.
+try:
+    jax.config.update("jax_num_cpu_devices", 2)
+except AttributeError:  # older JAX: the XLA flag, read when the backend initialises
+    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2").strip()
+jax.config.update("jax_enable_x64", True)
+
+import tomllib  # noqa: E402
+from importlib import resources  # noqa: E402
+
+import equinox as eqx  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
+import pytest  # noqa: E402
+
+import jaxhoist as jh  # noqa: E402
+
+PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2")
+
+# Every simulate() in the physics tests saves this many times, so one compiled core serves them all
+# (ts is an array argument: its values may change, its length may not).
+N_SAVE = 201
+# Shared solver settings (static arguments of the jitted core: a change recompiles). rtol 1e-8 keeps the
+# solver error well below every physical tolerance asserted with them.
+SOLVE_KW = dict(rtol=1e-8, atol=1e-9)
+
+
+def run(scenario: jh.Scenario, ts, **kw) -> jh.Trajectory:
+    """`simulate` with the shared solver settings on the given saved times (len(ts) should be N_SAVE)."""
+    return jh.simulate(scenario, ts=jnp.asarray(ts, dtype=jnp.float64), **{**SOLVE_KW, **kw})
+
+
+def with_bristle(scenario: jh.Scenario, **kw) -> jh.Scenario:
+    """The same scenario with the bristle friction law (defaults unless given)."""
+    return eqx.tree_at(lambda s: s.foundation.friction, scenario, jh.BristleFriction(**kw))
+
+
+def with_coulomb(scenario: jh.Scenario, eps: float = 1e-3) -> jh.Scenario:
+    """The same scenario with the regularised Coulomb law of regularisation velocity `eps` [m/s]."""
+    return eqx.tree_at(lambda s: s.foundation.friction, scenario, jh.RegularisedCoulomb(eps))
+
+
+@pytest.fixture(scope="session")
+def preset_dicts() -> dict[str, dict]:
+    """The bundled presets as plain TOML dicts (to edit and feed to `scenario_from_dict`)."""
+    pkg = resources.files("jaxhoist.io.presets")
+    return {n: tomllib.loads(pkg.joinpath(f"{n}.toml").read_text()) for n in PRESETS}
+
+
+@pytest.fixture(scope="session")
+def paper42() -> jh.Scenario:
+    """The paper-4.2 preset: 31 875 kg container, offset mass centre, rope at the top corner above D."""
+    return jh.load_scenario("paper-4.2")
+
+
+@pytest.fixture(scope="session")
+def paper42_bristle(paper42) -> jh.Scenario:
+    """paper-4.2 with the default bristle friction law."""
+    return with_bristle(paper42)
+
+
+@pytest.fixture(scope="session")
+def centred42(paper42) -> jh.Scenario:
+    """paper-4.2's box with its mass centre at the box centre, rope at the top-face centre straight below the
+    boom tip (a vertical lift through C: no tilt, no yaw, no horizontal force by symmetry), hoist stopped."""
+    a, b, c = (float(x) for x in paper42.load.size)
+    return paper42.replace(**{
+        "load.mass_centre": [a / 2, b / 2, c / 2],
+        "rope.attachment": [a / 2, b / 2, c],
+        "boom.tip_position": [a / 2, b / 2, 10.0],
+        "hoist.speed": 0.0,
+    })
