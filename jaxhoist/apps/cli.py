@@ -98,18 +98,26 @@ def _compiled_solve(scenario, ts, options):
     return _COMPILED[key]
 
 
-def _parse_set(items: Sequence[str]) -> dict[str, float]:
+def _parse_set(items: Sequence[str]) -> dict[str, float | list[float]]:
+    """`["rope.stiffness=1e7", "load.mass_centre=[1, 2.5, 1]"]` -> {path: number or list of numbers}."""
+    import json
+
     from .._errors import ScenarioError
 
     out = {}
     for item in items:
         path, sep, value = item.partition("=")
+        path = path.strip()
         if not sep or not path:
             raise ScenarioError(f"--set expects PATH=VALUE (e.g. foundation.friction_coefficient=0.3), got {item!r}")
         try:
-            out[path.strip()] = float(value)
+            v = json.loads(value) if value.strip().startswith("[") else float(value)
+            if isinstance(v, list) and not all(isinstance(x, int | float) and not isinstance(x, bool) for x in v):
+                raise ValueError
         except ValueError:
-            raise ScenarioError(f"--set {path.strip()}: value must be a number, got {value!r}") from None
+            raise ScenarioError(f"--set {path}: value must be a number or a list of numbers like [1, 2.5, 1], "
+                                f"got {value!r}") from None
+        out[path] = v
     return out
 
 
@@ -138,11 +146,14 @@ def run_simulate(args: argparse.Namespace) -> int:
     with progress(f"loading scenario {args.scenario}"):
         scenario = load_scenario(args.scenario)
         overrides = _parse_set(args.set or [])
-        for path in overrides:
-            get_leaf(scenario, path)  # raises ScenarioError naming a bad path
-        if overrides:
-            scenario = scenario.replace(**overrides)
-            scenario.check()
+        try:
+            for path in overrides:
+                get_leaf(scenario, path)  # raises ScenarioError naming a bad path
+            if overrides:
+                scenario = scenario.replace(**overrides)
+                scenario.check()
+        except ScenarioError as e:
+            raise ScenarioError(f"{e} [from --set]") from None
         t1 = scenario.t1 if args.t1 is None else args.t1
         check_times(t1, None)
         if args.n_save < 2:
@@ -209,15 +220,15 @@ def configure_simulate(subparsers) -> None:
                     "trajectory.npz, trajectory.json and PNG plots to --out.")
     p.add_argument("scenario", metavar="SCENARIO",
                    help="a preset name (paper-2.3, paper-4.1, paper-4.2) or a path to a TOML scenario file")
-    p.add_argument("--t1", type=float, default=None, help="end time [s] (default: the scenario's t1)")
-    p.add_argument("--n-save", type=int, default=501, help="number of equally spaced saved times (default 501)")
-    p.add_argument("--rtol", type=float, default=1e-6, help="relative tolerance (default 1e-6)")
-    p.add_argument("--atol", type=float, default=1e-8, help="absolute tolerance (default 1e-8)")
-    p.add_argument("--max-steps", type=int, default=200_000, help="solver step budget (default 200000)")
+    p.add_argument("--t1", type=float, default=None, metavar="T", help="end time [s] (default: the scenario's t1)")
+    p.add_argument("--n-save", type=int, default=501, metavar="N", help="number of equally spaced saved times (default 501)")
+    p.add_argument("--rtol", type=float, default=1e-6, metavar="R", help="relative tolerance (default 1e-6)")
+    p.add_argument("--atol", type=float, default=1e-8, metavar="A", help="absolute tolerance (default 1e-8)")
+    p.add_argument("--max-steps", type=int, default=200_000, metavar="M", help="solver step budget (default 200000)")
     p.add_argument("--set", action="append", metavar="PATH=VALUE",
-                   help="replace a scenario leaf by dotted path, e.g. foundation.friction_coefficient=0.3 "
-                        "(repeatable)")
-    p.add_argument("--out", default=None, help="output folder (default out/<scenario name>)")
+                   help="replace a scenario value by dotted path, e.g. foundation.friction_coefficient=0.3 or "
+                        "'load.mass_centre=[1, 2.5, 1]' (repeatable); checked before compiling")
+    p.add_argument("--out", default=None, metavar="DIR", help="output folder (default out/<scenario name>)")
     p.add_argument("--no-plots", action="store_true", help="write only the npz/json files")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run_simulate)
@@ -280,6 +291,9 @@ def main(argv: Sequence[str] | None = None) -> int:
     except (ScenarioError, Float64Error) as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
+    except OSError as e:  # unreadable scenario file, unwritable output folder
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 1
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)
         return 130
