@@ -29,7 +29,12 @@ import numpy as np  # noqa: E402
 
 import jaxhoist  # noqa: E402
 from jaxhoist.apps import plots  # noqa: E402
-from jaxhoist.io.results import corner_detach_times, liftoff_time, save_trajectory, trajectory_arrays  # noqa: E402
+from jaxhoist.io.results import (  # noqa: E402
+    corner_detach_times,
+    liftoff_time,
+    save_trajectory,
+    trajectory_arrays,
+)
 
 
 def main(argv=None) -> int:

@@ -162,7 +162,8 @@ def test_readme_scenario_reference_lists_every_field():
             assert f"`{field}`" in section, f"README scenario reference lacks {tbl}.{field}"
     for cmd in ('python3.11 -m venv .venv && .venv/bin/pip install -e . && .venv/bin/jaxhoist simulate '
                 'paper-4.2 --out out/paper-4.2',
-                'python3.11 -m venv .venv && .venv/bin/pip install -e ".[test]" && .venv/bin/python -m pytest -q'):
+                'python3.11 -m venv .venv && .venv/bin/pip install -e ".[test]" && '
+                '.venv/bin/python -m pytest -q'):
         assert cmd in readme
 
 

@@ -67,7 +67,8 @@ def test_npz_round_trip_preserves_arrays_units_and_scenario(traj42, tmp_path):
     terms = sum(loaded[f"energy_{k}"] for k in ("kinetic", "potential", "ground_spring", "rope_spring",
                                                  "boom_spring"))
     np.testing.assert_allclose(loaded["energy_mechanical"], terms, rtol=1e-12)
-    np.testing.assert_allclose(loaded["energy_residual"], np.asarray(traj.energy_residual()), rtol=0, atol=1e-9)
+    np.testing.assert_allclose(loaded["energy_residual"], np.asarray(traj.energy_residual()),
+                               rtol=0, atol=1e-9)
 
 
 def test_liftoff_and_detach_times():

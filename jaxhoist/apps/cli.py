@@ -109,14 +109,15 @@ def _parse_set(items: Sequence[str]) -> dict[str, float | list[float]]:
         path, sep, value = item.partition("=")
         path = path.strip()
         if not sep or not path:
-            raise ScenarioError(f"--set expects PATH=VALUE (e.g. foundation.friction_coefficient=0.3), got {item!r}")
+            raise ScenarioError("--set expects PATH=VALUE (e.g. foundation.friction_coefficient=0.3), "
+                                f"got {item!r}")
         try:
             v = json.loads(value) if value.strip().startswith("[") else float(value)
-            if isinstance(v, list) and not all(isinstance(x, int | float) and not isinstance(x, bool) for x in v):
+            if isinstance(v, list) and not all(type(x) in (int, float) for x in v):
                 raise ValueError
         except ValueError:
-            raise ScenarioError(f"--set {path}: value must be a number or a list of numbers like [1, 2.5, 1], "
-                                f"got {value!r}") from None
+            raise ScenarioError(f"--set {path}: value must be a number or a list of numbers like "
+                                f"[1, 2.5, 1], got {value!r}") from None
         out[path] = v
     return out
 
@@ -205,7 +206,8 @@ def run_simulate(args: argparse.Namespace) -> int:
                                      for c, t in zip("DEFH", detach, strict=True)),
         f"max S         {arrays['rope_tension'].max() / 1e3:.4g} kN",
         f"energy check  max |residual| = {resid:.3g} J (hoist work {arrays['hoist_work'][-1]:.4g} J)",
-        f"steps         {int(arrays['num_accepted_steps'])} accepted, {int(arrays['num_rejected_steps'])} rejected",
+        f"steps         {int(arrays['num_accepted_steps'])} accepted, "
+        f"{int(arrays['num_rejected_steps'])} rejected",
         f"wall time     solve {wall_solve:.3g} s, total {time.perf_counter() - wall0:.3g} s",
         f"wrote         {npz}, {meta}" + (f", {len(pngs)} PNGs" if pngs else ""),
     ]
@@ -220,13 +222,17 @@ def configure_simulate(subparsers) -> None:
                     "trajectory.npz, trajectory.json and PNG plots to --out.")
     p.add_argument("scenario", metavar="SCENARIO",
                    help="a preset name (paper-2.3, paper-4.1, paper-4.2) or a path to a TOML scenario file")
-    p.add_argument("--t1", type=float, default=None, metavar="T", help="end time [s] (default: the scenario's t1)")
-    p.add_argument("--n-save", type=int, default=501, metavar="N", help="number of equally spaced saved times (default 501)")
+    p.add_argument("--t1", type=float, default=None, metavar="T",
+                   help="end time [s] (default: the scenario's t1)")
+    p.add_argument("--n-save", type=int, default=501, metavar="N",
+                   help="number of equally spaced saved times (default 501)")
     p.add_argument("--rtol", type=float, default=1e-6, metavar="R", help="relative tolerance (default 1e-6)")
     p.add_argument("--atol", type=float, default=1e-8, metavar="A", help="absolute tolerance (default 1e-8)")
-    p.add_argument("--max-steps", type=int, default=200_000, metavar="M", help="solver step budget (default 200000)")
+    p.add_argument("--max-steps", type=int, default=200_000, metavar="M",
+                   help="solver step budget (default 200000)")
     p.add_argument("--set", action="append", metavar="PATH=VALUE",
-                   help="replace a scenario value by dotted path, e.g. foundation.friction_coefficient=0.3 or "
+                   help="replace a scenario value by dotted path, e.g. foundation.friction_coefficient=0.3 "
+                        "or "
                         "'load.mass_centre=[1, 2.5, 1]' (repeatable); checked before compiling")
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default out/<scenario name>)")
     p.add_argument("--no-plots", action="store_true", help="write only the npz/json files")
@@ -237,13 +243,16 @@ def configure_simulate(subparsers) -> None:
 # -------------------------------------------------------------------------------------------- parser
 
 
-def _unavailable(name: str, module: str, error: BaseException):
+def _add_unavailable(subparsers, name: str, module: str, error: BaseException) -> None:
+    """Register `name` as a subcommand that explains why its module failed to import."""
     def run(args):
         print(f"{PROG} {name}: unavailable, importing {module} failed: {type(error).__name__}: {error}",
               file=sys.stderr)
         return 1
 
-    return run
+    p = subparsers.add_parser(name, help=f"(unavailable: {error})", add_help=False)
+    p.add_argument("rest", nargs=argparse.REMAINDER)
+    p.set_defaults(func=run)
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -262,10 +271,10 @@ def build_parser() -> argparse.ArgumentParser:
         except ModuleNotFoundError as e:
             if e.name is not None and module.startswith(e.name):
                 continue  # the module is not written yet
-            subparsers.add_parser(name, help=f"(unavailable: {e})").set_defaults(func=_unavailable(name, module, e))
+            _add_unavailable(subparsers, name, module, e)
             continue
         except Exception as e:  # a broken extension must not take `simulate` down with it
-            subparsers.add_parser(name, help=f"(unavailable: {e})").set_defaults(func=_unavailable(name, module, e))
+            _add_unavailable(subparsers, name, module, e)
             continue
         configure = getattr(mod, "configure_parser", None)
         if callable(configure):

@@ -145,11 +145,11 @@ def plot_corner_forces(data, *, title: str | None = None) -> Figure:
 def plot_corner_tracks(data, *, n_arrows: int = 40, n_outlines: int = 6, title: str | None = None) -> Figure:
     """The bottom corners D, E, F, H seen from above (world X-Y [m]) (the paper's Fig. 9 kind).
 
-    Tracks are thick while the corner touches the ground (N_i > 0) and thin where it is in the air. Arrows point
-    along the friction force T_i at up to `n_arrows` equally spaced saved times at which the corner touches
-    the ground; they have a fixed length (direction, not magnitude). Grey outlines show the footprint D-E-F-H
-    at `n_outlines` equally spaced times from t = 0 to lift-off (or the end), labelled with the time at
-    corner D; dots mark the start."""
+    Tracks are thick while the corner touches the ground (N_i > 0) and thin where it is in the air. Arrows
+    point along the friction force T_i at up to `n_arrows` equally spaced saved times at which the corner
+    touches the ground; they have a fixed length (direction, not magnitude). Grey outlines show the footprint
+    D-E-F-H at `n_outlines` equally spaced times from t = 0 to lift-off (or the end), labelled with the time
+    at corner D; dots mark the start."""
     d = as_arrays(data)
     fig, axes = _figure(1, 1, figsize=(7.0, 7.0), sharex=False)
     ax = axes[0, 0]
@@ -194,9 +194,9 @@ def plot_corner_tracks(data, *, n_arrows: int = 40, n_outlines: int = 6, title: 
 
 
 def plot_energy(data, *, title: str | None = None) -> Figure:
-    """Energy balance [kJ] (residual [J]) vs time [s]: the change of mechanical energy E(t) - E(0) against the hoist work minus
-    the damping and friction losses (top), and their difference, the residual (bottom), which measures the
-    solver error."""
+    """Energy balance [kJ] (residual [J]) vs time [s]: the change of mechanical energy E(t) - E(0) against the
+    hoist work minus the damping and friction losses (top), and their difference, the residual (bottom), which
+    measures the solver error."""
     d = as_arrays(data)
     fig, axes = _figure(2, 1, figsize=(7.0, 5.5))
     t = d["ts"]

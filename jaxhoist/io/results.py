@@ -282,4 +282,5 @@ def liftoff_time(ts, normal_forces) -> float | None:
 def corner_detach_times(ts, normal_forces) -> list[float | None]:
     """Per corner D, E, F, H: the first saved time [s] with N_i = 0, or None."""
     ts, n = np.asarray(ts), np.asarray(normal_forces)
-    return [float(ts[np.argmax(n[:, i] <= 0.0)]) if np.any(n[:, i] <= 0.0) else None for i in range(n.shape[1])]
+    off = n <= 0.0
+    return [float(ts[np.argmax(off[:, i])]) if off[:, i].any() else None for i in range(n.shape[-1])]
