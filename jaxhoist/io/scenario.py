@@ -171,7 +171,8 @@ def scenario_from_dict(data: dict, source: str = "<dict>") -> P.Scenario:
         if not (math.isfinite(t1) and t1 > 0):
             raise ScenarioError(f"t1 must be a positive finite time [s], got {t1}")
         return P.Scenario(load, foundation, rope, hoist, boom, gravity=top.get("gravity", 9.81),
-                          name=top.get("name", Path(source).stem), t1=t1)
+                          name=top.get("name", Path(source).stem), t1=t1,
+                          description=top.get("description", ""))
     except ScenarioError as e:
         msg = str(e)
         if f"[{source}" in msg:

@@ -62,10 +62,9 @@ class Trajectory(eqx.Module):
         """True where the solve reached t1 with a finite state."""
         return self.status == SolveStatus.OK
 
-    def energy_residual(self) -> Float[Array, " n_t"]:
+    def energy_residual(self) -> Float[Array, "*batch n_t"]:
         """E(t) - E(0) - [W_hoist - D_damping - W_friction](t) [J]: zero up to the solver error."""
-        e = self.energy
-        mech = e.kinetic + e.potential + e.ground_spring + e.rope_spring + e.boom_spring
+        mech = self.energy.mechanical
         supplied = self.hoist_work - self.damping_loss - self.friction_work
         return (mech - mech[..., :1]) - (supplied - supplied[..., :1])
 

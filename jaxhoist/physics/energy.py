@@ -8,6 +8,7 @@ W_friction also holds the elastic energy stored in the bristles (at most ½ μ N
 
 import equinox as eqx
 import jax.numpy as jnp
+from jaxtyping import Array, Float
 
 from .._typing import Scalar
 from .elastic import Constants, Snapshot, State
@@ -31,7 +32,7 @@ class Energy(eqx.Module):
     boom_spring: Scalar
 
     @property
-    def mechanical(self) -> Scalar:
+    def mechanical(self) -> Float[Array, "*batch"]:
         return self.kinetic + self.potential + self.ground_spring + self.rope_spring + self.boom_spring
 
 

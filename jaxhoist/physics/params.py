@@ -71,7 +71,8 @@ class Load(eqx.Module):
     """The lifted load: a rigid box a×b×c with an eccentric mass centre (paper §2, Fig. 1).
 
     - `size`: (a, b, c), edge lengths along ξ, η, ζ [m].
-    - `mass`: m [kg] (give `mass` or `density` ρ [kg/m³] to the constructor; m = ρabc).
+    - `mass`: m [kg] (give `mass` or `density` ρ [kg/m³] to the constructor; m = ρabc, computed once:
+      replacing `size` later keeps the mass, so change both if you mean a bigger box of the same material).
     - `mass_centre`: C = (ξ_C, η_C, ζ_C) in the body frame, measured from corner D [m]; default the box centre.
     - `inertia`: J, the inertia tensor about C in body axes [kg m²] with the sign convention of (2.11)
       (off-diagonal entries are -J_ξη etc.), or None: then the uniform-box tensor about its centre,
@@ -422,6 +423,7 @@ class Scenario(eqx.Module):
     - `gravity`: g [m/s²].
     - `name`: a label (static).
     - `t1`: default end time of a simulation [s] (static).
+    - `description`: free text (static).
     """
 
     load: Load
@@ -432,8 +434,10 @@ class Scenario(eqx.Module):
     gravity: Scalar
     name: str = eqx.field(static=True)
     t1: float = eqx.field(static=True)
+    description: str = eqx.field(static=True)
 
-    def __init__(self, load, foundation, rope, hoist, boom, gravity=9.81, name="custom", t1=10.0):
+    def __init__(self, load, foundation, rope, hoist, boom, gravity=9.81, name="custom", t1=10.0,
+                 description=""):
         require_x64()
         self.load = load
         self.foundation = foundation
@@ -443,6 +447,7 @@ class Scenario(eqx.Module):
         self.gravity = _f64(gravity)
         self.name = name
         self.t1 = float(t1)
+        self.description = str(description)
 
     def __check_init__(self):
         self.check()
