@@ -1,0 +1,691 @@
+"""Where does the motion change character? Candidate jumps on a scan grid, their refinement to a tolerance
+with derivative-accelerated root finding, and continuation of a two-parameter boundary.
+
+The paper (§4.3, Figs 10-12) finds that the container's motion changes abruptly near μ ≈ 0.3635. Here a
+change of character is the sign change of an *indicator*
+
+    g(p) = observable(p) - level,
+
+where `level` separates the two kinds of motion (by default the midpoint of the observable at the two
+ends of the bracket). Two kinds of observables:
+
+- continuous ones whose zero *is* the boundary, e.g. the difference of two event times
+  (`observables.detachment_time_difference("E", "D")`: which corner leaves the ground first). Newton steps
+  with dg/dp from forward-mode sensitivities (`jax.jvp` through `diffrax.ForwardMode`) converge in a few
+  solves;
+- discontinuous ones (a final yaw that jumps by tens of degrees). Derivatives say nothing across a jump,
+  so the safeguard falls back to bisection, ~log2(width/tol) solves; `method="multisection"` instead solves
+  k points per round in one vmapped call (more solves, fewer rounds of wall time).
+
+Either way the result reports how many solves it took against a uniform grid of the same resolution.
+
+    import jaxhoist as jh
+    from jaxhoist.apps import bifurcation, observables as obs
+    b = jh.locate_bifurcation(sc, "load.mass_centre[0]", obs.detachment_time_difference("E", "D"),
+                              (0.4, 0.6), t1=0.2, n_save=101)
+    print(b.summary())
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import functools
+import json
+import math
+import sys
+import time
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+
+from .._errors import ScenarioError, SolveStatus, require_x64
+from ..numerics.scan import ScanResult, check_path, param_unit, scan, set_param
+from ..numerics.solve import SolverOptions, check_times, solve
+from ..physics.params import Scenario
+from . import observables as obs_mod
+
+
+class BifurcationError(RuntimeError):
+    """The locator could not proceed: no sign change in the bracket, or a solve failed. `n_solves` says how
+    many solves were spent before giving up."""
+
+    def __init__(self, msg: str, n_solves: int = 0):
+        super().__init__(msg)
+        self.n_solves = n_solves
+
+
+# -------------------------------------------------------------------------------------- candidates
+
+
+@dataclasses.dataclass(frozen=True)
+class Jump:
+    """A candidate change of character between two neighbouring scan points.
+
+    - `param`: the swept parameter path; `lo`, `hi`: the bracketing parameter values [its unit].
+    - `y_lo`, `y_hi`: the observable at `lo` and `hi`; `size` = |y_hi - y_lo|.
+    - `score`: `size` over the typical neighbouring step (inf where the neighbourhood is flat).
+    - `index`: position of `lo` among the valid members sorted by the parameter.
+    """
+
+    param: str
+    observable: str
+    lo: float
+    hi: float
+    y_lo: float
+    y_hi: float
+    size: float
+    score: float
+    index: int
+
+
+def find_jumps(result: ScanResult, observable: str, *, param: str | None = None, factor: float = 8.0,
+               window: int = 6, min_size: float | None = None) -> list[Jump]:
+    """Candidate jumps of a scalar observable along a 1-D scan.
+
+    A step between neighbouring (valid) members is a candidate when it is `factor` times larger than the
+    median step of its `window` neighbours on either side, and larger than `min_size` (default 1e-6 of the
+    observable's range). Consecutive candidates are merged into one (a ramp steeper than its surroundings
+    spanning several grid cells). A step between a finite value and ±inf (an event that stops happening)
+    always counts.
+
+    **Returns** the candidates sorted by parameter value.
+    """
+    if len(result.params) != 1 and param is None:
+        raise ScenarioError(f"find_jumps: the scan has parameters {list(result.params)}; say which with param=")
+    param = result.params[0] if param is None else param
+    if result.mode == "grid" and len(result.params) > 1:
+        raise ScenarioError("find_jumps works along a 1-D scan; take a slice of the grid first")
+    y = np.asarray(result[observable], dtype=np.float64)
+    if y.shape != result.shape:
+        raise ScenarioError(f"find_jumps needs a scalar observable; {observable!r} has shape {y.shape[1:]} per "
+                            f"member (use e.g. '{observable}[0]' when scanning)")
+    x = np.asarray(result.values(param), dtype=np.float64).ravel()
+    y = y.ravel()
+    keep = result.ok.ravel() & ~np.isnan(y)
+    x, y = x[keep], y[keep]
+    order = np.argsort(x, kind="stable")
+    x, y = x[order], y[order]
+    if x.size < 2:
+        return []
+    finite = np.isfinite(y)
+    with np.errstate(invalid="ignore"):
+        d = np.abs(np.diff(y))
+    both_inf = ~finite[:-1] & ~finite[1:] & (y[:-1] == y[1:])
+    d = np.where(both_inf, 0.0, d)
+    d_fin = np.where(np.isfinite(d), d, np.nan)
+    yr = np.ptp(y[finite]) if finite.any() else 0.0
+    floor = (1e-6 * yr if min_size is None else float(min_size))
+    cand = np.zeros(d.size, dtype=bool)
+    score = np.zeros(d.size)
+    for i in range(d.size):
+        if not np.isfinite(d[i]):
+            cand[i], score[i] = True, np.inf
+            continue
+        nb = np.concatenate([d_fin[max(0, i - window):i], d_fin[i + 1:i + 1 + window]])
+        nb = nb[np.isfinite(nb)]
+        bg = float(np.median(nb)) if nb.size else 0.0
+        if d[i] > floor and d[i] > factor * bg:
+            cand[i] = True
+            score[i] = d[i] / bg if bg > 0 else np.inf
+    jumps = []
+    i = 0
+    while i < d.size:
+        if not cand[i]:
+            i += 1
+            continue
+        j = i
+        while j + 1 < d.size and cand[j + 1]:
+            j += 1
+        with np.errstate(invalid="ignore"):
+            size = abs(y[j + 1] - y[i])
+        jumps.append(Jump(param=param, observable=observable, lo=float(x[i]), hi=float(x[j + 1]),
+                          y_lo=float(y[i]), y_hi=float(y[j + 1]), size=float(size),
+                          score=float(np.max(score[i:j + 1])), index=i))
+        i = j + 1
+    return jumps
+
+
+# ------------------------------------------------------------------------------------- evaluations
+
+
+@dataclasses.dataclass(frozen=True)
+class _Spec:
+    path: str
+    observable: obs_mod.Observable
+    options: SolverOptions
+
+
+def _value(scenario, x, ts, spec: _Spec):
+    sc = set_param(scenario, spec.path, x)
+    traj = solve(sc, ts, spec.options)
+    return jnp.asarray(spec.observable(traj, sc), dtype=jnp.float64), (traj.status, traj.num_accepted_steps)
+
+
+@functools.lru_cache(maxsize=32)
+def _value_fn(spec: _Spec):
+    return eqx.filter_jit(lambda sc, x, ts: _value(sc, x, ts, spec))
+
+
+@functools.lru_cache(maxsize=32)
+def _jvp_fn(spec: _Spec):
+    def f(sc, x, ts):
+        y, dy, aux = jax.jvp(lambda p: _value(sc, p, ts, spec), (x,), (jnp.ones_like(x),), has_aux=True)
+        return y, dy, aux
+
+    return eqx.filter_jit(f)
+
+
+class _Evaluator:
+    """Counts solves and turns a failed solve into a `BifurcationError` naming the parameter value."""
+
+    def __init__(self, scenario, path, observable, ts, options: SolverOptions):
+        self.scenario, self.path, self.ts = scenario, path, ts
+        self.value_spec = _Spec(path, observable, options)
+        self.jvp_spec = _Spec(path, observable, dataclasses.replace(options, adjoint="forward"))
+        self.n_value = 0
+        self.n_jvp = 0
+        self.steps = 0
+        self.compile_time = 0.0
+        self._compiled: dict = {}
+
+    def _call(self, kind, x):
+        spec = self.value_spec if kind == "value" else self.jvp_spec
+        fn = (_value_fn if kind == "value" else _jvp_fn)(spec)
+        xs = jnp.asarray(x, dtype=jnp.float64)
+        key = (kind, spec)
+        if key not in self._compiled:
+            t0 = time.perf_counter()
+            self._compiled[key] = fn.lower(self.scenario, xs, self.ts).compile()
+            self.compile_time += time.perf_counter() - t0
+        out = jax.block_until_ready(self._compiled[key](self.scenario, xs, self.ts))
+        aux = out[-1]
+        status, steps = int(aux[0]), int(aux[1])
+        self.steps += steps
+        if status != SolveStatus.OK:
+            raise BifurcationError(f"the solve at {self.path} = {float(x)!r} failed: "
+                                   f"{SolveStatus(status).message}", n_solves=self.n_value + self.n_jvp)
+        return out
+
+    def value(self, x) -> float:
+        self.n_value += 1
+        y, _ = self._call("value", x)
+        return float(y)
+
+    def value_and_slope(self, x) -> tuple[float, float]:
+        self.n_jvp += 1
+        y, dy, _ = self._call("jvp", x)
+        return float(y), float(dy)
+
+
+# ---------------------------------------------------------------------------------------- locator
+
+
+@dataclasses.dataclass
+class Bifurcation:
+    """The located change of character.
+
+    - `param`, `unit`, `observable`: what was varied and watched.
+    - `value`: the estimate p* (midpoint of the final bracket) [unit]; `bracket`: the final (lo, hi), with
+      the indicator g = observable - `level` of opposite signs at the two ends; `width` = hi - lo.
+    - `y_lo`, `y_hi`: the observable at the final bracket ends (the two kinds of motion).
+    - `n_solves`: solves used (`n_derivative_solves` of them with forward sensitivities, ~2-3x the cost);
+      `n_uniform`: solves a uniform grid over the initial bracket at spacing `tol` would need.
+    - `history`: every evaluation as (p, g, dg/dp or None, "newton" | "bisect" | "end" | "multisection").
+    - `converged`: width <= tol; `method`; `wall_time`, `compile_time` [s]; `steps`: total solver steps.
+    - `notes`: what the safeguards did (e.g. a fall-back to bisection when derivatives were not finite).
+    """
+
+    param: str
+    unit: str
+    observable: str
+    value: float
+    bracket: tuple[float, float]
+    width: float
+    level: float
+    y_lo: float
+    y_hi: float
+    tol: float
+    n_solves: int
+    n_derivative_solves: int
+    n_uniform: int
+    history: list
+    converged: bool
+    method: str
+    wall_time: float = 0.0
+    compile_time: float = 0.0
+    steps: int = 0
+    notes: list = dataclasses.field(default_factory=list)
+
+    def summary(self) -> str:
+        return (f"{self.param} * = {self.value:.10g} {self.unit} (bracket [{self.bracket[0]:.10g}, "
+                f"{self.bracket[1]:.10g}], width {self.width:.2g}) where {self.observable} changes from "
+                f"{self.y_lo:.6g} to {self.y_hi:.6g}; {self.n_solves} solves ({self.n_derivative_solves} with "
+                f"derivatives, method {self.method}) vs {self.n_uniform} for a uniform grid at spacing "
+                f"{self.tol:g}")
+
+    def to_dict(self) -> dict[str, Any]:
+        d = dataclasses.asdict(self)
+        d["history"] = [list(h) for h in self.history]
+        return d
+
+
+def _options(solver, rtol, atol, dt0, max_steps):
+    return SolverOptions(solver=diffrax.Tsit5() if solver is None else solver, rtol=rtol, atol=atol, dt0=dt0,
+                         max_steps=max_steps)
+
+
+def _times(scenario, t1, ts, n_save):
+    if t1 is None:
+        t1 = scenario.t1 if ts is None else float(np.asarray(ts)[-1])
+    check_times(t1, ts)
+    if ts is None:
+        if int(n_save) < 2:
+            raise ScenarioError(f"n_save must be >= 2, got {n_save}")
+        ts = np.linspace(0.0, 1.0, int(n_save)) * float(t1)
+    return jnp.asarray(ts, dtype=jnp.float64)
+
+
+def _resolve_one(observable) -> obs_mod.Observable:
+    try:
+        (o,) = obs_mod.resolve(observable)
+    except ValueError as e:
+        raise ScenarioError(f"locate_bifurcation needs one observable: {e}") from None
+    return o
+
+
+def _indicator(y, level, y_lo_end):
+    """g = y - level for finite ends; for an end at ±inf (an event that stops happening), +1 on the side of
+    the lower end and -1 on the other, with no slope information."""
+    if np.isfinite(level):
+        return y - level
+    same = (np.isfinite(y) == np.isfinite(y_lo_end)) and (np.isfinite(y) or y == y_lo_end)
+    return -1.0 if same else 1.0
+
+
+def locate_bifurcation(
+    scenario: Scenario,
+    param: str,
+    observable,
+    bracket: tuple[float, float],
+    *,
+    level: float | None = None,
+    tol: float = 1e-6,
+    method: str = "newton",
+    t1: float | None = None,
+    ts=None,
+    n_save: int = 201,
+    solver: diffrax.AbstractSolver | None = None,
+    rtol: float = 1e-6,
+    atol: float = 1e-8,
+    dt0: float | None = None,
+    max_steps: int = 200_000,
+    max_solves: int = 200,
+    points_per_round: int = 16,
+    lanes: int = 16,
+) -> Bifurcation:
+    """Refine a change of character of `observable` in `param` to a bracket no wider than `tol`.
+
+    **Arguments**
+    - `scenario`, `param`: the base scenario and a parameter path (as in `scan`, e.g.
+      "foundation.friction_coefficient", "hoist.speed", "rope.stiffness", "load.mass_centre[0]").
+    - `observable`: a built-in name (a scalar one, or a component such as "final_euler[1]"), a callable
+      `fn(traj[, scenario])` or an `Observable`.
+    - `bracket`: (lo, hi) with the two kinds of motion at its ends (e.g. a `Jump` from `find_jumps`).
+    - `level`: the indicator is g = observable - level; default the midpoint of the values at the ends
+      (0 is natural for an event-time difference).
+    - `tol`: the final bracket width [unit of the parameter].
+    - `method`: "newton" (safeguarded Newton on g with dg/dp from forward-mode sensitivities; bisection
+      whenever a Newton step leaves the bracket or does not shrink it fast enough), "bisection" (value-only
+      solves), or "multisection" (`points_per_round` values per round in one vmapped `scan`).
+    - `t1`, `ts`, `n_save`, `solver`, `rtol`, `atol`, `dt0`, `max_steps`: as in `simulate`.
+    - `max_solves`: give up (converged=False) after this many solves.
+
+    **Returns** a `Bifurcation`.
+
+    **Raises** `ScenarioError` on invalid input (before compiling); `BifurcationError` if g has the same
+    sign at both ends, or a solve fails.
+    """
+    require_x64()
+    wall0 = time.perf_counter()
+    if not isinstance(scenario, Scenario):
+        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
+    scenario.check()
+    check_path(scenario, param)
+    lo, hi = (float(b) for b in bracket)
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+        raise ScenarioError(f"bracket must be two finite values lo < hi, got {bracket}")
+    for v in (lo, hi):
+        set_param(scenario, param, v).check()
+    if not (np.isfinite(tol) and tol > 0):
+        raise ScenarioError(f"tol must be > 0, got {tol}")
+    if method not in ("newton", "bisection", "multisection"):
+        raise ScenarioError(f"method must be 'newton', 'bisection' or 'multisection', got {method!r}")
+    obs = _resolve_one(observable)
+    ts = _times(scenario, t1, ts, n_save)
+    options = _options(solver, rtol, atol, dt0, max_steps)
+    n_uniform = int(math.ceil((hi - lo) / tol)) + 1
+    unit = param_unit(scenario, param)
+
+    if method == "multisection":
+        return _multisection(scenario, param, obs, lo, hi, level, tol, ts, options, max_solves,
+                             points_per_round, lanes, n_uniform, unit, wall0)
+
+    ev = _Evaluator(scenario, param, obs, ts, options)
+    use_d = method == "newton"
+    history: list = []
+
+    def evaluate(x, tag):
+        if use_d:  # reassigned below once the ends are known
+            y, dy = ev.value_and_slope(x)
+        else:
+            y, dy = ev.value(x), None
+        return y, dy
+
+    y_a, dy_a = evaluate(lo, "end")
+    y_b, dy_b = evaluate(hi, "end")
+    y_lo_end = y_a
+    lev = 0.5 * (y_a + y_b) if level is None else float(level)
+    if level is None and not (np.isfinite(y_a) and np.isfinite(y_b)):
+        lev = np.inf  # one end never has the event: classify by finiteness
+    g_a, g_b = _indicator(y_a, lev, y_lo_end), _indicator(y_b, lev, y_lo_end)
+    slope_ok = use_d and np.isfinite(lev)
+    history += [(lo, g_a, dy_a if slope_ok else None, "end"), (hi, g_b, dy_b if slope_ok else None, "end")]
+    if g_a == 0.0 or g_b == 0.0 or np.sign(g_a) == np.sign(g_b):
+        raise BifurcationError(
+            f"{obs.name} - level has the same sign at both ends of the bracket ({param} = {lo:g}: {y_a:g}, "
+            f"{hi:g}: {y_b:g}, level {lev:g}); give a bracket across the change (see find_jumps)", n_solves=2)
+    notes: list[str] = []
+    if slope_ok and not (np.isfinite(dy_a) or np.isfinite(dy_b)):
+        slope_ok = False
+        notes.append("forward-mode derivatives are not finite at the bracket ends: bisection with value-only "
+                     "solves")
+    a, b, ga, gb = lo, hi, g_a, g_b
+    ya, yb = y_a, y_b
+    use_d = slope_ok  # no slope information across an event that stops happening: value-only solves
+    n_bad_slopes = 0
+    # Safeguarded Newton (the rtsafe rule): from the last point, take the Newton step if it stays inside
+    # the bracket and is at most half the step before last; otherwise bisect.
+    x, gx, dgx = (a, ga, dy_a) if abs(ga) <= abs(gb) else (b, gb, dy_b)
+    dx_old = dx = b - a
+    while b - a > tol and ev.n_value + ev.n_jvp < max_solves:
+        tag = "bisect"
+        x_new = 0.5 * (a + b)
+        if use_d and dgx is not None and np.isfinite(dgx) and dgx != 0.0:
+            step = -gx / dgx
+            if abs(step) < 0.5 * tol:
+                # converged to within tol/2: step a little past the root to close the bracket behind it
+                step = math.copysign(0.45 * tol, step if step != 0.0 else (b - a))
+            if a < x + step < b and abs(step) <= 0.5 * abs(dx_old):
+                x_new, tag = x + step, "newton"
+        dx_old, dx = dx, abs(x_new - x)
+        x_new = min(max(x_new, a + 0.05 * tol), b - 0.05 * tol)
+        y_new, dy_new = evaluate(x_new, tag)
+        g_new = _indicator(y_new, lev, y_lo_end)
+        history.append((x_new, g_new, dy_new if use_d else None, tag))
+        if g_new == 0.0:
+            a, b, ya, yb = x_new, x_new, y_new, y_new
+            break
+        if np.sign(g_new) == np.sign(ga):
+            a, ga, ya = x_new, g_new, y_new
+        else:
+            b, gb, yb = x_new, g_new, y_new
+        x, gx, dgx = x_new, g_new, dy_new
+        n_bad_slopes = 0 if (dy_new is None or np.isfinite(dy_new)) else n_bad_slopes + 1
+        if use_d and n_bad_slopes >= 2:
+            use_d = False
+            notes.append(f"forward-mode derivatives not finite twice in a row near {param} = {x_new:.10g}: "
+                         f"bisection with value-only solves from there")
+    return Bifurcation(param=param, unit=unit, observable=obs.name, value=0.5 * (a + b), bracket=(a, b),
+                       width=b - a, level=float(lev), y_lo=float(ya), y_hi=float(yb), tol=tol,
+                       n_solves=ev.n_value + ev.n_jvp, n_derivative_solves=ev.n_jvp, n_uniform=n_uniform,
+                       history=history, converged=(b - a) <= tol, method=method,
+                       wall_time=time.perf_counter() - wall0, compile_time=ev.compile_time, steps=ev.steps,
+                       notes=notes)
+
+
+def _multisection(scenario, param, obs, lo, hi, level, tol, ts, options, max_solves, k, lanes, n_uniform, unit,
+                  wall0):
+    """Each round solves `k` interior points in one vmapped scan and keeps the first sign change."""
+    if k < 1:
+        raise ScenarioError(f"points_per_round must be >= 1, got {k}")
+    kw = dict(observables={obs.name: obs}, ts=ts, solver=options.solver, rtol=options.rtol, atol=options.atol,
+              dt0=options.dt0, max_steps=options.max_steps, lanes=lanes, sort=False)
+    ends = scan(scenario, {param: np.array([lo, hi])}, **kw)
+    _raise_failed(ends, param)
+    y_a, y_b = (float(v) for v in ends[obs.name])
+    y_lo_end = y_a
+    lev = 0.5 * (y_a + y_b) if level is None else float(level)
+    if level is None and not (np.isfinite(y_a) and np.isfinite(y_b)):
+        lev = np.inf
+    ga, gb = _indicator(y_a, lev, y_lo_end), _indicator(y_b, lev, y_lo_end)
+    if np.sign(ga) == np.sign(gb) or ga == 0 or gb == 0:
+        raise BifurcationError(f"{obs.name} - level has the same sign at both ends of the bracket "
+                               f"({lo:g}: {y_a:g}, {hi:g}: {y_b:g}, level {lev:g})", n_solves=2)
+    history = [(lo, ga, None, "end"), (hi, gb, None, "end")]
+    n_solves, compile_time = 2, ends.attrs["timings_s"]["compile"]
+    a, b, ya, yb = lo, hi, y_a, y_b
+    steps = int(np.sum(ends.num_accepted_steps))
+    while b - a > tol and n_solves + k <= max_solves:
+        xs = a + (b - a) * np.arange(1, k + 1) / (k + 1)
+        r = scan(scenario, {param: xs}, **kw)
+        _raise_failed(r, param)
+        n_solves += k
+        compile_time += r.attrs["timings_s"]["compile"]
+        steps += int(np.sum(r.num_accepted_steps))
+        ys = np.asarray(r[obs.name], dtype=np.float64)
+        gs = [_indicator(float(y), lev, y_lo_end) for y in ys]
+        history += [(float(x), g, None, "multisection") for x, g in zip(xs, gs, strict=True)]
+        pts = [(a, ga, ya)] + list(zip(xs.tolist(), gs, ys.tolist(), strict=True)) + [(b, gb, yb)]
+        for (x0, g0, y0), (x1, g1, y1) in zip(pts[:-1], pts[1:], strict=True):
+            if g1 == 0.0 or np.sign(g1) != np.sign(g0):
+                a, ga, ya, b, gb, yb = x0, g0, y0, x1, g1, y1
+                break
+    return Bifurcation(param=param, unit=unit, observable=obs.name, value=0.5 * (a + b), bracket=(a, b),
+                       width=b - a, level=float(lev), y_lo=float(ya), y_hi=float(yb), tol=tol, n_solves=n_solves,
+                       n_derivative_solves=0, n_uniform=n_uniform, history=history, converged=(b - a) <= tol,
+                       method="multisection", wall_time=time.perf_counter() - wall0, compile_time=compile_time,
+                       steps=steps)
+
+
+def _raise_failed(r: ScanResult, param):
+    if not np.all(r.ok):
+        f = r.failures()[0]
+        raise BifurcationError(f"the solve at {param} = {f['params'][param]!r} failed: {f['reason']}")
+
+
+def locate_jumps(scenario: Scenario, result: ScanResult, observable: str, *, max_jumps: int | None = None,
+                 **kw) -> list[Bifurcation]:
+    """`find_jumps` on a 1-D scan, then `locate_bifurcation` in every candidate bracket (largest first).
+    Keyword arguments go to both (`factor`, `window`, `min_size` to `find_jumps`, the rest to the locator);
+    a candidate whose refinement fails is skipped."""
+    fj = {k: kw.pop(k) for k in ("factor", "window", "min_size") if k in kw}
+    jumps = sorted(find_jumps(result, observable, **fj), key=lambda j: -j.size if np.isfinite(j.size) else -np.inf)
+    if max_jumps is not None:
+        jumps = jumps[:max_jumps]
+    out = []
+    for j in jumps:
+        try:
+            out.append(locate_bifurcation(scenario, j.param, observable, (j.lo, j.hi), **kw))
+        except BifurcationError:
+            continue
+    return sorted(out, key=lambda b: b.value)
+
+
+# ----------------------------------------------------------------------------------- continuation
+
+
+@dataclasses.dataclass
+class Boundary:
+    """A boundary p*(q) traced by continuation.
+
+    - `param`, `along`: the located parameter p and the continuation parameter q (paths).
+    - `along_values`, `values`: q_k and p*(q_k) (NaN where the corrector failed); `widths`: final brackets.
+    - `n_solves`: solves used in all; `n_dense`: solves a dense grid at spacing `tol` in p, over the initial
+      bracket and every located p*, at the same q values would need.
+    - `points`: the `Bifurcation` of each q (None where it failed).
+    """
+
+    param: str
+    along: str
+    along_values: np.ndarray
+    values: np.ndarray
+    widths: np.ndarray
+    n_solves: int
+    n_dense: int
+    points: list
+    tol: float
+
+
+def trace_boundary(
+    scenario: Scenario,
+    param: str,
+    bracket: tuple[float, float],
+    along: str,
+    along_values: Sequence[float],
+    observable,
+    *,
+    level: float | None = None,
+    tol: float = 1e-6,
+    method: str = "newton",
+    initial_half_width: float | None = None,
+    max_expansions: int = 8,
+    **solve_kw,
+) -> Boundary:
+    """Follow the boundary p*(q) in the (p, q) plane by continuation, not a dense grid.
+
+    At `along_values[0]`, p* is located in `bracket`. At each next q the predictor extrapolates the last two
+    points linearly (a secant along the boundary), and the corrector brackets the prediction by
+    ±w (w = half the last change of p*, at least 20 tol; doubled until the indicator changes sign) and
+    refines it with `locate_bifurcation`. With `level=None` the level is re-estimated in each bracket.
+
+    **Returns** a `Boundary`.
+    """
+    qs = np.asarray(along_values, dtype=np.float64)
+    if qs.ndim != 1 or qs.size < 1:
+        raise ScenarioError("along_values must be a non-empty 1-D sequence")
+    check_path(scenario, along)
+    check_path(scenario, param)
+    obs = _resolve_one(observable)
+    lo, hi = (float(v) for v in bracket)
+    ps: list[float] = []
+    points: list = []
+    n_solves = 0
+    for k, q in enumerate(qs):
+        sc = set_param(scenario, along, q)
+        good = [(qq, pp) for qq, pp in zip(qs[:k], ps, strict=True) if np.isfinite(pp)]
+        if not good:
+            candidates = [(lo, hi)]
+        else:
+            if len(good) >= 2:  # secant predictor along the boundary
+                (q0, p0), (q1, p1) = good[-2], good[-1]
+                pred = p1 + (p1 - p0) * (q - q1) / (q1 - q0)
+                w = max(20 * tol, 0.5 * abs(p1 - p0))
+            else:
+                pred = good[-1][1]
+                w = max(20 * tol, initial_half_width if initial_half_width else 0.05 * (hi - lo))
+            candidates = [(pred - w * 2**i, pred + w * 2**i) for i in range(max_expansions)]
+        pt = None
+        for br in candidates:
+            try:
+                pt = locate_bifurcation(sc, param, obs, br, level=level, tol=tol, method=method, **solve_kw)
+                break
+            except BifurcationError as e:  # no sign change in this bracket: widen it
+                n_solves += e.n_solves
+            except ScenarioError:  # the widened bracket left the valid range of the parameter
+                break
+        if pt is not None:
+            n_solves += pt.n_solves
+        ps.append(pt.value if pt is not None else np.nan)
+        points.append(pt)
+    vals = np.asarray(ps)
+    fin = vals[np.isfinite(vals)]
+    span = max([hi, *fin.tolist()]) - min([lo, *fin.tolist()])
+    n_dense = int(qs.size * (math.ceil(span / tol) + 1))
+    widths = np.array([p.width if p is not None else np.nan for p in points])
+    return Boundary(param=param, along=along, along_values=qs, values=vals, widths=widths, n_solves=n_solves,
+                    n_dense=n_dense, points=points, tol=tol)
+
+
+# ---------------------------------------------------------------------------------------------- CLI
+
+
+def configure_parser(subparsers) -> None:
+    """Add `jaxhoist bifurcation SCENARIO --param PATH --bracket LO HI --observable NAME [...]`."""
+    p = subparsers.add_parser(
+        "bifurcation", help="locate where an observable changes character as a parameter varies",
+        description="Refine a change of character of an observable (a jump, or the sign change of an event-"
+                    "time difference) to a tolerance, with derivative-accelerated root finding. With --scan N, "
+                    "first scan N points across the bracket and refine every candidate jump.")
+    p.add_argument("scenario", metavar="SCENARIO", help="preset name (e.g. paper-4.2) or TOML file")
+    p.add_argument("--param", required=True, metavar="PATH", help="e.g. foundation.friction_coefficient")
+    p.add_argument("--bracket", nargs=2, type=float, required=True, metavar=("LO", "HI"))
+    p.add_argument("--observable", default="final_psi",
+                   help="scalar observable (built-in name, a component like final_euler[1], or "
+                        "detach:E-D for a detachment-time difference); default final_psi")
+    p.add_argument("--level", type=float, default=None, help="indicator level (default: midpoint of the ends)")
+    p.add_argument("--tol", type=float, default=1e-6, help="final bracket width (default 1e-6)")
+    p.add_argument("--method", choices=("newton", "bisection", "multisection"), default="newton")
+    p.add_argument("--scan", type=int, default=0, metavar="N",
+                   help="first scan N points over the bracket and refine every candidate jump")
+    p.add_argument("--t1", type=float, default=None)
+    p.add_argument("--n-save", type=int, default=201)
+    p.add_argument("--rtol", type=float, default=1e-6)
+    p.add_argument("--atol", type=float, default=1e-8)
+    p.add_argument("--max-steps", type=int, default=200_000)
+    p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
+    p.add_argument("--out", default=None, help="folder for bifurcation.json (and the scan, with --scan)")
+    p.set_defaults(func=run_cli)
+
+
+def _cli_observable(name: str):
+    if name.startswith("detach:"):
+        a, _, b = name[len("detach:"):].partition("-")
+        return obs_mod.detachment_time_difference(a, b)
+    return name
+
+
+def run_cli(args) -> int:
+    jax.config.update("jax_enable_x64", True)
+    from ..io.scenario import load_scenario
+    from ..physics.params import get_leaf
+
+    scenario = load_scenario(args.scenario)
+    overrides = {}
+    for item in args.set:
+        path, _, value = item.partition("=")
+        try:
+            overrides[path.strip()] = float(value)
+        except ValueError:
+            raise ScenarioError(f"--set expects PATH=VALUE with a number, got {item!r}") from None
+        get_leaf(scenario, path.strip())
+    if overrides:
+        scenario = scenario.replace(**overrides)
+        scenario.check()
+    observable = _cli_observable(args.observable)
+    kw = dict(t1=args.t1, n_save=args.n_save, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+    out = Path(args.out) if args.out else None
+    lo, hi = args.bracket
+    if args.scan:
+        name = _resolve_one(observable).name
+        res = scan(scenario, {args.param: np.linspace(lo, hi, args.scan)}, observables={name: observable},
+                   out_dir=None if out is None else out / "scan", progress=True, **kw)
+        found = locate_jumps(scenario, res, name, level=args.level, tol=args.tol, method=args.method, **kw)
+        print(f"{len(find_jumps(res, name))} candidate jumps of {name} in {args.scan} points; located {len(found)}:")
+    else:
+        found = [locate_bifurcation(scenario, args.param, observable, (lo, hi), level=args.level, tol=args.tol,
+                                    method=args.method, **kw)]
+    for b in found:
+        print(b.summary())
+    if out is not None:
+        out.mkdir(parents=True, exist_ok=True)
+        (out / "bifurcation.json").write_text(json.dumps(
+            {"scenario": scenario.name, "overrides": overrides, "command": getattr(args, "argv", sys.argv),
+             "bifurcations": [b.to_dict() for b in found]}, indent=1, default=float) + "\n")
+        print(f"wrote {out / 'bifurcation.json'}")
+    return 0 if all(b.converged for b in found) else 1
