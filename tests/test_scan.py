@@ -1,0 +1,178 @@
+"""`jaxhoist.numerics.scan`: chunked, vmapped, sharded parameter scans.
+
+The scans here share one compiled core (same scenario structure, observables, options, saved times and
+chunk shape) wherever a test does not need another shape. The box is a 1 m cube of 1000 kg pulled
+obliquely at 0.3 m/s by a stiff rope: within 0.3 s corners D and H leave the ground first, then E and F.
+"""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)  # tests/conftest.py also does this, and sets up two CPU devices
+
+import json  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import jaxhoist as jh  # noqa: E402
+from jaxhoist.apps import observables as O  # noqa: E402
+from jaxhoist.numerics.scan import ScanResult, ScanStatus, _members, parse_path, parse_values, scan  # noqa: E402
+
+MU = "foundation.friction_coefficient"
+MUS = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
+T1 = 0.3
+KW = dict(observables=["final_position", "liftoff_time", "detachment_times", "contact_time", "max_tilt"],
+          n_save=31, lanes=2, max_steps=3000)
+
+
+def oblique_box() -> jh.Scenario:
+    return jh.Scenario(
+        load=jh.Load([1.0, 1.0, 1.0], 1000.0),
+        foundation=jh.Foundation(1.5e7, 2.0e5, 0.3, jh.RegularisedCoulomb(1e-3)),
+        rope=jh.Rope(1.5e7, 1.3e4, [0.5, 0.5, 1.0]),
+        hoist=jh.ConstantSpeedHoist(0.3),
+        boom=jh.Boom([3.0, 0.5, 11.0], 500.0, 5.0e6, 5.0e3),
+        name="oblique-box", t1=T1)
+
+
+@pytest.fixture(scope="module")
+def box():
+    return oblique_box()
+
+
+@pytest.fixture(scope="module")
+def clean(box):
+    """The reference scan: 6 μ, groups of 2 lanes, one group per device per chunk (2 chunks)."""
+    return scan(box, {MU: MUS}, T1, chunk_size=4, **KW)
+
+
+def test_scan_physics(clean):
+    """Every member solved; the observables say what the oblique pull does to the box."""
+    assert clean.shape == (6,) and np.all(clean.ok)
+    x = clean["final_position"][:, 0]
+    # More friction holds the box back: the mass centre ends less far towards the boom (at X = 3 m).
+    assert np.all(np.diff(x) < 0)
+    assert np.all(x > 0.5)  # it started above X = 0.5 m
+    t = clean["detachment_times"]
+    # The corners at X = 0 (D, H) are on the far side from the boom and lift first; the mirror symmetry
+    # about Y = 0.5 m makes D and H (and E and F) leave at the same time.
+    np.testing.assert_allclose(t[:, 0], t[:, 3], rtol=1e-9)
+    np.testing.assert_allclose(t[:, 1], t[:, 2], rtol=1e-9)
+    assert np.all(t[:, 0] < t[:, 1])
+    # Lift-off (all four N_i = 0) cannot come before the last corner's first detachment.
+    assert np.all(clean["liftoff_time"] >= t.max(axis=1) - 1e-12)
+    # Time spent in the five contact configurations adds up to the horizon.
+    np.testing.assert_allclose(clean["contact_time"].sum(axis=1), T1, rtol=1e-12)
+    assert clean.units[MU] == "-" and clean.units["final_position"] == "m" and clean.units["liftoff_time"] == "s"
+
+
+def test_identical_for_any_chunk_size_and_device_count(box, clean):
+    assert len(jax.devices()) >= 2, "tests/conftest.py should provide two CPU devices"
+    one_chunk = scan(box, {MU: MUS}, T1, chunk_size=8, **KW)
+    one_device = scan(box, {MU: MUS}, T1, chunk_size=2, devices=jax.devices()[:1], **KW)
+    assert clean.attrs["chunk_size"] == 4 and one_chunk.attrs["chunk_size"] == 8
+    for other in (one_chunk, one_device):
+        for k in clean.data:
+            np.testing.assert_array_equal(other[k], clean[k], err_msg=k)
+        np.testing.assert_array_equal(other.num_accepted_steps, clean.num_accepted_steps)
+
+
+def test_poisoned_members_are_marked_and_the_rest_unchanged(box, clean):
+    """μ = NaN is refused on the host (not solved); μ = 1e4 makes the regularised friction so stiff that
+    the solve runs out of steps. Both are marked with their reason; every other member is bit-for-bit the
+    clean scan's, and no observable of a failed member is silently a number."""
+    mus = MUS.copy()
+    mus[2], mus[4] = np.nan, 1e4
+    res = scan(box, {MU: mus}, T1, chunk_size=4, **KW)
+    assert res.status[2] == ScanStatus.INVALID_PARAMETER and res.status[4] == ScanStatus.MAX_STEPS
+    assert "friction_coefficient" in res.reason(2) and "must be finite" in res.reason(2)
+    assert "max_steps" in res.reason(4)
+    assert [f["index"] for f in res.failures()] == [2, 4]
+    assert np.all(np.isnan(res["final_position"][[2, 4]]))
+    keep = [0, 1, 3, 5]
+    for k in clean.data:
+        np.testing.assert_array_equal(res[k][keep], clean[k][keep], err_msg=k)
+
+
+def test_resume_after_interruption(box, clean, tmp_path):
+    """Interrupt after the first chunk (a progress callback raises), resume from the files, and end with
+    exactly the uninterrupted result; the saved result is self-describing and loads back."""
+    reports = []
+
+    def stop_after_first(p):
+        reports.append(p)
+        if p.chunk == 0:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        scan(box, {MU: MUS}, T1, chunk_size=4, out_dir=tmp_path, progress=stop_after_first, **KW)
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert list(manifest["chunks"]) == ["0"] and (tmp_path / "chunk_00000.npz").exists()
+    assert not (tmp_path / "scan.npz").exists()
+
+    reports.clear()
+    res = scan(box, {MU: MUS}, T1, chunk_size=4, out_dir=tmp_path, progress=reports.append, **KW)
+    assert [p.loaded for p in reports] == [True, False]
+    assert reports[-1].done == reports[-1].total == 6 and reports[-1].eta == 0.0
+    for k in clean.data:
+        np.testing.assert_array_equal(res[k], clean[k], err_msg=k)
+
+    back = ScanResult.load(tmp_path / "scan.npz")
+    for k in clean.data:
+        np.testing.assert_array_equal(back[k], clean[k], err_msg=k)
+    side = json.loads((tmp_path / "scan.json").read_text())
+    assert side["arrays"]["obs:liftoff_time"]["unit"] == "s"
+    assert side["arrays"][f"coord:{MU}"]["unit"] == "-"
+    assert side["scan"]["components"]["detachment_times"] == ["D", "E", "F", "H"]
+
+    with pytest.raises(jh.ScenarioError, match="different scan"):
+        scan(box, {MU: MUS[:3]}, T1, chunk_size=4, out_dir=tmp_path, **KW)
+
+
+def test_grid_mode_with_time_histories(box):
+    """A 2 x 2 grid over μ and the hoist speed, keeping the mass-centre history."""
+    res = scan(box, {MU: [0.2, 0.5], "hoist.speed": [0.2, 0.3]}, T1, mode="grid", histories=("position",),
+               **{**KW, "observables": ["final_position"]})
+    assert res.shape == (2, 2) and res["position"].shape == (2, 2, 31, 3)
+    assert res.units["hoist.speed"] == "m/s" and res.units["position"] == "m"
+    np.testing.assert_array_equal(res["position"][:, :, -1], res["final_position"])
+    np.testing.assert_array_equal(res.values("hoist.speed"), [[0.2, 0.3], [0.2, 0.3]])
+    x = res["final_position"][..., 0]
+    assert x[0, 1] > x[0, 0] and x[1, 1] > x[1, 0]  # a faster hoist drags the box further in 0.3 s
+    assert x[0, 0] > x[1, 0] and x[0, 1] > x[1, 1]  # more friction, less far
+
+
+def test_member_layout_and_value_specs():
+    mode, coords, shape, m = _members({"a": [1.0, 2.0], "b": [10.0, 20.0, 30.0]}, "grid")
+    assert shape == (2, 3) and m.shape == (6, 2)
+    np.testing.assert_array_equal(m[4], [2.0, 20.0])  # row-major: index (1, 1)
+    mode, coords, shape, m = _members({"a": [1.0, 2.0], "b": [10.0, 20.0]}, "points")
+    np.testing.assert_array_equal(m, [[1.0, 10.0], [2.0, 20.0]])
+    with pytest.raises(jh.ScenarioError, match="mode='grid'"):
+        _members({"a": [1.0], "b": [2.0]}, "sweep")
+    with pytest.raises(jh.ScenarioError, match="equally long"):
+        _members({"a": [1.0, 2.0], "b": [2.0]}, "points")
+    np.testing.assert_allclose(parse_values("0.1:0.6:6"), MUS)
+    np.testing.assert_array_equal(parse_values("1,2.5"), [1.0, 2.5])
+    assert parse_path("load.mass_centre[2]") == ("load.mass_centre", 2)
+
+
+def test_invalid_requests_fail_before_compiling(box):
+    with pytest.raises(jh.ScenarioError, match="has no field 'frction_coefficient'"):
+        scan(box, {"foundation.frction_coefficient": [0.1]}, T1)
+    with pytest.raises(jh.ScenarioError, match=r"load.mass_centre\[0\]"):
+        scan(box, {"load.mass_centre": [0.4]}, T1)
+    with pytest.raises(jh.ScenarioError, match="every member"):
+        scan(box, {MU: [-1.0, np.nan]}, T1)
+    with pytest.raises(jh.ScenarioError, match="unknown observable"):
+        scan(box, {MU: [0.2]}, T1, observables=["final_yaw"])
+
+
+def test_first_down_crossing_is_interpolated():
+    import jax.numpy as jnp
+
+    ts = jnp.linspace(0.0, 1.0, 11)
+    # f = 0.537 - t crosses zero at t = 0.537 exactly; linear interpolation is exact for a linear signal.
+    assert float(O.first_down_crossing(ts, 0.537 - ts)) == pytest.approx(0.537, abs=1e-14)
+    assert float(O.first_down_crossing(ts, 1.0 + ts)) == np.inf
+    assert float(O.first_down_crossing(ts, ts - 0.5)) == 0.0  # not in contact at t = 0
