@@ -181,6 +181,9 @@ def _jvp_fn(spec: _Spec):
     return eqx.filter_jit(f)
 
 
+_COMPILED: dict = {}  # compiled solves, by kind, spec and the shapes of their inputs
+
+
 class _Evaluator:
     """Counts solves and turns a failed solve into a `BifurcationError` naming the parameter value."""
 
@@ -192,18 +195,18 @@ class _Evaluator:
         self.n_jvp = 0
         self.steps = 0
         self.compile_time = 0.0
-        self._compiled: dict = {}
 
     def _call(self, kind, x):
         spec = self.value_spec if kind == "value" else self.jvp_spec
         fn = (_value_fn if kind == "value" else _jvp_fn)(spec)
         xs = jnp.asarray(x, dtype=jnp.float64)
-        key = (kind, spec)
-        if key not in self._compiled:
+        leaves, treedef = jax.tree_util.tree_flatten(self.scenario)
+        key = (kind, spec, treedef, tuple(np.shape(v) for v in leaves), self.ts.shape)
+        if key not in _COMPILED:
             t0 = time.perf_counter()
-            self._compiled[key] = fn.lower(self.scenario, xs, self.ts).compile()
+            _COMPILED[key] = fn.lower(self.scenario, xs, self.ts).compile()
             self.compile_time += time.perf_counter() - t0
-        out = jax.block_until_ready(self._compiled[key](self.scenario, xs, self.ts))
+        out = jax.block_until_ready(_COMPILED[key](self.scenario, xs, self.ts))
         aux = out[-1]
         status, steps = int(aux[0]), int(aux[1])
         self.steps += steps
@@ -451,26 +454,35 @@ def locate_bifurcation(
 
 def _multisection(scenario, param, obs, lo, hi, level, tol, ts, options, max_solves, k, lanes, n_uniform, unit,
                   wall0):
-    """Each round solves `k` interior points in one vmapped scan and keeps the first sign change."""
-    if k < 1:
-        raise ScenarioError(f"points_per_round must be >= 1, got {k}")
+    """Each round solves `k` points in one vmapped scan and keeps the first sign change."""
     kw = dict(observables={obs.name: obs}, ts=ts, solver=options.solver, rtol=options.rtol, atol=options.atol,
               dt0=options.dt0, max_steps=options.max_steps, lanes=lanes, sort=False)
-    ends = scan(scenario, {param: np.array([lo, hi])}, **kw)
-    _raise_failed(ends, param)
-    y_a, y_b = (float(v) for v in ends[obs.name])
+    if k < 2:
+        raise ScenarioError(f"points_per_round must be >= 2 for multisection, got {k}")
+    # Every round solves exactly k points (one compiled shape): the first round spans the bracket, ends
+    # included; later rounds put k points strictly inside the current bracket.
+    xs = np.linspace(lo, hi, k)
+    first = scan(scenario, {param: xs}, **kw)
+    _raise_failed(first, param)
+    ys = np.asarray(first[obs.name], dtype=np.float64)
+    y_a, y_b = float(ys[0]), float(ys[-1])
     y_lo_end = y_a
     lev = 0.5 * (y_a + y_b) if level is None else float(level)
     if level is None and not (np.isfinite(y_a) and np.isfinite(y_b)):
         lev = np.inf
-    ga, gb = _indicator(y_a, lev, y_lo_end), _indicator(y_b, lev, y_lo_end)
-    if np.sign(ga) == np.sign(gb) or ga == 0 or gb == 0:
+    gs = [_indicator(float(y), lev, y_lo_end) for y in ys]
+    if np.sign(gs[0]) == np.sign(gs[-1]) or gs[0] == 0 or gs[-1] == 0:
         raise BifurcationError(f"{obs.name} - level has the same sign at both ends of the bracket "
-                               f"({lo:g}: {y_a:g}, {hi:g}: {y_b:g}, level {lev:g})", n_solves=2)
-    history = [(lo, ga, None, "end"), (hi, gb, None, "end")]
-    n_solves, compile_time = 2, ends.attrs["timings_s"]["compile"]
-    a, b, ya, yb = lo, hi, y_a, y_b
-    steps = int(np.sum(ends.num_accepted_steps))
+                               f"({lo:g}: {y_a:g}, {hi:g}: {y_b:g}, level {lev:g})", n_solves=k)
+    history = [(float(x), g, None, "multisection") for x, g in zip(xs, gs, strict=True)]
+    n_solves, compile_time = k, first.attrs["timings_s"]["compile"]
+    steps = int(np.sum(first.num_accepted_steps))
+    pts = list(zip(xs.tolist(), gs, ys.tolist(), strict=True))
+    a = b = ga = gb = ya = yb = None
+    for (x0, g0, y0), (x1, g1, y1) in zip(pts[:-1], pts[1:], strict=True):
+        if g1 == 0.0 or np.sign(g1) != np.sign(g0):
+            a, ga, ya, b, gb, yb = x0, g0, y0, x1, g1, y1
+            break
     while b - a > tol and n_solves + k <= max_solves:
         xs = a + (b - a) * np.arange(1, k + 1) / (k + 1)
         r = scan(scenario, {param: xs}, **kw)

@@ -1,0 +1,183 @@
+"""`jaxhoist.apps.bifurcation`: candidate jumps on a scan, refinement to |Δp| <= 1e-6 against critical values
+derived by hand, and continuation of a boundary."""
+
+import math
+
+import jax
+
+jax.config.update("jax_enable_x64", True)  # tests/conftest.py also does this
+
+import jax.numpy as jnp  # noqa: E402
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+import jaxhoist as jh  # noqa: E402
+from jaxhoist.apps import observables as O  # noqa: E402
+from jaxhoist.apps.bifurcation import (  # noqa: E402
+    BifurcationError,
+    find_jumps,
+    locate_bifurcation,
+    trace_boundary,
+)
+from jaxhoist.numerics.scan import ScanResult  # noqa: E402
+
+XI = "load.mass_centre[0]"
+E_MINUS_D = O.detachment_time_difference("E", "D")
+SYM_KW = dict(t1=0.2, n_save=101)
+
+
+def symmetric_lift(xi_c: float = 0.45) -> jh.Scenario:
+    """A 1 m cube of 1000 kg lifted at 0.05 m/s by a vertical rope from the centre of its top face; the
+    mass centre is offset along ξ only, to (ξ_C, 0.5, 0.5) m."""
+    return jh.Scenario(
+        load=jh.Load([1.0, 1.0, 1.0], 1000.0, mass_centre=[xi_c, 0.5, 0.5]),
+        foundation=jh.Foundation(1.5e7, 2.0e5, 0.3, jh.RegularisedCoulomb(1e-3)),
+        rope=jh.Rope(1.5e7, 1.3e4, [0.5, 0.5, 1.0]),
+        hoist=jh.ConstantSpeedHoist(0.05),
+        boom=jh.Boom([0.5, 0.5, 11.0], 500.0, 5.0e6, 5.0e3),
+        name="symmetric-lift", t1=0.2)
+
+
+@pytest.fixture(scope="module")
+def newton_result():
+    return locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), level=0.0, tol=1e-6, **SYM_KW)
+
+
+def test_corner_order_swaps_at_the_symmetric_mass_centre(newton_result):
+    """Which corner leaves the ground first swaps at ξ_C* = a/2 = 0.5 m.
+
+    Derivation. The box (a = b = 1 m) stands with D, E, F, H at (0,0), (a,0), (a,b), (0,b); the rope runs
+    vertically from the top-face centre B = (a/2, b/2, c) to the boom tip straight above it, and only ξ_C
+    varies. The mirror X -> a - X maps the problem with ξ_C onto the one with a - ξ_C and swaps D <-> E and
+    H <-> F, so the indicator g(ξ_C) = t_E - t_D (first detachment times) is odd about a/2: g(a - ξ_C) =
+    -g(ξ_C), hence g(a/2) = 0, whatever the dynamics. Its sign: with a vertical pull S through x = a/2 the
+    ground reaction G - S acts at x_R = (G ξ_C - S a/2)/(G - S) (moments about the D-H edge, as in (2.8)),
+    which moves towards x = 0 as S grows when ξ_C < a/2, so the E-F edge unloads first: g < 0 below a/2
+    and g > 0 above. The bracket (0.46, 0.57) is not centred on 0.5, so bisection alone would not land
+    on it by accident.
+    """
+    b = newton_result
+    assert b.converged and b.width <= 1e-6
+    assert abs(b.value - 0.5) <= 1e-6
+    assert b.y_lo < 0.0 < b.y_hi  # E leaves first below ξ_C*, D above it
+    g_ends = [h[1] for h in b.history[:2]]
+    assert g_ends[0] < 0.0 < g_ends[1]
+    # Newton on the event-time difference converges in a handful of solves, against 110 001 for a uniform
+    # grid of the same resolution over the bracket.
+    assert b.n_uniform == 110_001
+    assert b.n_solves <= 12 and b.n_derivative_solves == b.n_solves
+    assert any(tag == "newton" for *_, tag in b.history)
+
+
+def test_bisection_finds_the_same_point_with_more_solves(newton_result):
+    b = locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), level=0.0, tol=1e-6,
+                           method="bisection", **SYM_KW)
+    assert b.converged and abs(b.value - 0.5) <= 1e-6
+    assert b.n_derivative_solves == 0
+    # log2(0.11 / 1e-6) = 16.7 halvings, plus the two ends
+    assert b.n_solves == 2 + math.ceil(math.log2(0.11 / 1e-6))
+    assert newton_result.n_solves < b.n_solves
+
+
+def test_multisection_and_continuation_along_the_hoist_speed():
+    """Multisection (8 points per vmapped round) finds ξ_C* = 0.5 m too; and the boundary ξ_C*(v_l) traced
+    by continuation over three hoist speeds stays at a/2 (the symmetry argument holds for every v_l)."""
+    m = locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), level=0.0, tol=1e-6,
+                           method="multisection", points_per_round=8, lanes=8, **SYM_KW)
+    assert m.converged and abs(m.value - 0.5) <= 1e-6
+    assert m.n_solves % 8 == 0
+
+    tr = trace_boundary(symmetric_lift(), XI, (0.46, 0.57), "hoist.speed", [0.05, 0.06, 0.07], E_MINUS_D,
+                        level=0.0, tol=1e-6, **SYM_KW)
+    np.testing.assert_allclose(tr.values, 0.5, atol=1e-6)
+    assert np.all(tr.widths <= 1e-6)
+    assert tr.n_solves < 40 and tr.n_dense > 3e5
+
+
+def test_slide_or_tip_first_flips_at_the_static_friction_coefficient():
+    """A horizontal pull at the top front edge: the box slides first for μ < μ*, tips first for μ > μ*.
+
+    Set-up: a 1 m cube, m = 1000 kg, mass centre at its centre (ξ_C = ζ_C = 0.5 m), on the elastic
+    foundation k = 1e6 N/m per corner (soft, so that the foundation's tilt matters) with little damping
+    (h = 100 N s/m), bristle friction (δ = 1 mm). The rope is attached at B = (a, b/2, c) = (1, 0.5, 1) m
+    and runs horizontally in +X to a boom tip 50 m away at the height of B at the critical state; the hoist
+    ramps up smoothly, so the pull S grows slowly (T ~ 2 s) and the load stays in quasi-static equilibrium
+    until one of two things happens:
+
+    - sliding: with a horizontal rope Σ N_i = m g, and the bristles carry T_i = μ N_i z_i/δ with the same
+      deflection z at every corner (the box translates), so the friction utilisation is z/δ = S/(μ m g).
+      We call "sliding onset" the first time z/δ reaches 1 - ε (ε = 1e-3): S = (1 - ε) μ m g.
+    - tipping: the back corners D, H (x = 0) unload. At that instant they touch the ground with N = 0 and
+      the front corners carry m g, so they sink p_f = m g/(2k) and the box is pitched by sin θ = p_f/a.
+      Moments about the front contact line (the friction and the front normal forces pass through it):
+          S (Z_B + p_f) = m g (X_front - X_C),
+      with Z_B + p_f = ζ_B cos θ + (a - ξ_B) sin θ = c cos θ and X_front - X_C = (a - ξ_C) cos θ - ζ_C sin θ.
+
+    Both at once: μ* = [(a - ξ_C) - ζ_C tan θ] / [c (1 - ε)] = 0.498046 (rigid ground: 0.5/(1 - ε) = 0.5005).
+    The event-time difference t_tip - t_slide changes sign there (±inf where only one event happens).
+
+    Tolerance: the derivation is quasi-static. The ground dampers shift the unloading of D by h ṗ ~ h/(k T)
+    ~ 5e-5 relative, the inertia of the bristle and contact oscillators by ~ (ω T)^-2 ~ 1e-4, and the event
+    times are interpolated on a 10 ms grid; so we allow 2.5e-4, a tenth of the elastic-foundation
+    correction (2.5e-3), which the located value must resolve.
+    """
+    eps, m, g, k = 1e-3, 1000.0, 9.81, 1e6
+    a = c = 1.0
+    xi_c = zeta_c = 0.5
+    sin_t = m * g / (2 * k * a)
+    cos_t = math.sqrt(1 - sin_t**2)
+    mu_star = ((a - xi_c) - zeta_c * sin_t / cos_t) / (c * (1 - eps))
+    sc = jh.Scenario(
+        load=jh.Load([a, 1.0, c], m),
+        foundation=jh.Foundation(k, 100.0, 0.5, jh.BristleFriction(1e-3, 0.5, 0.01)),
+        rope=jh.Rope(1.5e7, 1.3e4, [a, 0.5, c]),
+        hoist=jh.RampedHoist(4e-3, 0.5),
+        boom=jh.Boom([a + 50.0, 0.5, c * cos_t - a * sin_t], 500.0, 5.0e6, 5.0e3),
+        gravity=g, name="slide-or-tip", t1=3.0)
+
+    def tip_minus_slide(traj, scenario):
+        z2 = jnp.max(jnp.sum(traj.states.friction_state**2, axis=-1), axis=-1)
+        delta = scenario.foundation.friction.deflection
+        t_slide = O.first_down_crossing(traj.ts, ((1 - eps) * delta) ** 2 - z2)
+        t_tip = O.contact_function(traj, scenario)[:, 0]  # corner D
+        return O.first_down_crossing(traj.ts, t_tip) - t_slide
+
+    obs = O.Observable("tip_minus_slide", tip_minus_slide, "s", "t_tip - t_slide")
+    b = locate_bifurcation(sc, "foundation.friction_coefficient", obs, (0.49, 0.51), level=0.0, tol=1e-6,
+                           method="bisection", t1=3.0, n_save=301)
+    assert b.converged and b.width <= 1e-6
+    assert b.y_lo > 0.0 > b.y_hi  # slides first below μ*, tips first above
+    assert abs(b.value - mu_star) < 2.5e-4
+    assert abs(b.value - 0.5 / (1 - eps)) > 2e-3  # the rigid-ground value is excluded
+
+
+def test_find_jumps_on_a_synthetic_scan():
+    """A smooth background with a jump, a steep ramp over a few cells, an event that stops happening, and
+    a failed member: three candidates, each bracketing its feature."""
+    x = np.linspace(0.0, 1.0, 201)
+    y = np.sin(3 * x) + 2.0 * (x > 0.3037) + 5.0 * np.clip((x - 0.7) / 0.012, 0.0, 1.0)
+    y[x > 0.9025] = np.inf
+    status = np.zeros(x.size, dtype=np.int32)
+    status[50] = 1
+    y[50] = np.nan
+    res = ScanResult(params=["p"], mode="sweep", coords={"p": x}, shape=(201,), data={"y": y},
+                     components={"y": None}, status=status, reasons={50: "max_steps"},
+                     num_accepted_steps=np.zeros(201, dtype=np.int32),
+                     num_rejected_steps=np.zeros(201, dtype=np.int32), ts=None, histories={},
+                     units={"p": "-", "y": "-"}, descriptions={}, attrs={})
+    jumps = find_jumps(res, "y")
+    assert len(jumps) == 3
+    j0, j1, j2 = jumps
+    assert j0.lo < 0.3037 < j0.hi and j0.hi - j0.lo == pytest.approx(0.005)
+    assert j0.size == pytest.approx(2.0, abs=0.02)
+    assert j1.lo <= 0.7 + 1e-12 and j1.hi >= 0.712 and j1.hi - j1.lo <= 0.02  # the ramp, merged into one
+    assert j2.lo < 0.9025 < j2.hi and np.isinf(j2.y_hi)
+
+
+def test_locator_refuses_a_bracket_without_a_sign_change():
+    with pytest.raises(jh.ScenarioError, match="lo < hi"):
+        locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.6, 0.4), **SYM_KW)
+    with pytest.raises(jh.ScenarioError, match="mass_centre"):
+        locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.4, 1.2), **SYM_KW)  # outside the box
+    with pytest.raises(BifurcationError, match="same sign"):
+        locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.48), level=0.0, **SYM_KW)
