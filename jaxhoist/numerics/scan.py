@@ -240,18 +240,28 @@ class _Spec:
     options: SolverOptions
     lanes: int
     devices: tuple
+    derivatives: bool = False
 
 
 def _member(scenario, ts, row, spec: _Spec):
-    sc = scenario
-    for k, p in enumerate(spec.paths):
-        sc = set_param(sc, p, row[k])
-    traj = solve(sc, ts, spec.options)
+    def run(row):
+        sc = scenario
+        for k, p in enumerate(spec.paths):
+            sc = set_param(sc, p, row[k])
+        traj = solve(sc, ts, spec.options)
+        obs = {o.name: o(traj, sc) for o in spec.observables}
+        return obs, (obs, traj)
+
+    if spec.derivatives:  # forward-mode sensitivities d observable / d parameter, one tangent per parameter
+        jac, (obs, traj) = jax.jacfwd(run, has_aux=True)(row)
+    else:
+        _, (obs, traj) = run(row)
+        jac = {}
     ok = traj.status == SolveStatus.OK
-    obs = {o.name: o(traj, sc) for o in spec.observables}
     nan_obs = jnp.any(jnp.stack([jnp.any(jnp.isnan(v)) for v in obs.values()])) if obs else False
     status = jnp.where(ok & nan_obs, ScanStatus.NAN_OBSERVABLE, traj.status).astype(jnp.int32)
     obs = {k: jnp.where(ok, v, jnp.nan) for k, v in obs.items()}
+    obs.update({f"d_{k}": jnp.where(ok, v, jnp.nan) for k, v in jac.items()})
     hist = {h: jnp.where(ok, getattr(traj, h), jnp.nan) for h in spec.histories}
     return {"obs": obs, "hist": hist, "status": status,
             "num_accepted_steps": traj.num_accepted_steps.astype(jnp.int32),
@@ -517,7 +527,7 @@ def _fingerprint(scenario, spec: _Spec, members, ts, sort) -> str:
     h.update(np.ascontiguousarray(np.asarray(ts)).tobytes())
     o = spec.options
     h.update(repr((spec.paths, spec.histories, spec.lanes, sort, type(o.solver).__name__, o.rtol, o.atol, o.dt0,
-                   o.max_steps)).encode())
+                   o.max_steps, spec.derivatives)).encode())
     for ob in spec.observables:
         code = getattr(ob.fn, "__code__", None)
         h.update(f"{ob.name}|{getattr(ob.fn, '__module__', '')}.{getattr(ob.fn, '__qualname__', '')}".encode())
@@ -570,6 +580,7 @@ def scan(
     max_memory: float = 1e9,
     devices: Sequence | None = None,
     sort: bool = True,
+    derivatives: bool = False,
     out_dir: str | Path | None = None,
     resume: bool = True,
     progress: bool | Callable[[Progress], None] | None = None,
@@ -596,6 +607,10 @@ def scan(
     - `devices`: the JAX devices to shard over (default all of `jax.devices()`).
     - `sort`: solve members in order of their parameter values (cuts lock-step waste; no effect on results
       beyond the grouping).
+    - `derivatives`: also compute forward-mode sensitivities of every observable with respect to the swept
+      parameters (`jax.jacfwd` through `diffrax.ForwardMode`), stored as `d_<name>` with a last axis over
+      the parameters (about 1 + P/2 times the cost of a plain scan for P parameters; measured in
+      `experiments/benchmark_scan.py`).
     - `out_dir`: write each finished chunk there (`chunk_#####.npz` + `manifest.json`) and the final
       `scan.npz` + `scan.json`; with `resume=True` an interrupted scan continues from the chunks on disk.
     - `progress`: True to print a line per chunk on stderr, or a callable receiving a `Progress`.
@@ -625,7 +640,7 @@ def scan(
         if h not in _HISTORY_UNITS:
             raise ScenarioError(f"history {h!r} is not a Trajectory output; choose from {sorted(_HISTORY_UNITS)}")
     options = SolverOptions(solver=diffrax.Tsit5() if solver is None else solver, rtol=rtol, atol=atol, dt0=dt0,
-                            max_steps=max_steps)
+                            max_steps=max_steps, adjoint="forward" if derivatives else "reverse")
     if t1 is None:
         t1 = scenario.t1 if ts is None else float(np.asarray(ts)[-1])
     check_times(t1, ts)
@@ -657,7 +672,6 @@ def scan(
 
     # Layout: groups of `lanes` members; chunks of whole groups on every device.
     n_groups = math.ceil(n / lanes)
-    obs_shapes = {}
     hist_bytes = 8 * len(ts) * sum(int(np.prod(_hist_shape(h))) for h in histories)
     if chunk_size is None:
         per_dev = max(1, min(8, math.ceil(n_groups / n_dev)))
@@ -668,7 +682,8 @@ def scan(
             raise ScenarioError(f"chunk_size must be >= 1, got {chunk_size}")
         per_dev = max(1, math.ceil(int(chunk_size) / (lanes * n_dev)))
     chunk = per_dev * lanes * n_dev
-    spec = _Spec(paths=paths, observables=obs, histories=histories, options=options, lanes=lanes, devices=devs)
+    spec = _Spec(paths=paths, observables=obs, histories=histories, options=options, lanes=lanes, devices=devs,
+                 derivatives=bool(derivatives))
     fp = _fingerprint(scenario, spec, members, ts, sort)
 
     # Resume from disk.
@@ -765,7 +780,11 @@ def scan(
         v = flat[f"obs:{o.name}"].astype(np.float64)
         v[bad] = np.nan
         data[o.name] = v.reshape(*shape, *v.shape[1:])
-        obs_shapes[o.name] = v.shape[1:]
+    if derivatives:
+        for o in obs:
+            v = flat[f"obs:d_{o.name}"].astype(np.float64)
+            v[bad] = np.nan
+            data[f"d_{o.name}"] = v.reshape(*shape, *v.shape[1:])
     hist = {}
     for h in histories:
         v = flat[f"hist:{h}"].astype(np.float64)
@@ -778,6 +797,13 @@ def scan(
     units.update({o.name: o.unit for o in obs})
     units.update({h: _HISTORY_UNITS[h] for h in histories})
     descriptions = {o.name: o.description for o in obs}
+    components = {o.name: o.components for o in obs}
+    if derivatives:
+        for o in obs:
+            units[f"d_{o.name}"] = " | ".join(f"{o.unit} per {units[p]}" for p in paths)
+            descriptions[f"d_{o.name}"] = (f"forward-mode sensitivity of {o.name} to each swept parameter "
+                                           f"(last axis: {', '.join(paths)})")
+            components[f"d_{o.name}"] = paths
     attrs = {
         "scenario": scenario.name, "t1": float(ts[-1]), "n_save": int(len(ts)),
         "solver": {"solver": type(options.solver).__name__, "rtol": rtol, "atol": atol, "dt0": dt0,
@@ -788,7 +814,7 @@ def scan(
         "fingerprint": fp,
     }
     result = ScanResult(params=paths, mode=mode, coords=coords, shape=shape, data=data,
-                        components={o.name: o.components for o in obs}, status=status.reshape(shape),
+                        components=components, status=status.reshape(shape),
                         reasons=reasons, num_accepted_steps=flat["num_accepted_steps"].reshape(shape),
                         num_rejected_steps=flat["num_rejected_steps"].reshape(shape),
                         ts=np.asarray(ts), histories=hist, units=units,
