@@ -36,14 +36,15 @@ SCHEMA: dict[str, dict[str, tuple[str, bool, str]]] = {
     "load": {"size": ("m", _REQ, "vec3"), "mass": ("kg", _OPT, "float"), "density": ("kg/m^3", _OPT, "float"),
              "mass_centre": ("m", _OPT, "vec3"), "inertia": ("kg m^2", _OPT, "mat33")},
     "foundation": {"stiffness": ("N/m", _REQ, "float"), "damping": ("N s/m", _REQ, "float"),
-                   "friction_coefficient": ("-", _REQ, "float")},
+                   "friction_coefficient": ("-", _REQ, "float"), "damping_onset": ("m", _OPT, "float")},
     "foundation.friction:bristle": {"law": ("-", _REQ, "str"), "deflection": ("m", _OPT, "float"),
                                     "breakaway_ratio": ("-", _OPT, "float"),
                                     "relaxation_time": ("s", _OPT, "float")},
     "foundation.friction:regularised-coulomb": {"law": ("-", _REQ, "str"),
                                                 "regularisation_velocity": ("m/s", _OPT, "float")},
     "rope": {"stiffness": ("N/m", _REQ, "float"), "damping": ("N s/m", _REQ, "float"),
-             "attachment": ("m", _REQ, "vec3"), "slack": ("m", _OPT, "float")},
+             "attachment": ("m", _REQ, "vec3"), "slack": ("m", _OPT, "float"),
+             "damping_onset": ("m", _OPT, "float")},
     "hoist:constant-speed": {"law": ("-", _OPT, "str"), "speed": ("m/s", _REQ, "float")},
     "hoist:ramped": {"law": ("-", _REQ, "str"), "speed": ("m/s", _REQ, "float"),
                      "ramp_time": ("s", _OPT, "float"), "travel": ("m", _OPT, "float")},
@@ -72,13 +73,23 @@ class _Reader:
         where = f"table [{table}]" if table else "top level"
         return ScenarioError(f"{msg} [{self.source}, {where}]")
 
-    def table(self, data: dict, table: str, schema_key: str | None = None) -> dict[str, Any]:
-        """Check one table's keys and value types against SCHEMA; return {field: converted value}."""
+    def table(self, data: dict, table: str, schema_key: str | None = None,
+              subtables: tuple[str, ...] = ()) -> dict[str, Any]:
+        """Check one table's keys and value types against SCHEMA; return {field: converted value}.
+        `subtables` are the keys that hold a table read separately."""
         schema = SCHEMA[schema_key or table]
         out = {}
         for key, value in data.items():
+            if isinstance(value, dict) and key in subtables:
+                continue
+            if isinstance(value, dict) and key in schema:
+                unit, _, kind = schema[key]
+                raise self.error(table, f"{_dotted(table, key)} must be a {kind.replace('|', ' or ')} [{unit}], "
+                                        f"got a table {value!r}")
             if isinstance(value, dict):
-                continue  # a sub-table, read separately
+                allowed = sorted(schema) + list(subtables)
+                raise self.error(table, f"unknown table [{_dotted(table, key)}]{_hint(key, allowed)}; "
+                                        f"allowed: {allowed}")
             if key not in schema:
                 raise self.error(table, f"unknown field {_dotted(table, key)!r}{_hint(key, schema)}; "
                                         f"allowed: {sorted(schema)}")
@@ -139,28 +150,30 @@ def scenario_from_dict(data: dict, source: str = "<dict>") -> P.Scenario:
     for key, value in data.items():
         if isinstance(value, dict) and key not in tables:
             raise r.error("", f"unknown table [{key}]{_hint(key, tables)}; tables are {list(tables)}")
-    top = r.table(data, "")
+    top = r.table(data, "", subtables=tables)
     for t in tables:
         if t not in data:
             raise r.error("", f"missing table [{t}]")
-    sub = {k for k, v in data["foundation"].items() if isinstance(v, dict)}
-    if sub - {"friction"}:
-        bad = sorted(sub - {"friction"})[0]
-        raise r.error("foundation", f"unknown table [foundation.{bad}]{_hint(bad, ['friction'])}")
+        if not isinstance(data[t], dict):
+            raise r.error("", f"{t} must be a table [{t}], got {data[t]!r}")
 
     try:
         ld = r.table(data["load"], "load")
         load = P.Load(ld["size"], ld.get("mass"), density=ld.get("density"),
                       mass_centre=ld.get("mass_centre"), inertia=ld.get("inertia"))
         fr_data = data["foundation"].get("friction", {"law": "regularised-coulomb"})
+        if not isinstance(fr_data, dict):
+            raise r.error("foundation", f"foundation.friction must be a table [foundation.friction], got {fr_data!r}")
         law = _law(r, fr_data, "foundation.friction", FRICTION_LAWS, None)
         fr = r.table(fr_data, "foundation.friction", f"foundation.friction:{law}")
         fr.pop("law")
         friction = P.BristleFriction(**fr) if law == "bristle" else P.RegularisedCoulomb(**fr)
-        fd = r.table(data["foundation"], "foundation")
-        foundation = P.Foundation(fd["stiffness"], fd["damping"], fd["friction_coefficient"], friction)
+        fd = r.table(data["foundation"], "foundation", subtables=("friction",))
+        foundation = P.Foundation(fd["stiffness"], fd["damping"], fd["friction_coefficient"], friction,
+                                  fd.get("damping_onset", 1e-4))
         rp = r.table(data["rope"], "rope")
-        rope = P.Rope(rp["stiffness"], rp["damping"], rp["attachment"], rp.get("slack", 0.0))
+        rope = P.Rope(rp["stiffness"], rp["damping"], rp["attachment"], rp.get("slack", 0.0),
+                      rp.get("damping_onset", 1e-4))
         hlaw = _law(r, data["hoist"], "hoist", HOIST_LAWS, "constant-speed")
         hs = r.table(data["hoist"], "hoist", f"hoist:{hlaw}")
         hs.pop("law", None)

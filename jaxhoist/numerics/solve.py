@@ -177,6 +177,18 @@ def _raise_on_failure(traj: Trajectory) -> Trajectory:
     return eqx.branched_error_if(traj, traj.status != SolveStatus.OK, traj.status, msgs)
 
 
+def as_float64_leaves(scenario: Scenario) -> Scenario:
+    """Every float leaf as a strongly typed float64 array, so that a leaf set with `eqx.tree_at` to a Python
+    float or a weakly typed array hits the same compiled core instead of compiling again."""
+
+    def fix(x):
+        if isinstance(x, bool) or not isinstance(x, float | int | np.ndarray | np.generic | jax.Array):
+            return x
+        return jax.lax.convert_element_type(jnp.asarray(x), jnp.float64)
+
+    return jax.tree_util.tree_map(fix, scenario)
+
+
 def _concrete_float(x):
     return None if isinstance(x, jax.core.Tracer) else float(np.asarray(x))
 
@@ -230,6 +242,7 @@ def simulate(
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()
+    scenario = as_float64_leaves(scenario)
     options = SolverOptions(solver=diffrax.Tsit5() if solver is None else solver, rtol=rtol, atol=atol,
                             dt0=dt0, max_steps=max_steps, adjoint=adjoint, progress=progress)
     if t1 is None:

@@ -108,7 +108,8 @@ def snapshot(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Snapshot:
     # Corners and the foundation, eqs. (3.1)-(3.3).
     corners = kinematics.points_world(y.position, R, c.corners_rel)
     corner_vel = kinematics.points_velocity(y.velocity, R, omega, c.corners_rel)
-    N_i, ground_loss = forces.ground_normal(-corners[:, 2], -corner_vel[:, 2], fnd.stiffness, fnd.damping)
+    N_i, ground_loss = forces.ground_normal(-corners[:, 2], -corner_vel[:, 2], fnd.stiffness, fnd.damping,
+                                            fnd.damping_onset)
     T_h = fnd.friction.force(fnd.friction_coefficient, N_i, corner_vel[:, :2], y.friction_state)
     T_i = jnp.concatenate([T_h, jnp.zeros((4, 1))], axis=1)
 
@@ -121,7 +122,7 @@ def snapshot(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Snapshot:
     L_dot = jnp.dot(y.tip_velocity - v_B, e)
     s_dot = scenario.hoist.rate(t)
     stretch = L - (c.rope_length - scenario.hoist.shortening(t))
-    S, rope_loss = forces.rope_tension(stretch, L_dot + s_dot, rope.stiffness, rope.damping)
+    S, rope_loss = forces.rope_tension(stretch, L_dot + s_dot, rope.stiffness, rope.damping, rope.damping_onset)
 
     _, boom_loss = forces.boom_force(y.tip_position - c.tip_rest, y.tip_velocity, scenario.boom.stiffness,
                                      scenario.boom.damping)
@@ -171,7 +172,8 @@ def vector_field(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> State
         tip_position=y.tip_velocity,
         tip_velocity=tip_acc,
         friction_state=scenario.foundation.friction.state_rate(
-            snap.corner_velocity[:, :2], y.friction_state, snap.corners[:, 2] < 0.0),
+            snap.corner_velocity[:, :2], y.friction_state,
+            forces.onset_ramp(-snap.corners[:, 2], scenario.foundation.damping_onset)),
         hoist_work=snap.hoist_power,
         damping_loss=snap.damping_rate,
         friction_work=snap.friction_rate,

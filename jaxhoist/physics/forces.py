@@ -9,28 +9,45 @@ import jax.numpy as jnp
 from .._typing import PerCorner, Scalar, Vec3
 
 
-def ground_normal(penetration: PerCorner, penetration_rate: PerCorner, k: Scalar, h: Scalar):
-    """Normal forces N_i [N] of eqs. (3.1)-(3.2): N_i = max(0, k p_i + h dp_i/dt) for p_i > 0, else 0.
+def onset_ramp(depth, onset):
+    """min(depth / onset, 1) clipped at 0 [-]; a step at depth 0 when onset = 0.
 
-    p_i = -Z_i is how far corner i is below the ground [m]. The clip at zero means the ground never pulls
-    (a corner leaving the ground faster than the spring relaxes feels no force).
+    How much of a damper acts at a given penetration or stretch (our addition to (3.1) and (2.14)): the
+    damper builds up over the first `onset` metres, so a contact force is continuous when a corner touches
+    down or a slack rope snaps taut. A discontinuous force there would make the solution's parameter
+    derivatives (forward and reverse mode) miss the jump of the sensitivities at that instant.
+    """
+    pos = onset > 0.0
+    return jnp.where(pos, jnp.clip(depth / jnp.where(pos, onset, 1.0), 0.0, 1.0),
+                     jnp.where(depth > 0.0, 1.0, 0.0))
+
+
+def ground_normal(penetration: PerCorner, penetration_rate: PerCorner, k: Scalar, h: Scalar,
+                  onset: Scalar | float = 0.0):
+    """Normal forces N_i [N] of eqs. (3.1)-(3.2): N_i = max(0, k p_i + h w(p_i) dp_i/dt) for p_i > 0, else 0.
+
+    p_i = -Z_i is how far corner i is below the ground [m]; w = `onset_ramp(p_i, onset)` (w = 1 beyond
+    `onset` [m]; onset = 0 is the paper's law exactly). The clip at zero means the ground never pulls (a
+    corner leaving the ground faster than the spring relaxes feels no force).
 
     **Returns** `(N, dissipation_rate)`: N_i [N] and the power lost in the dampers [W] (>= 0).
     """
     in_contact = penetration > 0.0
     elastic = k * jnp.where(in_contact, penetration, 0.0)
-    normal = jnp.where(in_contact, jnp.maximum(elastic + h * penetration_rate, 0.0), 0.0)
+    damper = h * onset_ramp(penetration, onset) * penetration_rate
+    normal = jnp.where(in_contact, jnp.maximum(elastic + damper, 0.0), 0.0)
     return normal, jnp.sum((normal - elastic) * penetration_rate)
 
 
-def rope_tension(stretch: Scalar, stretch_rate: Scalar, c_l: Scalar, b_l: Scalar):
-    """Rope tension S [N] of eq. (2.14) with damping: S = max(0, c_l δ + b_l dδ/dt) for δ > 0, else 0.
+def rope_tension(stretch: Scalar, stretch_rate: Scalar, c_l: Scalar, b_l: Scalar, onset: Scalar | float = 0.0):
+    """Rope tension S [N] of eq. (2.14) with damping: S = max(0, c_l δ + b_l w(δ) dδ/dt) for δ > 0, else 0,
+    with w = `onset_ramp(δ, onset)` (onset = 0: the damper acts in full as soon as the rope is taut).
 
     **Returns** `(S, dissipation_rate)` with the damper's loss (S - c_l δ⁺) dδ/dt [W] (>= 0).
     """
     taut = stretch > 0.0
     elastic = c_l * jnp.where(taut, stretch, 0.0)
-    tension = jnp.where(taut, jnp.maximum(elastic + b_l * stretch_rate, 0.0), 0.0)
+    tension = jnp.where(taut, jnp.maximum(elastic + b_l * onset_ramp(stretch, onset) * stretch_rate, 0.0), 0.0)
     return tension, (tension - elastic) * stretch_rate
 
 

@@ -50,10 +50,15 @@ def euler_to_quat(phi, psi, theta) -> Quat:
 
 
 def matrix_to_euler(R: Rot33) -> Float[Array, "3"]:
-    """(φ, ψ, ϑ) [rad] of R = R_Z(ψ) R_Y(ϑ) R_X(φ); ϑ in [-π/2, π/2], φ and ψ in (-π, π]."""
-    phi = jnp.arctan2(R[2, 1], R[2, 2])
+    """(φ, ψ, ϑ) [rad] of R = R_Z(ψ) R_Y(ϑ) R_X(φ); ϑ in [-π/2, π/2], φ and ψ in (-π, π].
+
+    At gimbal lock (ϑ = ±π/2 to round-off: the box stands on an end) only φ ∓ ψ is defined; we return
+    φ = 0 and put the whole turn into ψ, so the triple still reproduces R.
+    """
     theta = jnp.arcsin(jnp.clip(-R[2, 0], -1.0, 1.0))
-    psi = jnp.arctan2(R[1, 0], R[0, 0])
+    lock = jnp.abs(R[2, 0]) > 1.0 - 1e-12
+    phi = jnp.where(lock, 0.0, jnp.arctan2(R[2, 1], R[2, 2]))
+    psi = jnp.where(lock, jnp.arctan2(-R[0, 1], R[1, 1]), jnp.arctan2(R[1, 0], R[0, 0]))
     return jnp.stack([phi, psi, theta])
 
 

@@ -19,7 +19,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Bool, Float
+from jaxtyping import Array, Float
 
 from .._errors import ScenarioError, require_x64
 from .._typing import Rot33, Scalar, Vec3
@@ -146,8 +146,9 @@ class AbstractFrictionLaw(eqx.Module):
 
     @abc.abstractmethod
     def state_rate(self, velocity: Float[Array, "4 2"], state: Float[Array, "4 n"],
-                   in_contact: Bool[Array, "4"]) -> Float[Array, "4 n"]:
-        """Time derivative of the law's internal state (`in_contact`: corner below the ground)."""
+                   contact: Float[Array, "4"]) -> Float[Array, "4 n"]:
+        """Time derivative of the law's internal state. `contact` in [0, 1] is 0 off the ground and 1 once a
+        corner is deeper than the foundation's `damping_onset` (continuous in between)."""
 
     def check(self) -> None:
         pass
@@ -172,7 +173,7 @@ class RegularisedCoulomb(AbstractFrictionLaw):
         speed = jnp.sqrt(jnp.sum(velocity**2, axis=-1) + eps**2)
         return -(mu * normal / speed)[:, None] * velocity
 
-    def state_rate(self, velocity, state, in_contact):
+    def state_rate(self, velocity, state, contact):
         return state
 
     def check(self):
@@ -211,7 +212,7 @@ class BristleFriction(AbstractFrictionLaw):
     def force(self, mu, normal, velocity, state):
         return -(mu * normal / self.deflection)[:, None] * state
 
-    def state_rate(self, velocity, state, in_contact):
+    def state_rate(self, velocity, state, contact):
         delta, rb = self.deflection, self.breakaway_ratio
         z2 = jnp.sum(state**2, axis=-1)
         r = jnp.sqrt(z2) / delta
@@ -222,7 +223,8 @@ class BristleFriction(AbstractFrictionLaw):
         rate = velocity - (beta * vz)[:, None] * state
         # Off the ground the bristles carry no load and relax: a corner lands with an unloaded bristle,
         # and a fast-moving free corner does not make the ODE stiff.
-        return jnp.where(in_contact[:, None], rate, -state / self.relaxation_time)
+        w = contact[:, None]
+        return w * rate - (1.0 - w) * state / self.relaxation_time
 
     def check(self):
         _check("foundation.friction.deflection", self.deflection, unit="m", low=0.0, low_open=True,
@@ -243,26 +245,31 @@ class Foundation(eqx.Module):
     - `damping`: h, vertical damper per corner [N s/m].
     - `friction_coefficient`: μ [-].
     - `friction`: the friction law (default `RegularisedCoulomb(1e-3)`, see README "Friction laws").
+    - `damping_onset`: p_0, the penetration over which the damper builds up [m] (our addition; 0 gives
+      the paper's (3.1) exactly, whose force jumps to h dp/dt at touch-down).
 
-    N_i = max(0, k p_i + h dp_i/dt) for a corner below the ground by p_i > 0, else 0: the ground pushes,
-    never pulls.
+    N_i = max(0, k p_i + h min(p_i/p_0, 1) dp_i/dt) for a corner below the ground by p_i > 0, else 0: the
+    ground pushes, never pulls, and the force is continuous at touch-down.
     """
 
     stiffness: Scalar
     damping: Scalar
     friction_coefficient: Scalar
     friction: AbstractFrictionLaw
+    damping_onset: Scalar
 
-    def __init__(self, stiffness, damping, friction_coefficient, friction=None):
+    def __init__(self, stiffness, damping, friction_coefficient, friction=None, damping_onset=1e-4):
         self.stiffness = _f64(stiffness)
         self.damping = _f64(damping)
         self.friction_coefficient = _f64(friction_coefficient)
         self.friction = RegularisedCoulomb(1e-3) if friction is None else friction
+        self.damping_onset = _f64(damping_onset)
 
     def check(self):
         _check("foundation.stiffness", self.stiffness, unit="N/m", low=0.0, low_open=True, symbol="k")
         _check("foundation.damping", self.damping, unit="N s/m", low=0.0, symbol="h")
         _check("foundation.friction_coefficient", self.friction_coefficient, unit="-", low=0.0, symbol="μ")
+        _check("foundation.damping_onset", self.damping_onset, unit="m", low=0.0, symbol="p_0")
         self.friction.check()
 
 
@@ -273,26 +280,31 @@ class Rope(eqx.Module):
     - `damping`: b_l, tension per metre per second of stretch rate [N s/m].
     - `attachment`: point B in the body frame ξηζ, measured from corner D [m]; on or inside the box.
     - `slack`: rope length at t = 0 minus the distance |AB| [m]; 0 means just taut.
+    - `damping_onset`: δ_0, the stretch over which the damper builds up [m] (our addition; 0: the
+      damper acts in full as soon as the rope is taut, and S jumps when a slack rope snaps taut).
 
-    S = max(0, c_l δ + b_l dδ/dt) for stretch δ = |AB| - l(t) > 0, else 0.
+    S = max(0, c_l δ + b_l min(δ/δ_0, 1) dδ/dt) for stretch δ = |AB| - l(t) > 0, else 0.
     """
 
     stiffness: Scalar
     damping: Scalar
     attachment: Vec3
     slack: Scalar
+    damping_onset: Scalar
 
-    def __init__(self, stiffness, damping, attachment, slack=0.0):
+    def __init__(self, stiffness, damping, attachment, slack=0.0, damping_onset=1e-4):
         self.stiffness = _f64(stiffness)
         self.damping = _f64(damping)
         self.attachment = _f64(attachment)
         self.slack = _f64(slack)
+        self.damping_onset = _f64(damping_onset)
 
     def check(self):
         _check("rope.stiffness", self.stiffness, unit="N/m", low=0.0, low_open=True, symbol="c_l")
         _check("rope.damping", self.damping, unit="N s/m", low=0.0, symbol="b_l")
         _check("rope.attachment", self.attachment, unit="m", shape=(3,), symbol="B")
         _check("rope.slack", self.slack, unit="m", low=0.0)
+        _check("rope.damping_onset", self.damping_onset, unit="m", low=0.0, symbol="δ_0")
 
 
 class AbstractHoistLaw(eqx.Module):

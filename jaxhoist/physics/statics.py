@@ -173,6 +173,14 @@ def friction_utilisation(force_h: Float[Array, "2"], moment: Scalar, points: Flo
 # ------------------------------------------------------------------------------------- rest statics
 
 
+def rest_statics_loads(scenario: Scenario, rope_force: Vec3) -> PerCorner:
+    """Only the nonnegative corner loads of `rest_statics` [N] (cheap: no friction utilisation)."""
+    load = scenario.load
+    N_i = linear_corner_loads(load.size, load.mass_centre, load.mass * scenario.gravity, rope_force,
+                              scenario.rope.attachment)
+    return nonnegative_corner_loads(N_i)[0]
+
+
 class RestStatics(eqx.Module):
     """Static quantities of the load resting flat under a rope force S (paper §2.1). Forces [N], lengths [m].
 

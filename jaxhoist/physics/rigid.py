@@ -1,0 +1,473 @@
+"""The paper's §2 model: a rigid box on a rigid ground, pulled by an elastic rope from a sprung boom tip.
+
+One mechanism serves every phase of the motion (rest, sliding, tipping about an edge or a corner, flight):
+constrained Newton-Euler dynamics (2.10)-(2.11) for the current set of active contacts. Each bottom corner
+D, E, F, H is in one of three contact modes, carried in `Phase.contact`:
+
+- `FREE`: no ground force;
+- `SLIDE`: on the ground (Z_i = 0 enforced), normal force N_i >= 0 and Coulomb friction -μ N_i t̂_i
+  opposite to the sliding direction t̂_i (eq. 2.18), t̂_i = v_i,h / |v_i,h| blended with the phase's
+  `slip_hint` below `slip_velocity` so that sliding can start from rest;
+- `STICK`: the corner does not move (all three velocity components held at zero), ground force free.
+
+The unknown contact forces λ (3 per corner) solve the small linear system "constrained corner accelerations
+vanish" (with Baumgarte stabilisation of the drift); redundant contacts (four coplanar corners, or two
+sticking corners sharing an edge) make it singular: four corners on the ground carry the paper's linear
+distribution (2.3) (which at rest is the minimum-norm solution), and what remains indeterminate takes
+the minimum norm (SVD pseudo-inverse). When the body is at rest on all
+four corners (`Phase.rest`) it is held fixed and only the boom tip moves; the phase lasts while the load
+can rest: N > 0, R inside the rectangle, and the exact corner friction utilisation ρ* <= 1 (`statics`).
+
+A phase ends at the first zero of one of its guards (all positive while the phase is valid):
+a contact's normal force reaching 0 (lift-off of that corner), a free corner reaching the ground
+(touch-down or impact), a sticking corner's friction reaching μN_i (slip), a sliding corner's velocity
+along its sliding direction reaching 0 (stop or turn), and for rest: R leaving the rectangle (tip) or
+ρ* reaching 1 (slip). The choice of the next phase, impacts and the phase loop live in
+`numerics.rigid_solve`.
+
+The state is `elastic.State` (with an empty friction state, shape (4, 0)); the rope (2.14) and the boom
+(2.13) are the force laws of `forces`. All functions are pure JAX.
+"""
+
+from __future__ import annotations
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float, Int
+
+from .._typing import CornerVecs, PerCorner, Rot33, Scalar, Vec3
+from . import forces, kinematics, statics
+from .elastic import Constants, State, constants
+from .energy import Energy
+from .params import Scenario
+
+FREE, SLIDE, STICK = 0, 1, 2
+MODE_NAMES = {FREE: "free", SLIDE: "slide", STICK: "stick"}
+CORNERS = ("D", "E", "F", "H")
+#: Guards: 0-3 normal/touch-down per corner, 4-7 stick/slide per corner, 8 rest tip/lift, 9 rest slip.
+N_GUARDS = 10
+GUARD_NAMES = tuple([f"normal:{c}" for c in CORNERS] + [f"tangential:{c}" for c in CORNERS]
+                    + ["rest:tip", "rest:slip"])
+
+
+class Phase(eqx.Module):
+    """The contact configuration of one phase. Arrays, so that every phase of motion runs through one
+    compiled solve; `rest` is static, so rest phases (the load held fixed) have their own, cheaper one.
+
+    - `contact`: per corner D, E, F, H: `FREE` (0), `SLIDE` (1) or `STICK` (2).
+    - `rest`: the load rests on all four corners and is held fixed (static).
+    - `slip_hint`: per corner, a horizontal unit vector (world X, Y): the sliding direction at the start of
+      the phase (needed when sliding starts from rest; otherwise the direction of the corner velocity).
+    - `guard_offset`: added to each guard so that all guards start > 0 (a guard that starts at 0, such as
+      the height of a corner that has just left the ground, must not end the phase at once).
+    """
+
+    contact: Int[Array, "4"]
+    slip_hint: Float[Array, "4 2"]
+    guard_offset: Float[Array, "10"]
+    rest: bool = eqx.field(static=True, default=False)
+
+
+def make_phase(contact, rest=False, slip_hint=None, guard_offset=None) -> Phase:
+    """Build a `Phase` from Python values (host side)."""
+    return Phase(
+        contact=jnp.asarray(contact, dtype=jnp.int32),
+        rest=bool(rest),
+        slip_hint=jnp.zeros((4, 2)) if slip_hint is None else jnp.asarray(slip_hint, dtype=jnp.float64),
+        guard_offset=jnp.zeros(N_GUARDS) if guard_offset is None else jnp.asarray(guard_offset, jnp.float64),
+    )
+
+
+class Settings(eqx.Module):
+    """Numerical constants of the rigid contact model.
+
+    - `baumgarte`: β [1/s]; constrained corner accelerations are driven to -2β v - β² Z so that the
+      drift of the contact constraints (integration error) decays instead of growing.
+    - `slip_velocity`: ε_v [m/s]; the sliding direction is that of v_h + ε_v t̂_hint, so it follows the
+      hint at the start of sliding from rest and the corner velocity once |v_h| >> ε_v.
+    - `rcond`: relative cut-off of singular values in the minimum-norm contact-force solve [-].
+    """
+
+    baumgarte: Scalar
+    slip_velocity: Scalar
+    rcond: Scalar
+
+    def __init__(self, baumgarte=20.0, slip_velocity=1e-6, rcond=1e-9):
+        self.baumgarte = jnp.asarray(baumgarte, dtype=jnp.float64)
+        self.slip_velocity = jnp.asarray(slip_velocity, dtype=jnp.float64)
+        self.rcond = jnp.asarray(rcond, dtype=jnp.float64)
+
+
+class Scales(eqx.Module):
+    """Reference magnitudes of a scenario: weight G = m g [N], length L = |(a, b, c)| [m],
+    velocity V = sqrt(g L) [m/s], acceleration g [m/s²]."""
+
+    force: Scalar
+    length: Scalar
+    velocity: Scalar
+    acceleration: Scalar
+
+
+def scales(scenario: Scenario) -> Scales:
+    g = scenario.gravity
+    L = jnp.linalg.norm(scenario.load.size)
+    return Scales(force=scenario.load.mass * g, length=L, velocity=jnp.sqrt(g * L), acceleration=g)
+
+
+# ------------------------------------------------------------------------------------ initial state
+
+
+def initial_state(scenario: Scenario) -> tuple[State, Constants]:
+    """The load standing flat on the rigid ground with corner D at the origin and ψ = 0, at rest; the rope
+    just taut (or slack by `rope.slack`), the boom tip at rest at A."""
+    load = scenario.load
+    position = load.mass_centre
+    B = scenario.rope.attachment
+    l0 = jnp.sqrt(jnp.sum((scenario.boom.tip_position - B) ** 2)) + scenario.rope.slack
+    c = constants(scenario, l0)
+    zero = jnp.zeros(())
+    y0 = State(position=position, velocity=jnp.zeros(3), quaternion=jnp.array([1.0, 0.0, 0.0, 0.0]),
+               angular_velocity=jnp.zeros(3), tip_position=scenario.boom.tip_position,
+               tip_velocity=jnp.zeros(3), friction_state=jnp.zeros((4, 0)), hoist_work=zero,
+               damping_loss=zero, friction_work=zero)
+    return y0, c
+
+
+# ------------------------------------------------------------------------------------ loads
+
+
+class Loads(eqx.Module):
+    """Kinematics and the applied (non-contact) forces at one instant. World axes unless stated.
+
+    - `rotation`: R (body -> world); `corners`, `corner_velocity`: D, E, F, H [m], [m/s].
+    - `jacobians`: B_i (4, 3, 6) with v_i = B_i (v_C, ω_body); `bias`: R(ω×(ω×ρ_i)) [m/s²], the part of
+      the corner acceleration not proportional to (dv_C/dt, dω/dt).
+    - `generalised_force`: (F, M - ω×Jω) with F world [N] and M about C in body axes [N m]: rope + weight.
+    - rope (2.14): `rope_point` B, `rope_tension` S, `rope_direction` (B -> A), `stretch`, `hoist_rate`,
+      `rope_loss` [W]; boom (2.13): `boom_force` on the tip [N], `boom_loss` [W].
+    """
+
+    rotation: Rot33
+    corners: CornerVecs
+    corner_velocity: CornerVecs
+    jacobians: Float[Array, "4 3 6"]
+    bias: CornerVecs
+    generalised_force: Float[Array, "6"]
+    rope_point: Vec3
+    rope_tension: Scalar
+    rope_direction: Vec3
+    stretch: Scalar
+    hoist_rate: Scalar
+    rope_loss: Scalar
+    boom_force: Vec3
+    boom_loss: Scalar
+
+
+def loads(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Loads:
+    """Kinematics, rope, boom and weight at (t, y)."""
+    load, rope, boom = scenario.load, scenario.rope, scenario.boom
+    R = kinematics.quat_to_matrix(y.quaternion)
+    omega = y.angular_velocity
+    corners = kinematics.points_world(y.position, R, c.corners_rel)
+    corner_vel = kinematics.points_velocity(y.velocity, R, omega, c.corners_rel)
+    jac = jax.vmap(lambda rho: jnp.concatenate([jnp.eye(3), -R @ kinematics.skew(rho)], axis=1))(
+        c.corners_rel)
+    bias = jnp.cross(omega, jnp.cross(omega, c.corners_rel)) @ R.T
+
+    # Rope (2.14) with l(t) = l0 - s(t), as in the elastic model.
+    B = kinematics.points_world(y.position, R, c.attachment_rel[None])[0]
+    v_B = kinematics.points_velocity(y.velocity, R, omega, c.attachment_rel[None])[0]
+    AB = y.tip_position - B
+    L = forces.safe_norm(AB)
+    e = AB / jnp.maximum(L, 1e-12)
+    L_dot = jnp.dot(y.tip_velocity - v_B, e)
+    s_dot = scenario.hoist.rate(t)
+    stretch = L - (c.rope_length - scenario.hoist.shortening(t))
+    S, rope_loss = forces.rope_tension(stretch, L_dot + s_dot, rope.stiffness, rope.damping)
+    F_boom, boom_loss = forces.boom_force(y.tip_position - c.tip_rest, y.tip_velocity, boom.stiffness,
+                                          boom.damping)
+
+    F_rope = S * e
+    z_hat = jnp.array([0.0, 0.0, 1.0])
+    force = F_rope - load.mass * scenario.gravity * z_hat
+    moment = jnp.cross(c.attachment_rel, R.T @ F_rope) - jnp.cross(omega, c.inertia @ omega)
+    return Loads(rotation=R, corners=corners, corner_velocity=corner_vel, jacobians=jac, bias=bias,
+                 generalised_force=jnp.concatenate([force, moment]), rope_point=B, rope_tension=S,
+                 rope_direction=e, stretch=stretch, hoist_rate=s_dot, rope_loss=rope_loss, boom_force=F_boom,
+                 boom_loss=boom_loss)
+
+
+def _mass_inverse(scenario: Scenario, c: Constants) -> Float[Array, "6 6"]:
+    m = scenario.load.mass
+    z = jnp.zeros((3, 3))
+    return jnp.block([[jnp.eye(3) / m, z], [z, c.inertia_inv]])
+
+
+def slip_directions(corner_velocity: CornerVecs, slip_hint: Float[Array, "4 2"], eps: Scalar):
+    """Unit sliding directions t̂_i (4, 2) from v_h + ε_v hint (zero if both vanish: frictionless)."""
+    w = corner_velocity[:, :2] + eps * slip_hint
+    n2 = jnp.sum(w**2, axis=1)
+    pos = n2 > 0
+    n = jnp.where(pos, jnp.sqrt(jnp.where(pos, n2, 1.0)), 1.0)
+    return jnp.where(pos[:, None], w / n[:, None], 0.0)
+
+
+def _maps(contact: Int[Array, "4"], tdir: Float[Array, "4 2"], mu: Scalar):
+    """Per corner: the force map P_i (world force = P_i λ_i) and the constrained-row selector S_i (3x3)."""
+    stick = contact == STICK
+    slide = contact == SLIDE
+    P_slide = jnp.zeros((4, 3, 3)).at[:, 2, 2].set(1.0).at[:, 0, 2].set(-mu * tdir[:, 0]).at[:, 1, 2].set(
+        -mu * tdir[:, 1])
+    eye = jnp.broadcast_to(jnp.eye(3), (4, 3, 3))
+    P = jnp.where(stick[:, None, None], eye, jnp.where(slide[:, None, None], P_slide, 0.0))
+    s_rows = jnp.where(stick[:, None], 1.0, jnp.where(slide[:, None], jnp.array([0.0, 0.0, 1.0]), 0.0))
+    return P, s_rows
+
+
+def _block_diag(blocks: Float[Array, "4 3 3"]) -> Float[Array, "12 12"]:
+    out = jnp.zeros((12, 12))
+    for i in range(4):
+        out = out.at[3 * i:3 * i + 3, 3 * i:3 * i + 3].set(blocks[i])
+    return out
+
+
+def solve_contact_system(jacobians, Minv, P, s_rows, target, mass, rcond):
+    """λ (12) of: for every constrained row k, (B M⁻¹ Bᵀ P λ)_k = target_k; unconstrained rows λ_k = 0.
+
+    Redundant contacts leave a family of solutions. With all four corners on the ground their normal
+    forces are fixed by the paper's linear law (2.3), N_i = A_0 + A_1 ξ_i + A_2 η_i, i.e. Σ w_i N_i = 0 with
+    w = (1, -1, 1, -1) (the rigid limit of the elastic foundation, where the flat bottom compresses the
+    springs linearly); with sliding corners this differs from the unweighted minimum norm because friction
+    scales with N_i. What is left (tangential forces shared by sticking corners) takes the minimum norm.
+    The system is scaled by the load's mass so that its entries are O(1); the identity rows of the
+    unconstrained components decouple, so the pseudo-inverse gives λ = 0 there.
+    """
+    Bbig = jacobians.reshape(12, 6)
+    K = Bbig @ Minv @ Bbig.T
+    s = s_rows.reshape(12)
+    A = mass * (s[:, None] * K @ _block_diag(P)) + jnp.diag(1.0 - s)
+    rhs = mass * s * target.reshape(12)
+    four = jnp.all(s_rows[:, 2] > 0)
+    w_row = jnp.zeros(12).at[jnp.array([2, 5, 8, 11])].set(jnp.asarray(statics._W)) * four
+    A = jnp.concatenate([A, w_row[None, :]], axis=0)
+    rhs = jnp.concatenate([rhs, jnp.zeros(1)])
+    return jnp.linalg.pinv(A, rtol=rcond) @ rhs
+
+
+class ContactMatrices(eqx.Module):
+    """The data of the contact problem at one instant, for host-side analysis (`numerics.rigid_solve`).
+
+    - `mass`: M = diag(m I, J) (6, 6); `force`: generalised applied force (6) (see `Loads`);
+    - `jacobians` B_i (4, 3, 6), `bias` (4, 3), `corner_velocity` (4, 3), `corners` (4, 3);
+    - `target`: the Baumgarte-stabilised acceleration a constrained corner must have (4, 3).
+    """
+
+    mass: Float[Array, "6 6"]
+    force: Float[Array, "6"]
+    jacobians: Float[Array, "4 3 6"]
+    bias: CornerVecs
+    corner_velocity: CornerVecs
+    corners: CornerVecs
+    target: CornerVecs
+
+
+def contact_matrices(t: Scalar, y: State, scenario: Scenario, c: Constants, settings: Settings) -> ContactMatrices:
+    ld = loads(t, y, scenario, c)
+    m = scenario.load.mass
+    z = jnp.zeros((3, 3))
+    M = jnp.block([[m * jnp.eye(3), z], [z, c.inertia]])
+    beta = settings.baumgarte
+    target = -2.0 * beta * ld.corner_velocity - beta**2 * ld.corners[:, 2:3] * jnp.array([0.0, 0.0, 1.0])
+    return ContactMatrices(mass=M, force=ld.generalised_force, jacobians=ld.jacobians, bias=ld.bias,
+                           corner_velocity=ld.corner_velocity, corners=ld.corners, target=target)
+
+
+class Contact(eqx.Module):
+    """The dynamics of one instant in a given `Phase`. World axes.
+
+    - `accel`: (dv_C/dt, dω/dt) with dω/dt in body axes.
+    - `force`: ground force on each corner (N_i ẑ + T_i) [N], (4, 3); for a rest phase the normal parts are
+      the least-norm nonnegative loads (`statics.nonnegative_corner_loads`).
+    - `corner_accel`: D, E, F, H accelerations [m/s²].
+    - `slip_direction`: t̂_i used by sliding corners (4, 2).
+    - `loads`: the `Loads` of the instant.
+    """
+
+    accel: Float[Array, "6"]
+    force: CornerVecs
+    corner_accel: CornerVecs
+    slip_direction: Float[Array, "4 2"]
+    loads: Loads
+
+
+def rest_friction(ld: Loads, c: Constants, scenario: Scenario) -> Float[Array, "4 2"]:
+    """Corner friction forces (world X, Y) [N] of a load resting on all four corners: the minimum-norm
+    distribution balancing the rope's horizontal pull, T_i = -S_h/4 + α ẑ × (r_i - r̄), with α set by the
+    moment of S_h about the corners' centroid r̄ (the statically indeterminate part takes the least norm)."""
+    F = ld.rope_tension * ld.rope_direction
+    r = ld.corners[:, :2]
+    rbar = jnp.mean(r, axis=0)
+    d = r - rbar
+    arm = ld.rope_point[:2] - rbar
+    M = arm[0] * F[1] - arm[1] * F[0]
+    alpha = -M / jnp.sum(d**2)
+    return -0.25 * F[None, :2] + alpha * jnp.stack([-d[:, 1], d[:, 0]], axis=1)
+
+
+def contact_dynamics(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
+                     settings: Settings) -> Contact:
+    """Contact forces and accelerations of the load in the contact configuration `phase`."""
+    ld = loads(t, y, scenario, c)
+    if phase.rest:
+        # Held fixed: zero acceleration; the corner loads of the linear law (2.3), made nonnegative.
+        S_body = ld.rotation.T @ (ld.rope_tension * ld.rope_direction)
+        st = statics.rest_statics_loads(scenario, S_body)
+        F = jnp.concatenate([rest_friction(ld, c, scenario), st[:, None]], axis=1)
+        return Contact(accel=jnp.zeros(6), force=F, corner_accel=jnp.zeros((4, 3)),
+                       slip_direction=jnp.zeros((4, 2)), loads=ld)
+    mu, m = scenario.foundation.friction_coefficient, scenario.load.mass
+    Minv = _mass_inverse(scenario, c)
+    tdir = slip_directions(ld.corner_velocity, phase.slip_hint, settings.slip_velocity)
+    P, s_rows = _maps(phase.contact, tdir, mu)
+    beta = settings.baumgarte
+    z_only = jnp.array([0.0, 0.0, 1.0])
+    a_free = jnp.einsum("kij,j->ki", ld.jacobians, Minv @ ld.generalised_force) + ld.bias
+    a_target = -2.0 * beta * ld.corner_velocity - beta**2 * ld.corners[:, 2:3] * z_only
+    lam = solve_contact_system(ld.jacobians, Minv, P, s_rows, a_target - a_free, m, settings.rcond)
+    F = jnp.einsum("kij,kj->ki", P, lam.reshape(4, 3))
+    accel = Minv @ (ld.generalised_force + jnp.einsum("kij,ki->j", ld.jacobians, F))
+    corner_accel = jnp.einsum("kij,j->ki", ld.jacobians, accel) + ld.bias
+    return Contact(accel=accel, force=F, corner_accel=corner_accel, slip_direction=tdir, loads=ld)
+
+
+def vector_field(t: Scalar, y: State, args) -> State:
+    """dy/dt of the rigid model in the phase `args = (scenario, constants, phase, settings)`."""
+    scenario, c, phase, settings = args
+    boom, g = scenario.boom, scenario.gravity
+    if phase.rest:
+        ld = loads(t, y, scenario, c)
+        zero3 = jnp.zeros(3)
+        body = dict(position=zero3, velocity=zero3, quaternion=jnp.zeros(4), angular_velocity=zero3,
+                    friction_work=jnp.zeros(()))
+    else:
+        ct = contact_dynamics(t, y, scenario, c, phase, settings)
+        ld = ct.loads
+        body = dict(position=y.velocity, velocity=ct.accel[:3],
+                    quaternion=kinematics.quat_rate(y.quaternion, y.angular_velocity),
+                    angular_velocity=ct.accel[3:],
+                    friction_work=-jnp.sum(ct.force[:, :2] * ld.corner_velocity[:, :2]))
+    F_rope = ld.rope_tension * ld.rope_direction
+    tip_acc = (ld.boom_force - F_rope) / boom.tip_mass - g * jnp.array([0.0, 0.0, 1.0])
+    return State(tip_position=y.tip_velocity, tip_velocity=tip_acc, friction_state=y.friction_state,
+                 hoist_work=ld.rope_tension * ld.hoist_rate, damping_loss=ld.rope_loss + ld.boom_loss, **body)
+
+
+# ------------------------------------------------------------------------------------------ guards
+
+
+def rest_conditions(ld: Loads, scenario: Scenario, c: Constants):
+    """For a load resting flat: `(tip_margin, rho)`, tip margin = min(N/G, distance of R from the edges / L)
+    (> 0 while it neither lifts nor tips) and the exact friction utilisation ρ* (<= 1 while it can rest).
+    Uses `statics.rest_statics` with the rope force in body axes (the load may have turned about Z)."""
+    S_body = ld.rotation.T @ (ld.rope_tension * ld.rope_direction)
+    st = statics.rest_statics(scenario, S_body)
+    return jnp.minimum(st.margins[0], st.margins[3]), st.friction_utilisation
+
+
+def raw_guards(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
+               settings: Settings) -> Float[Array, "10"]:
+    """The guards of `phase` without offsets, dimensionless (forces / G, heights / L, speeds / V); the
+    phase is valid while all are > 0. Guards that do not apply (to a corner's mode, or to rest) are +1."""
+    if phase.rest:
+        tip, rho = rest_conditions(loads(t, y, scenario, c), scenario, c)
+        return jnp.concatenate([jnp.ones(8), jnp.stack([tip, 1.0 - rho])])
+    sc = scales(scenario)
+    ct = contact_dynamics(t, y, scenario, c, phase, settings)
+    ld = ct.loads
+    mu = scenario.foundation.friction_coefficient
+    N = ct.force[:, 2]
+    T = jnp.sqrt(jnp.sum(ct.force[:, :2] ** 2, axis=1))
+    contact = phase.contact
+    g_normal = jnp.where(contact != FREE, N / sc.force, ld.corners[:, 2] / sc.length)
+    v_along = jnp.sum(ld.corner_velocity[:, :2] * phase.slip_hint, axis=1)
+    g_tan = jnp.where(contact == STICK, (mu * N - T) / sc.force,
+                      jnp.where(contact == SLIDE, v_along / sc.velocity, 1.0))
+    return jnp.concatenate([g_normal, g_tan, jnp.ones(2)])
+
+
+def event_condition(t, y, args, **kwargs) -> Scalar:
+    """min over the guards (+ offsets): > 0 while the phase is valid; its zero ends the phase."""
+    scenario, c, phase, settings = args
+    return jnp.min(raw_guards(t, y, scenario, c, phase, settings) + phase.guard_offset)
+
+
+# ------------------------------------------------------------------------------------------ impacts
+
+
+def impulse_response(y: State, scenario: Scenario, c: Constants, modes: Int[Array, "4"],
+                     slip_dirs: Float[Array, "4 2"], normal_target: PerCorner, rcond) -> tuple:
+    """Velocity jump of an impact with the ground: minimum-norm impulses P_i at the corners in `modes`
+    (`STICK`: all three post-impact velocity components prescribed, tangential ones 0; `SLIDE`: normal only,
+    with a tangential impulse -μ P_n t̂_i along `slip_dirs`; `FREE`: no impulse), such that the post-impact
+    normal velocity of each involved corner equals `normal_target` (Newton's law: -e times the pre-impact
+    one for the striking corner, 0 for persistent contacts).
+
+    **Returns** `(velocity, angular_velocity, impulses (4, 3), corner_velocity_after (4, 3))`.
+    """
+    R = kinematics.quat_to_matrix(y.quaternion)
+    Minv = _mass_inverse(scenario, c)
+    jac = jax.vmap(lambda rho: jnp.concatenate([jnp.eye(3), -R @ kinematics.skew(rho)], axis=1))(
+        c.corners_rel)
+    u = jnp.concatenate([y.velocity, y.angular_velocity])
+    v = jnp.einsum("kij,j->ki", jac, u)
+    P, s_rows = _maps(modes, slip_dirs, scenario.foundation.friction_coefficient)
+    target = jnp.concatenate([jnp.zeros((4, 2)), normal_target[:, None]], axis=1)
+    lam = solve_contact_system(jac, Minv, P, s_rows, target - v, scenario.load.mass, rcond)
+    imp = jnp.einsum("kij,kj->ki", P, lam.reshape(4, 3))
+    du = Minv @ jnp.einsum("kij,ki->j", jac, imp)
+    u1 = u + du
+    return u1[:3], u1[3:], imp, jnp.einsum("kij,j->ki", jac, u1)
+
+
+# ------------------------------------------------------------------------------------------ outputs
+
+
+def kinetic_energy(y: State, scenario: Scenario, c: Constants) -> Scalar:
+    """½ m |v_C|² + ½ ωᵀJω of the load [J] (without the boom tip)."""
+    w = y.angular_velocity
+    return 0.5 * scenario.load.mass * jnp.sum(y.velocity**2) + 0.5 * w @ c.inertia @ w
+
+
+def energy(y: State, ld: Loads, scenario: Scenario, c: Constants) -> Energy:
+    """Energy terms [J] (`ground_spring` is 0: the ground is rigid)."""
+    load, boom, g = scenario.load, scenario.boom, scenario.gravity
+    stretch = jnp.maximum(ld.stretch, 0.0)
+    dx = y.tip_position - c.tip_rest
+    return Energy(
+        kinetic=kinetic_energy(y, scenario, c) + 0.5 * boom.tip_mass * jnp.sum(y.tip_velocity**2),
+        potential=g * (load.mass * y.position[2] + boom.tip_mass * y.tip_position[2]),
+        ground_spring=jnp.zeros(()),
+        rope_spring=0.5 * scenario.rope.stiffness * stretch**2,
+        boom_spring=0.5 * jnp.sum(boom.stiffness * dx**2),
+    )
+
+
+class Output(eqx.Module):
+    """What the trajectory reports at one saved instant (see `numerics.rigid_solve.RigidTrajectory`)."""
+
+    corners: CornerVecs
+    normal: PerCorner
+    friction: CornerVecs
+    rope_tension: Scalar
+    energy: Energy
+    euler: Float[Array, "3"]
+
+
+def output(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Output:
+    ct = contact_dynamics(t, y, scenario, c, phase, settings)
+    ld = ct.loads
+    return Output(corners=ld.corners, normal=ct.force[:, 2],
+                  friction=ct.force.at[:, 2].set(0.0), rope_tension=ld.rope_tension,
+                  energy=energy(y, ld, scenario, c), euler=kinematics.matrix_to_euler(ld.rotation))
+
