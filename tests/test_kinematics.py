@@ -67,11 +67,6 @@ def test_quaternion_round_trip_and_orthonormal(q):
     assert min(np.abs(q2 - qn).max(), np.abs(q2 + qn).max()) < tol
 
 
-@pytest.mark.xfail(strict=True, raises=AssertionError, reason=(
-    "core bug in kinematics.matrix_to_euler: at exact gimbal lock (|R[2,0]| = 1, the box standing on an "
-    "end, pitch ±90°) R[2,1] = R[2,2] = R[1,0] = R[0,0] = 0, so both arctan2 calls return 0 and the "
-    "rotation about the vertical is lost: R_Z(0.5) R_Y(π/2) R_X(0.3) comes back as (0, 0, π/2). Fix: when "
-    "|R[2,0]| is 1 to round-off, set φ = 0 and take ψ from R[0,1], R[1,1]."))
 @pytest.mark.parametrize("sign", [1.0, -1.0])
 def test_euler_at_gimbal_lock_reproduces_the_rotation(sign):
     """At ϑ = ±π/2 only φ ∓ ψ is defined, but the triple returned must still give back R."""

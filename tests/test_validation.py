@@ -162,13 +162,6 @@ def test_wrong_type_names_its_field(preset_dicts, preset, data, wrong):
     _expect_error_naming(d, path)
 
 
-@pytest.mark.xfail(strict=True, raises=(KeyError, TypeError, AssertionError), reason=(
-    "core bug in jaxhoist/io/scenario.py: _Reader.table skips every dict-valued key as 'a sub-table, read "
-    "separately', but only [foundation.friction] is ever read; so `stiffness = {x = 1.0}` under [rope] "
-    "(or a [rope.stiffness] table) passes the required-field check and then fails with a bare KeyError "
-    "('stiffness'), under [hoist] with a TypeError (missing argument 'speed'), and an optional field given "
-    "as a table (boom.damping, foundation.friction.regularisation_velocity) is silently ignored and the "
-    "default used. Expected: ScenarioError naming the field."))
 @pytest.mark.parametrize("path", ["rope.stiffness", "hoist.speed", "load.size", "boom.damping",
                                   "foundation.friction.regularisation_velocity"])
 def test_table_where_a_value_belongs_names_its_field(preset_dicts, path):
@@ -221,7 +214,8 @@ def test_presets_themselves_are_valid(preset_dicts):
 
 # Float leaves of a Scenario that must be positive / non-negative, by dotted path, with a valid value
 # for comparison.
-LEAVES = ("load.mass", "load.size", "foundation.stiffness", "foundation.damping", "foundation.friction_coefficient",
+LEAVES = ("load.mass", "load.size", "foundation.stiffness", "foundation.damping",
+          "foundation.friction_coefficient",
           "foundation.friction.regularisation_velocity", "rope.stiffness", "rope.damping", "rope.slack",
           "hoist.speed", "boom.tip_mass", "boom.stiffness", "boom.damping", "gravity")
 
