@@ -15,7 +15,8 @@ import jax
 try:
     jax.config.update("jax_num_cpu_devices", 2)
 except AttributeError:  # older JAX: the XLA flag, read when the backend initialises
-    os.environ["XLA_FLAGS"] = (os.environ.get("XLA_FLAGS", "") + " --xla_force_host_platform_device_count=2").strip()
+    flags = os.environ.get("XLA_FLAGS", "")
+    os.environ["XLA_FLAGS"] = (flags + " --xla_force_host_platform_device_count=2").strip()
 jax.config.update("jax_enable_x64", True)
 
 import tomllib  # noqa: E402

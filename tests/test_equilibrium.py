@@ -22,8 +22,8 @@ def n_d_paper(a, b, G, S, B, C):
     Sx, Sy, Sz = S
     xB, yB, zB = B
     xC, yC = C[0], C[1]
-    return (3 * a * b * (G - Sz) + 2 * b * (Sz * xB - G * xC - Sx * zB) + 2 * a * (Sz * yB - G * yC - Sy * zB)) / (
-        4 * a * b)
+    return (3 * a * b * (G - Sz) + 2 * b * (Sz * xB - G * xC - Sx * zB)
+            + 2 * a * (Sz * yB - G * yC - Sy * zB)) / (4 * a * b)
 
 
 def corner_loads_paper(a, b, G, S, B, C):
@@ -137,7 +137,8 @@ def test_linear_corner_loads_match_paper_2_8(size, c_frac, b_frac, S):
     rope force S (all three components), to round-off (1e-9 of the weight)."""
     size, C, B = np.array(size), np.array(c_frac) * np.array(size), np.array(b_frac) * np.array(size)
     W = 1000.0 * G
-    got = np.asarray(jh.linear_corner_loads(jnp.asarray(size), jnp.asarray(C), W, jnp.asarray(S), jnp.asarray(B)))
+    got = jh.linear_corner_loads(jnp.asarray(size), jnp.asarray(C), W, jnp.asarray(S), jnp.asarray(B))
+    got = np.asarray(got)
     want = corner_loads_paper(size[0], size[1], W, S, B, C)
     assert np.allclose(got, want, rtol=0.0, atol=1e-9 * W), (got, want)
     # And they are in equilibrium: vertical forces and moments about D balance.

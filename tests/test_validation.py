@@ -24,10 +24,11 @@ FEW = settings(max_examples=25, derandomize=True, deadline=None)
 
 # Numeric fields that must be > 0 or >= 0 (negative is invalid), as "table.field" of the scenario file.
 NONNEGATIVE = ("t1", "gravity", "load.size", "load.density", "load.mass", "foundation.stiffness",
-               "foundation.damping", "foundation.friction_coefficient", "foundation.friction.deflection",
-               "foundation.friction.breakaway_ratio", "foundation.friction.relaxation_time",
-               "foundation.friction.regularisation_velocity", "rope.stiffness", "rope.damping", "rope.slack",
-               "hoist.speed", "boom.tip_mass", "boom.stiffness", "boom.damping")
+               "foundation.damping", "foundation.damping_onset", "foundation.friction_coefficient",
+               "foundation.friction.deflection", "foundation.friction.breakaway_ratio",
+               "foundation.friction.relaxation_time", "foundation.friction.regularisation_velocity",
+               "rope.stiffness", "rope.damping", "rope.damping_onset", "rope.slack", "hoist.speed",
+               "boom.tip_mass", "boom.stiffness", "boom.damping")
 # Negative is fine for these (positions), but NaN and inf are not; a negative mass centre or rope point
 # leaves the box, which is tested below.
 ANY_SIGN = ("boom.tip_position",)
@@ -212,12 +213,12 @@ def test_presets_themselves_are_valid(preset_dicts):
 # ------------------------------------------------------- leaves changed after construction
 
 
-# Float leaves of a Scenario that must be positive / non-negative, by dotted path, with a valid value
-# for comparison.
+# Float leaves of a Scenario (paper-4.2: regularised Coulomb friction) that must be positive or
+# non-negative, by dotted path.
 LEAVES = ("load.mass", "load.size", "foundation.stiffness", "foundation.damping",
-          "foundation.friction_coefficient",
-          "foundation.friction.regularisation_velocity", "rope.stiffness", "rope.damping", "rope.slack",
-          "hoist.speed", "boom.tip_mass", "boom.stiffness", "boom.damping", "gravity")
+          "foundation.friction_coefficient", "foundation.friction.regularisation_velocity",
+          "rope.stiffness", "rope.damping", "rope.slack", "hoist.speed", "boom.tip_mass", "boom.stiffness",
+          "boom.damping", "gravity", "foundation.damping_onset", "rope.damping_onset")
 
 
 @FEW
