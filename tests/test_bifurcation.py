@@ -60,6 +60,7 @@ def test_corner_order_swaps_at_the_symmetric_mass_centre(newton_result):
     assert b.converged and b.width <= 1e-6
     assert abs(b.value - 0.5) <= 1e-6
     assert b.y_lo < 0.0 < b.y_hi  # E leaves first below ξ_C*, D above it
+    assert b.kind == "crossing" and b.jump_fraction < 1e-5  # t_E - t_D passes continuously through zero
     g_ends = [h[1] for h in b.history[:2]]
     assert g_ends[0] < 0.0 < g_ends[1]
     # Newton on the event-time difference converges in a handful of solves, against 110 001 for a uniform

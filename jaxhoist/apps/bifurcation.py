@@ -242,6 +242,7 @@ class Bifurcation:
     - `history`: every evaluation as (p, g, dg/dp or None, "newton" | "bisect" | "end" | "multisection").
     - `converged`: width <= tol; `method`; `wall_time`, `compile_time` [s]; `steps`: total solver steps.
     - `notes`: what the safeguards did (e.g. a fall-back to bisection when derivatives were not finite).
+    - `jump_fraction`: |y_hi - y_lo| over the change across the initial bracket; `kind` reads it.
     """
 
     param: str
@@ -264,12 +265,20 @@ class Bifurcation:
     compile_time: float = 0.0
     steps: int = 0
     notes: list = dataclasses.field(default_factory=list)
+    jump_fraction: float = float("nan")
+
+    @property
+    def kind(self) -> str:
+        """"jump" if the observable still changes by more than 10 % of its change across the initial bracket
+        within the final one (a discontinuity), else "crossing" (a continuous, possibly steep, change)."""
+        return "jump" if self.jump_fraction > 0.1 else "crossing"
 
     def summary(self) -> str:
         return (f"{self.param} * = {self.value:.10g} {self.unit} (bracket [{self.bracket[0]:.10g}, "
-                f"{self.bracket[1]:.10g}], width {self.width:.2g}) where {self.observable} changes from "
-                f"{self.y_lo:.6g} to {self.y_hi:.6g}; {self.n_solves} solves ({self.n_derivative_solves} with "
-                f"derivatives, method {self.method}) vs {self.n_uniform} for a uniform grid at spacing "
+                f"{self.bracket[1]:.10g}], width {self.width:.2g}): {self.observable} changes from "
+                f"{self.y_lo:.6g} to {self.y_hi:.6g} across it, {self.kind} ({100 * self.jump_fraction:.3g} % of "
+                f"the change across the initial bracket); {self.n_solves} solves ({self.n_derivative_solves} "
+                f"with derivatives, method {self.method}) vs {self.n_uniform} for a uniform grid at spacing "
                 f"{self.tol:g}")
 
     def to_dict(self) -> dict[str, Any]:
@@ -449,7 +458,7 @@ def locate_bifurcation(
                        n_solves=ev.n_value + ev.n_jvp, n_derivative_solves=ev.n_jvp, n_uniform=n_uniform,
                        history=history, converged=(b - a) <= tol, method=method,
                        wall_time=time.perf_counter() - wall0, compile_time=ev.compile_time, steps=ev.steps,
-                       notes=notes)
+                       notes=notes, jump_fraction=_fraction(ya, yb, y_a, y_b))
 
 
 def _multisection(scenario, param, obs, lo, hi, level, tol, ts, options, max_solves, k, lanes, n_uniform, unit,
@@ -502,7 +511,15 @@ def _multisection(scenario, param, obs, lo, hi, level, tol, ts, options, max_sol
                        width=b - a, level=float(lev), y_lo=float(ya), y_hi=float(yb), tol=tol, n_solves=n_solves,
                        n_derivative_solves=0, n_uniform=n_uniform, history=history, converged=(b - a) <= tol,
                        method="multisection", wall_time=time.perf_counter() - wall0, compile_time=compile_time,
-                       steps=steps)
+                       steps=steps, jump_fraction=_fraction(ya, yb, y_a, y_b))
+
+
+def _fraction(ya, yb, y_a, y_b) -> float:
+    """|yb - ya| / |y_b - y_a|, with an event that happens on one side only counting as a full jump."""
+    if not (np.isfinite(y_a) and np.isfinite(y_b)):
+        return 1.0 if np.isfinite(ya) != np.isfinite(yb) else 0.0
+    full = abs(y_b - y_a)
+    return float(abs(yb - ya) / full) if full > 0 else 0.0
 
 
 def _raise_failed(r: ScanResult, param):

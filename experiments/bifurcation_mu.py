@@ -1,0 +1,166 @@
+"""Bifurcation map of paper-4.2 in the friction coefficient μ (the paper's §4.3, Figs 10-12).
+
+1. scan μ over [0.1, 0.6] (4000 points; resumable: the chunks go to DIR/scan) and record final position
+   and Euler angles, maximum tilt, lift-off time, the corner that leaves first and the impact count;
+2. find candidate jumps of the final yaw ψ (and the other observables) on the grid;
+3. refine the largest ones to |Δμ| <= 1e-6 (multisection: 16 μ per vmapped round);
+4. plot every observable against μ with the located μ* marked, a zoom around each μ*, and the time
+   histories x, y, φ, ϑ, ψ for μ values just below and just above a located μ* (Figs 10-12 analogue).
+
+    python experiments/bifurcation_mu.py --out out/bifurcation-mu            # full: 4000 μ over 25 s
+    python experiments/bifurcation_mu.py --out out/bifurcation-mu --quick    # 48 μ over 4 s, tol 1e-4
+
+Writes DIR/bifurcation_mu.json (jumps, located μ*, solves used vs a uniform grid, timings) and PNGs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import matplotlib  # noqa: E402
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt  # noqa: E402
+import numpy as np  # noqa: E402
+
+import jaxhoist as jh  # noqa: E402
+from jaxhoist.apps.bifurcation import BifurcationError, find_jumps, locate_bifurcation  # noqa: E402
+from jaxhoist.numerics.scan import scan  # noqa: E402
+
+MU = "foundation.friction_coefficient"
+OBSERVABLES = ["final_x", "final_y", "final_phi", "final_theta", "final_psi", "max_tilt", "liftoff_time",
+               "first_corner", "impacts"]
+LABELS = {"final_x": ("x(t1)", "m", 1.0), "final_y": ("y(t1)", "m", 1.0), "final_phi": ("φ(t1)", "deg", 180 / np.pi),
+          "final_theta": ("ϑ(t1)", "deg", 180 / np.pi), "final_psi": ("ψ(t1)", "deg", 180 / np.pi),
+          "max_tilt": ("max tilt", "deg", 180 / np.pi), "liftoff_time": ("lift-off time", "s", 1.0),
+          "first_corner": ("first corner off (0=D,1=E,2=F,3=H)", "-", 1.0), "impacts": ("corner impacts", "-", 1.0)}
+
+
+def main(argv=None):
+    p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--out", required=True)
+    p.add_argument("--quick", action="store_true", help="48 μ over 4 s, tolerance 1e-4: a smoke run")
+    p.add_argument("--n", type=int, default=None, help="μ values in the scan (default 4000; quick 48)")
+    p.add_argument("--t1", type=float, default=None, help="horizon [s] (default 25; quick 4)")
+    p.add_argument("--n-save", type=int, default=None, help="saved times (default 251; quick 101)")
+    p.add_argument("--tol", type=float, default=None, help="|Δμ| of the located μ* (default 1e-6; quick 1e-4)")
+    p.add_argument("--jumps", type=int, default=None, help="how many jumps of ψ to refine (default 3; quick 1)")
+    p.add_argument("--lanes", type=int, default=16)
+    p.add_argument("--rtol", type=float, default=1e-6)
+    p.add_argument("--atol", type=float, default=1e-8)
+    args = p.parse_args(argv)
+    q = args.quick
+    n = args.n or (48 if q else 4000)
+    t1 = args.t1 or (4.0 if q else 25.0)
+    n_save = args.n_save or (101 if q else 251)
+    tol = args.tol or (1e-4 if q else 1e-6)
+    n_jumps = args.jumps if args.jumps is not None else (1 if q else 3)
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    sc = jh.load_scenario("paper-4.2")
+    solve_kw = dict(n_save=n_save, rtol=args.rtol, atol=args.atol)
+    rec: dict = {"scenario": sc.name, "n": n, "t1": t1, "n_save": n_save, "tol": tol, "quick": q,
+                 "command": [sys.executable, *sys.argv]}
+
+    # 1. the scan
+    mus = np.linspace(0.1, 0.6, n)
+    t0 = time.perf_counter()
+    res = scan(sc, {MU: mus}, t1, observables=OBSERVABLES, lanes=args.lanes, out_dir=out / "scan", progress=True,
+               **solve_kw)
+    rec["scan"] = {"wall_s": time.perf_counter() - t0, **res.attrs["timings_s"], "failed": res.failures()[:20],
+                   "n_failed": int(np.sum(~res.ok)), "steps_median": int(np.median(res.num_accepted_steps)),
+                   "steps_max": int(res.num_accepted_steps.max())}
+    print(f"scan: {n} μ in {rec['scan']['wall_s']:.1f} s ({res.attrs['timings_s']['compile']:.1f} s compile), "
+          f"{rec['scan']['n_failed']} failed", flush=True)
+
+    # 2. candidate jumps
+    jumps = {name: find_jumps(res, name) for name in OBSERVABLES}
+    rec["candidate_jumps"] = {k: [vars(j) for j in v] for k, v in jumps.items()}
+    for k, v in jumps.items():
+        print(f"  {k}: {len(v)} candidate jumps", flush=True)
+
+    # 3. refine the largest jumps of the final yaw ψ
+    psi_jumps = sorted(jumps["final_psi"], key=lambda j: -abs(j.size))[:n_jumps]
+    located = []
+    for j in psi_jumps:
+        try:
+            b = locate_bifurcation(sc, MU, "final_psi", (j.lo, j.hi), tol=tol, method="multisection",
+                                   points_per_round=16, lanes=16, t1=t1, **solve_kw)
+        except BifurcationError as e:
+            print(f"  jump at μ in [{j.lo:.6f}, {j.hi:.6f}]: not refined ({e})", flush=True)
+            continue
+        located.append(b)
+        print("  " + b.summary(), flush=True)
+    rec["located"] = [b.to_dict() for b in located]
+
+    # 4a. observables against μ, with the located μ* marked
+    fig, axes = plt.subplots(3, 3, figsize=(13, 9), sharex=True)
+    for ax, name in zip(axes.ravel(), OBSERVABLES, strict=True):
+        label, unit, scale = LABELS[name]
+        ax.plot(mus, res[name] * scale, ".", ms=2 if n > 500 else 4)
+        bad = ~res.ok
+        if bad.any():
+            ax.plot(mus[bad], np.zeros(bad.sum()), "rx", ms=4, label="failed")
+        for b in located:
+            ax.axvline(b.value, color="C3", lw=0.8, alpha=0.7)
+        ax.set_ylabel(f"{label} [{unit}]")
+    for ax in axes[-1]:
+        ax.set_xlabel("friction coefficient μ [-]")
+    fig.suptitle(f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s); red lines: located μ*")
+    fig.tight_layout()
+    fig.savefig(out / "observables_vs_mu.png", dpi=110)
+    plt.close(fig)
+
+    # 4b. zoom around each μ* and 4c. histories across it (Figs 10-12 analogue)
+    for i, b in enumerate(located):
+        lo, hi = b.bracket
+        half = max(50 * tol, 20 * (hi - lo))
+        zoom = scan(sc, {MU: np.linspace(b.value - half, b.value + half, 32)}, t1, observables=["final_psi"],
+                    lanes=16, **solve_kw)
+        fig, ax = plt.subplots(figsize=(7, 4))
+        ax.plot(zoom.coords[MU], np.degrees(zoom["final_psi"]), "o-", ms=3)
+        ax.axvline(b.value, color="C3", lw=0.8)
+        ax.set_xlabel("μ [-]")
+        ax.set_ylabel("ψ(t1) [deg]")
+        ax.set_title(f"zoom around μ* = {b.value:.7f} (bracket width {b.width:.1e})")
+        fig.tight_layout()
+        fig.savefig(out / f"zoom_{i}.png", dpi=110)
+        plt.close(fig)
+
+        d = max(2 * tol, b.width)
+        across = np.array([b.value - 100 * d, b.value - d, b.value + d, b.value + 100 * d])
+        hist = scan(sc, {MU: across}, t1, observables=["final_psi"], histories=("position", "euler"), lanes=4,
+                    sort=False, **solve_kw)
+        ts = hist.ts
+        fig, axes = plt.subplots(5, 1, figsize=(8, 11), sharex=True)
+        series = [("x", hist["position"][..., 0], "m", 1.0), ("y", hist["position"][..., 1], "m", 1.0),
+                  ("φ", hist["euler"][..., 0], "deg", 180 / np.pi), ("ϑ", hist["euler"][..., 2], "deg", 180 / np.pi),
+                  ("ψ", hist["euler"][..., 1], "deg", 180 / np.pi)]
+        for ax, (name, val, unit, scale) in zip(axes, series, strict=True):
+            for k, mu in enumerate(across):
+                side = "below" if mu < b.value else "above"
+                ax.plot(ts, val[k] * scale, lw=1.0, ls="-" if side == "below" else "--",
+                        label=f"μ = {mu:.7f} ({side} μ*)")
+            ax.set_ylabel(f"{name} [{unit}]")
+        axes[0].legend(fontsize=7)
+        axes[-1].set_xlabel("t [s]")
+        fig.suptitle(f"{sc.name}: histories across μ* = {b.value:.7f} (cf. the paper's Figs 10-12)")
+        fig.tight_layout()
+        fig.savefig(out / f"histories_across_mu_star_{i}.png", dpi=110)
+        plt.close(fig)
+
+    path = out / "bifurcation_mu.json"
+    path.write_text(json.dumps(rec, indent=1, default=float) + "\n")
+    print(f"wrote {path} and PNGs in {out}")
+
+
+if __name__ == "__main__":
+    main()
