@@ -274,7 +274,8 @@ class Bifurcation:
         return "jump" if self.jump_fraction > 0.1 else "crossing"
 
     def summary(self) -> str:
-        return (f"{self.param} * = {self.value:.10g} {self.unit} (bracket [{self.bracket[0]:.10g}, "
+        unit = "" if self.unit in ("-", "") else f" {self.unit}"
+        return (f"{self.param} * = {self.value:.10g}{unit} (bracket [{self.bracket[0]:.10g}, "
                 f"{self.bracket[1]:.10g}], width {self.width:.2g}): {self.observable} changes from "
                 f"{self.y_lo:.6g} to {self.y_hi:.6g} across it, {self.kind} ({100 * self.jump_fraction:.3g} % of "
                 f"the change across the initial bracket); {self.n_solves} solves ({self.n_derivative_solves} "
