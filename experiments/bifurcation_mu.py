@@ -5,7 +5,8 @@
 2. find candidate jumps of the final yaw ψ (and the other observables) on the grid;
 3. refine the largest ones to |Δμ| <= 1e-6 (multisection: 16 μ per vmapped round);
 4. plot every observable against μ with the located μ* marked, a zoom around each μ*, and the time
-   histories x, y, φ, ϑ, ψ for μ values just below and just above a located μ* (Figs 10-12 analogue).
+   histories x, y, φ, ϑ, ψ for μ values just below and just above a located μ* (Figs 10-12 analogue);
+5. continue the first μ* along the hoist speed v_l (the two-parameter boundary μ*(v_l), by continuation).
 
     python experiments/bifurcation_mu.py --out out/bifurcation-mu            # full: 4000 μ over 25 s
     python experiments/bifurcation_mu.py --out out/bifurcation-mu --quick    # 48 μ over 4 s, tol 1e-4
@@ -32,7 +33,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.apps.bifurcation import BifurcationError, find_jumps, locate_bifurcation  # noqa: E402
+from jaxhoist.apps.bifurcation import BifurcationError, find_jumps, locate_bifurcation, trace_boundary  # noqa: E402
 from jaxhoist.numerics.scan import scan  # noqa: E402
 
 MU = "foundation.friction_coefficient"
@@ -54,6 +55,9 @@ def main(argv=None):
     p.add_argument("--tol", type=float, default=None, help="|Δμ| of the located μ* (default 1e-6; quick 1e-4)")
     p.add_argument("--jumps", type=int, default=None, help="how many jumps of ψ to refine (default 3; quick 1)")
     p.add_argument("--lanes", type=int, default=16)
+    p.add_argument("--trace", default=None,
+                   help="hoist speeds v_l [m/s] along which to continue the first located μ*, as start:stop:num "
+                        "(default 0.26:0.34:9; quick 0.3:0.31:2; 'none' to skip)")
     p.add_argument("--rtol", type=float, default=1e-6)
     p.add_argument("--atol", type=float, default=1e-8)
     args = p.parse_args(argv)
@@ -155,6 +159,32 @@ def main(argv=None):
         fig.suptitle(f"{sc.name}: histories across μ* = {b.value:.7f} (cf. the paper's Figs 10-12)")
         fig.tight_layout()
         fig.savefig(out / f"histories_across_mu_star_{i}.png", dpi=110)
+        plt.close(fig)
+
+    # 5. the boundary μ*(v_l) by continuation from the first located μ* (predictor + 1-D corrector)
+    trace_spec = args.trace or ("0.3:0.31:2" if q else "0.26:0.34:9")
+    if located and trace_spec != "none":
+        a_, b_, k_ = trace_spec.split(":")
+        speeds = np.linspace(float(a_), float(b_), int(k_))
+        v0 = float(sc.hoist.speed)
+        speeds = np.concatenate([[v0], speeds[speeds != v0]])  # start where μ* is known
+        b0 = located[0]
+        t0 = time.perf_counter()
+        tr = trace_boundary(sc, MU, b0.bracket, "hoist.speed", speeds, "final_psi", tol=tol, method="bisection",
+                            initial_half_width=max(10 * tol, 0.002), t1=t1, **solve_kw)
+        rec["trace"] = {"hoist_speed": tr.along_values.tolist(), "mu_star": tr.values.tolist(),
+                        "widths": tr.widths.tolist(), "n_solves": tr.n_solves, "n_dense": tr.n_dense,
+                        "wall_s": time.perf_counter() - t0}
+        print(f"  boundary μ*(v_l): {np.round(tr.values, 7).tolist()} at v_l = {speeds.tolist()} m/s; "
+              f"{tr.n_solves} solves vs {tr.n_dense} for a dense grid", flush=True)
+        order = np.argsort(tr.along_values)
+        fig, ax = plt.subplots(figsize=(6, 4))
+        ax.plot(tr.along_values[order], tr.values[order], "o-")
+        ax.set_xlabel("hoist speed v_l [m/s]")
+        ax.set_ylabel("μ* [-]")
+        ax.set_title("boundary traced by continuation (NaN: the corrector lost it)")
+        fig.tight_layout()
+        fig.savefig(out / "boundary_mu_vl.png", dpi=110)
         plt.close(fig)
 
     path = out / "bifurcation_mu.json"
