@@ -37,12 +37,28 @@ from jaxhoist.apps.bifurcation import BifurcationError, find_jumps, locate_bifur
 from jaxhoist.numerics.scan import scan  # noqa: E402
 
 MU = "foundation.friction_coefficient"
-OBSERVABLES = ["final_x", "final_y", "final_phi", "final_theta", "final_psi", "max_tilt", "liftoff_time",
-               "first_corner", "impacts"]
-LABELS = {"final_x": ("x(t1)", "m", 1.0), "final_y": ("y(t1)", "m", 1.0), "final_phi": ("φ(t1)", "deg", 180 / np.pi),
-          "final_theta": ("ϑ(t1)", "deg", 180 / np.pi), "final_psi": ("ψ(t1)", "deg", 180 / np.pi),
-          "max_tilt": ("max tilt", "deg", 180 / np.pi), "liftoff_time": ("lift-off time", "s", 1.0),
-          "first_corner": ("first corner off (0=D,1=E,2=F,3=H)", "-", 1.0), "impacts": ("corner impacts", "-", 1.0)}
+OBSERVABLES = [
+    "final_x",
+    "final_y",
+    "final_phi",
+    "final_theta",
+    "final_psi",
+    "max_tilt",
+    "liftoff_time",
+    "first_corner",
+    "impacts",
+]
+LABELS = {
+    "final_x": ("x(t1)", "m", 1.0),
+    "final_y": ("y(t1)", "m", 1.0),
+    "final_phi": ("φ(t1)", "deg", 180 / np.pi),
+    "final_theta": ("ϑ(t1)", "deg", 180 / np.pi),
+    "final_psi": ("ψ(t1)", "deg", 180 / np.pi),
+    "max_tilt": ("max tilt", "deg", 180 / np.pi),
+    "liftoff_time": ("lift-off time", "s", 1.0),
+    "first_corner": ("first corner off (0=D,1=E,2=F,3=H)", "-", 1.0),
+    "impacts": ("corner impacts", "-", 1.0),
+}
 
 
 def main(argv=None):
@@ -52,12 +68,19 @@ def main(argv=None):
     p.add_argument("--n", type=int, default=None, help="μ values in the scan (default 4000; quick 48)")
     p.add_argument("--t1", type=float, default=None, help="horizon [s] (default 25; quick 4)")
     p.add_argument("--n-save", type=int, default=None, help="saved times (default 251; quick 101)")
-    p.add_argument("--tol", type=float, default=None, help="|Δμ| of the located μ* (default 1e-6; quick 1e-4)")
-    p.add_argument("--jumps", type=int, default=None, help="how many jumps of ψ to refine (default 3; quick 1)")
+    p.add_argument(
+        "--tol", type=float, default=None, help="|Δμ| of the located μ* (default 1e-6; quick 1e-4)"
+    )
+    p.add_argument(
+        "--jumps", type=int, default=None, help="how many jumps of ψ to refine (default 3; quick 1)"
+    )
     p.add_argument("--lanes", type=int, default=16)
-    p.add_argument("--trace", default=None,
-                   help="hoist speeds v_l [m/s] along which to continue the first located μ*, as start:stop:num "
-                        "(default 0.26:0.34:9; quick 0.3:0.31:2; 'none' to skip)")
+    p.add_argument(
+        "--trace",
+        default=None,
+        help="hoist speeds v_l [m/s] along which to continue the first located μ*, as start:stop:num "
+        "(default 0.26:0.34:9; quick 0.3:0.31:2; 'none' to skip)",
+    )
     p.add_argument("--rtol", type=float, default=1e-6)
     p.add_argument("--atol", type=float, default=1e-8)
     args = p.parse_args(argv)
@@ -71,19 +94,42 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     sc = jh.load_scenario("paper-4.2")
     solve_kw = dict(n_save=n_save, rtol=args.rtol, atol=args.atol)
-    rec: dict = {"scenario": sc.name, "n": n, "t1": t1, "n_save": n_save, "tol": tol, "quick": q,
-                 "command": [sys.executable, *sys.argv]}
+    rec: dict = {
+        "scenario": sc.name,
+        "n": n,
+        "t1": t1,
+        "n_save": n_save,
+        "tol": tol,
+        "quick": q,
+        "command": [sys.executable, *sys.argv],
+    }
 
     # 1. the scan
     mus = np.linspace(0.1, 0.6, n)
     t0 = time.perf_counter()
-    res = scan(sc, {MU: mus}, t1, observables=OBSERVABLES, lanes=args.lanes, out_dir=out / "scan", progress=True,
-               **solve_kw)
-    rec["scan"] = {"wall_s": time.perf_counter() - t0, **res.attrs["timings_s"], "failed": res.failures()[:20],
-                   "n_failed": int(np.sum(~res.ok)), "steps_median": int(np.median(res.num_accepted_steps)),
-                   "steps_max": int(res.num_accepted_steps.max())}
-    print(f"scan: {n} μ in {rec['scan']['wall_s']:.1f} s ({res.attrs['timings_s']['compile']:.1f} s compile), "
-          f"{rec['scan']['n_failed']} failed", flush=True)
+    res = scan(
+        sc,
+        {MU: mus},
+        t1,
+        observables=OBSERVABLES,
+        lanes=args.lanes,
+        out_dir=out / "scan",
+        progress=True,
+        **solve_kw,
+    )
+    rec["scan"] = {
+        "wall_s": time.perf_counter() - t0,
+        **res.attrs["timings_s"],
+        "failed": res.failures()[:20],
+        "n_failed": int(np.sum(~res.ok)),
+        "steps_median": int(np.median(res.num_accepted_steps)),
+        "steps_max": int(res.num_accepted_steps.max()),
+    }
+    print(
+        f"scan: {n} μ in {rec['scan']['wall_s']:.1f} s ({res.attrs['timings_s']['compile']:.1f} s compile), "
+        f"{rec['scan']['n_failed']} failed",
+        flush=True,
+    )
 
     # 2. candidate jumps
     jumps = {name: find_jumps(res, name) for name in OBSERVABLES}
@@ -96,8 +142,18 @@ def main(argv=None):
     located = []
     for j in psi_jumps:
         try:
-            b = locate_bifurcation(sc, MU, "final_psi", (j.lo, j.hi), tol=tol, method="multisection",
-                                   points_per_round=16, lanes=16, t1=t1, **solve_kw)
+            b = locate_bifurcation(
+                sc,
+                MU,
+                "final_psi",
+                (j.lo, j.hi),
+                tol=tol,
+                method="multisection",
+                points_per_round=16,
+                lanes=16,
+                t1=t1,
+                **solve_kw,
+            )
         except BifurcationError as e:
             print(f"  jump at μ in [{j.lo:.6f}, {j.hi:.6f}]: not refined ({e})", flush=True)
             continue
@@ -118,7 +174,9 @@ def main(argv=None):
         ax.set_ylabel(f"{label} [{unit}]")
     for ax in axes[-1]:
         ax.set_xlabel("friction coefficient μ [-]")
-    fig.suptitle(f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s); red lines: located μ*")
+    fig.suptitle(
+        f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s); red lines: located μ*"
+    )
     fig.tight_layout()
     fig.savefig(out / "observables_vs_mu.png", dpi=110)
     plt.close(fig)
@@ -127,8 +185,14 @@ def main(argv=None):
     for i, b in enumerate(located):
         lo, hi = b.bracket
         half = max(50 * tol, 20 * (hi - lo))
-        zoom = scan(sc, {MU: np.linspace(b.value - half, b.value + half, 32)}, t1, observables=["final_psi"],
-                    lanes=16, **solve_kw)
+        zoom = scan(
+            sc,
+            {MU: np.linspace(b.value - half, b.value + half, 32)},
+            t1,
+            observables=["final_psi"],
+            lanes=16,
+            **solve_kw,
+        )
         fig, ax = plt.subplots(figsize=(7, 4))
         ax.plot(zoom.coords[MU], np.degrees(zoom["final_psi"]), "o-", ms=3)
         ax.axvline(b.value, color="C3", lw=0.8)
@@ -141,18 +205,35 @@ def main(argv=None):
 
         d = max(2 * tol, b.width)
         across = np.array([b.value - 100 * d, b.value - d, b.value + d, b.value + 100 * d])
-        hist = scan(sc, {MU: across}, t1, observables=["final_psi"], histories=("position", "euler"), lanes=4,
-                    sort=False, **solve_kw)
+        hist = scan(
+            sc,
+            {MU: across},
+            t1,
+            observables=["final_psi"],
+            histories=("position", "euler"),
+            lanes=4,
+            sort=False,
+            **solve_kw,
+        )
         ts = hist.ts
         fig, axes = plt.subplots(5, 1, figsize=(8, 11), sharex=True)
-        series = [("x", hist["position"][..., 0], "m", 1.0), ("y", hist["position"][..., 1], "m", 1.0),
-                  ("φ", hist["euler"][..., 0], "deg", 180 / np.pi), ("ϑ", hist["euler"][..., 2], "deg", 180 / np.pi),
-                  ("ψ", hist["euler"][..., 1], "deg", 180 / np.pi)]
+        series = [
+            ("x", hist["position"][..., 0], "m", 1.0),
+            ("y", hist["position"][..., 1], "m", 1.0),
+            ("φ", hist["euler"][..., 0], "deg", 180 / np.pi),
+            ("ϑ", hist["euler"][..., 2], "deg", 180 / np.pi),
+            ("ψ", hist["euler"][..., 1], "deg", 180 / np.pi),
+        ]
         for ax, (name, val, unit, scale) in zip(axes, series, strict=True):
             for k, mu in enumerate(across):
                 side = "below" if mu < b.value else "above"
-                ax.plot(ts, val[k] * scale, lw=1.0, ls="-" if side == "below" else "--",
-                        label=f"μ = {mu:.7f} ({side} μ*)")
+                ax.plot(
+                    ts,
+                    val[k] * scale,
+                    lw=1.0,
+                    ls="-" if side == "below" else "--",
+                    label=f"μ = {mu:.7f} ({side} μ*)",
+                )
             ax.set_ylabel(f"{name} [{unit}]")
         axes[0].legend(fontsize=7)
         axes[-1].set_xlabel("t [s]")
@@ -170,13 +251,32 @@ def main(argv=None):
         speeds = np.concatenate([[v0], speeds[speeds != v0]])  # start where μ* is known
         b0 = located[0]
         t0 = time.perf_counter()
-        tr = trace_boundary(sc, MU, b0.bracket, "hoist.speed", speeds, "final_psi", tol=tol, method="bisection",
-                            initial_half_width=max(10 * tol, 0.002), t1=t1, **solve_kw)
-        rec["trace"] = {"hoist_speed": tr.along_values.tolist(), "mu_star": tr.values.tolist(),
-                        "widths": tr.widths.tolist(), "n_solves": tr.n_solves, "n_dense": tr.n_dense,
-                        "wall_s": time.perf_counter() - t0}
-        print(f"  boundary μ*(v_l): {np.round(tr.values, 7).tolist()} at v_l = {speeds.tolist()} m/s; "
-              f"{tr.n_solves} solves vs {tr.n_dense} for a dense grid", flush=True)
+        tr = trace_boundary(
+            sc,
+            MU,
+            b0.bracket,
+            "hoist.speed",
+            speeds,
+            "final_psi",
+            tol=tol,
+            method="bisection",
+            initial_half_width=max(10 * tol, 0.002),
+            t1=t1,
+            **solve_kw,
+        )
+        rec["trace"] = {
+            "hoist_speed": tr.along_values.tolist(),
+            "mu_star": tr.values.tolist(),
+            "widths": tr.widths.tolist(),
+            "n_solves": tr.n_solves,
+            "n_dense": tr.n_dense,
+            "wall_s": time.perf_counter() - t0,
+        }
+        print(
+            f"  boundary μ*(v_l): {np.round(tr.values, 7).tolist()} at v_l = {speeds.tolist()} m/s; "
+            f"{tr.n_solves} solves vs {tr.n_dense} for a dense grid",
+            flush=True,
+        )
         order = np.argsort(tr.along_values)
         fig, ax = plt.subplots(figsize=(6, 4))
         ax.plot(tr.along_values[order], tr.values[order], "o-")

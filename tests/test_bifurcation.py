@@ -36,7 +36,9 @@ def symmetric_lift(xi_c: float = 0.45) -> jh.Scenario:
         rope=jh.Rope(1.5e7, 1.3e4, [0.5, 0.5, 1.0]),
         hoist=jh.ConstantSpeedHoist(0.05),
         boom=jh.Boom([0.5, 0.5, 11.0], 500.0, 5.0e6, 5.0e3),
-        name="symmetric-lift", t1=0.2)
+        name="symmetric-lift",
+        t1=0.2,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -72,8 +74,9 @@ def test_corner_order_swaps_at_the_symmetric_mass_centre(newton_result):
 
 
 def test_bisection_finds_the_same_point_with_more_solves(newton_result):
-    b = locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), level=0.0, tol=1e-6,
-                           method="bisection", **SYM_KW)
+    b = locate_bifurcation(
+        symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), level=0.0, tol=1e-6, method="bisection", **SYM_KW
+    )
     assert b.converged and abs(b.value - 0.5) <= 1e-6
     assert b.n_derivative_solves == 0
     # log2(0.11 / 1e-6) = 16.7 halvings, plus the two ends
@@ -84,13 +87,32 @@ def test_bisection_finds_the_same_point_with_more_solves(newton_result):
 def test_multisection_and_continuation_along_the_hoist_speed():
     """Multisection (8 points per vmapped round) finds ξ_C* = 0.5 m too; and the boundary ξ_C*(v_l) traced
     by continuation over three hoist speeds stays at a/2 (the symmetry argument holds for every v_l)."""
-    m = locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), level=0.0, tol=1e-6,
-                           method="multisection", points_per_round=8, lanes=8, **SYM_KW)
+    m = locate_bifurcation(
+        symmetric_lift(),
+        XI,
+        E_MINUS_D,
+        (0.46, 0.57),
+        level=0.0,
+        tol=1e-6,
+        method="multisection",
+        points_per_round=8,
+        lanes=8,
+        **SYM_KW,
+    )
     assert m.converged and abs(m.value - 0.5) <= 1e-6
     assert m.n_solves % 8 == 0
 
-    tr = trace_boundary(symmetric_lift(), XI, (0.46, 0.57), "hoist.speed", [0.05, 0.06, 0.07], E_MINUS_D,
-                        level=0.0, tol=1e-6, **SYM_KW)
+    tr = trace_boundary(
+        symmetric_lift(),
+        XI,
+        (0.46, 0.57),
+        "hoist.speed",
+        [0.05, 0.06, 0.07],
+        E_MINUS_D,
+        level=0.0,
+        tol=1e-6,
+        **SYM_KW,
+    )
     np.testing.assert_allclose(tr.values, 0.5, atol=1e-6)
     assert np.all(tr.widths <= 1e-6)
     assert tr.n_solves < 40 and tr.n_dense > 3e5
@@ -138,7 +160,10 @@ def test_slide_or_tip_first_flips_at_the_static_friction_coefficient():
         rope=jh.Rope(1.5e7, 1.3e4, [a, 0.5, c]),
         hoist=jh.RampedHoist(8e-3, 0.5),
         boom=jh.Boom([a + 50.0, 0.5, c * cos_t - a * sin_t], 500.0, 5.0e6, 5.0e3),
-        gravity=g, name="slide-or-tip", t1=3.0)
+        gravity=g,
+        name="slide-or-tip",
+        t1=3.0,
+    )
     v_slide = eps_v * r_s / math.sqrt(1 - r_s**2)
 
     def tip_minus_slide(traj, scenario):
@@ -155,8 +180,17 @@ def test_slide_or_tip_first_flips_at_the_static_friction_coefficient():
         return t_tip - t_slide
 
     obs = O.Observable("tip_minus_slide", tip_minus_slide, "s", "t_tip - t_slide")
-    b = locate_bifurcation(sc, "foundation.friction_coefficient", obs, (0.514, 0.521), level=0.0, tol=1e-6,
-                           method="bisection", t1=3.0, n_save=301)
+    b = locate_bifurcation(
+        sc,
+        "foundation.friction_coefficient",
+        obs,
+        (0.514, 0.521),
+        level=0.0,
+        tol=1e-6,
+        method="bisection",
+        t1=3.0,
+        n_save=301,
+    )
     assert b.converged and b.width <= 1e-6
     assert b.y_lo > 0.0 > b.y_hi  # slides first below μ*, tips first above
     assert abs(b.value - mu_star) < 1.5e-3
@@ -172,11 +206,23 @@ def test_find_jumps_on_a_synthetic_scan():
     status = np.zeros(x.size, dtype=np.int32)
     status[50] = 1
     y[50] = np.nan
-    res = ScanResult(params=["p"], mode="sweep", coords={"p": x}, shape=(201,), data={"y": y},
-                     components={"y": None}, status=status, reasons={50: "max_steps"},
-                     num_accepted_steps=np.zeros(201, dtype=np.int32),
-                     num_rejected_steps=np.zeros(201, dtype=np.int32), ts=None, histories={},
-                     units={"p": "-", "y": "-"}, descriptions={}, attrs={})
+    res = ScanResult(
+        params=["p"],
+        mode="sweep",
+        coords={"p": x},
+        shape=(201,),
+        data={"y": y},
+        components={"y": None},
+        status=status,
+        reasons={50: "max_steps"},
+        num_accepted_steps=np.zeros(201, dtype=np.int32),
+        num_rejected_steps=np.zeros(201, dtype=np.int32),
+        ts=None,
+        histories={},
+        units={"p": "-", "y": "-"},
+        descriptions={},
+        attrs={},
+    )
     jumps = find_jumps(res, "y")
     assert len(jumps) == 3
     j0, j1, j2 = jumps

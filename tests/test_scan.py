@@ -21,8 +21,12 @@ from jaxhoist.numerics.scan import ScanResult, ScanStatus, _members, parse_path,
 MU = "foundation.friction_coefficient"
 MUS = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
 T1 = 0.3
-KW = dict(observables=["final_position", "liftoff_time", "detachment_times", "contact_time", "max_tilt"],
-          n_save=31, lanes=2, max_steps=3000)
+KW = dict(
+    observables=["final_position", "liftoff_time", "detachment_times", "contact_time", "max_tilt"],
+    n_save=31,
+    lanes=2,
+    max_steps=3000,
+)
 
 
 def oblique_box() -> jh.Scenario:
@@ -32,7 +36,9 @@ def oblique_box() -> jh.Scenario:
         rope=jh.Rope(1.5e7, 1.3e4, [0.5, 0.5, 1.0]),
         hoist=jh.ConstantSpeedHoist(0.3),
         boom=jh.Boom([3.0, 0.5, 11.0], 500.0, 5.0e6, 5.0e3),
-        name="oblique-box", t1=T1)
+        name="oblique-box",
+        t1=T1,
+    )
 
 
 @pytest.fixture(scope="module")
@@ -63,7 +69,9 @@ def test_scan_physics(clean):
     assert np.all(clean["liftoff_time"] >= t.max(axis=1) - 1e-12)
     # Time spent in the five contact configurations adds up to the horizon.
     np.testing.assert_allclose(clean["contact_time"].sum(axis=1), T1, rtol=1e-12)
-    assert clean.units[MU] == "-" and clean.units["final_position"] == "m" and clean.units["liftoff_time"] == "s"
+    assert (
+        clean.units[MU] == "-" and clean.units["final_position"] == "m" and clean.units["liftoff_time"] == "s"
+    )
 
 
 def test_identical_for_any_chunk_size_and_device_count(box, clean):
@@ -131,8 +139,14 @@ def test_resume_after_interruption(box, clean, tmp_path):
 
 def test_grid_mode_with_time_histories(box):
     """A 2 x 2 grid over μ and the hoist speed, keeping the mass-centre history."""
-    res = scan(box, {MU: [0.2, 0.5], "hoist.speed": [0.2, 0.3]}, T1, mode="grid", histories=("position",),
-               **{**KW, "observables": ["final_position"]})
+    res = scan(
+        box,
+        {MU: [0.2, 0.5], "hoist.speed": [0.2, 0.3]},
+        T1,
+        mode="grid",
+        histories=("position",),
+        **{**KW, "observables": ["final_position"]},
+    )
     assert res.shape == (2, 2) and res["position"].shape == (2, 2, 31, 3)
     assert res.units["hoist.speed"] == "m/s" and res.units["position"] == "m"
     np.testing.assert_array_equal(res["position"][:, :, -1], res["final_position"])
@@ -150,8 +164,15 @@ def test_forward_sensitivities_match_differences(box):
     corner lands again. Across a touch-down the ground damper force jumps from 0 to h dp/dt, and
     differentiating through the solver steps misses the saltation term of that jump: over 0.3 s, with 4
     impacts, the same comparison is off by 1.4e-3 (reported with the benchmark, not asserted here)."""
-    res = scan(box, {MU: [0.29, 0.3, 0.31]}, 0.003, derivatives=True, rtol=1e-9, atol=1e-11,
-               **{**KW, "observables": ["final_x", "impacts"]})
+    res = scan(
+        box,
+        {MU: [0.29, 0.3, 0.31]},
+        0.003,
+        derivatives=True,
+        rtol=1e-9,
+        atol=1e-11,
+        **{**KW, "observables": ["final_x", "impacts"]},
+    )
     x, dx = res["final_x"], res["d_final_x"][:, 0]
     assert res["d_final_x"].shape == (3, 1) and res.units["d_final_x"] == "m per -"
     assert np.all(res["impacts"] == 0)

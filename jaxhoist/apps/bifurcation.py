@@ -84,8 +84,15 @@ class Jump:
     index: int
 
 
-def find_jumps(result: ScanResult, observable: str, *, param: str | None = None, factor: float = 8.0,
-               window: int = 6, min_size: float | None = None) -> list[Jump]:
+def find_jumps(
+    result: ScanResult,
+    observable: str,
+    *,
+    param: str | None = None,
+    factor: float = 8.0,
+    window: int = 6,
+    min_size: float | None = None,
+) -> list[Jump]:
     """Candidate jumps of a scalar observable along a 1-D scan.
 
     A step between neighbouring (valid) members is a candidate when it is `factor` times larger than the
@@ -97,14 +104,18 @@ def find_jumps(result: ScanResult, observable: str, *, param: str | None = None,
     **Returns** the candidates sorted by parameter value.
     """
     if len(result.params) != 1 and param is None:
-        raise ScenarioError(f"find_jumps: the scan has parameters {list(result.params)}; say which with param=")
+        raise ScenarioError(
+            f"find_jumps: the scan has parameters {list(result.params)}; say which with param="
+        )
     param = result.params[0] if param is None else param
     if result.mode == "grid" and len(result.params) > 1:
         raise ScenarioError("find_jumps works along a 1-D scan; take a slice of the grid first")
     y = np.asarray(result[observable], dtype=np.float64)
     if y.shape != result.shape:
-        raise ScenarioError(f"find_jumps needs a scalar observable; {observable!r} has shape {y.shape[1:]} per "
-                            f"member (use e.g. '{observable}[0]' when scanning)")
+        raise ScenarioError(
+            f"find_jumps needs a scalar observable; {observable!r} has shape {y.shape[1:]} per "
+            f"member (use e.g. '{observable}[0]' when scanning)"
+        )
     x = np.asarray(result.values(param), dtype=np.float64).ravel()
     y = y.ravel()
     keep = result.ok.ravel() & ~np.isnan(y)
@@ -120,14 +131,14 @@ def find_jumps(result: ScanResult, observable: str, *, param: str | None = None,
     d = np.where(both_inf, 0.0, d)
     d_fin = np.where(np.isfinite(d), d, np.nan)
     yr = np.ptp(y[finite]) if finite.any() else 0.0
-    floor = (1e-6 * yr if min_size is None else float(min_size))
+    floor = 1e-6 * yr if min_size is None else float(min_size)
     cand = np.zeros(d.size, dtype=bool)
     score = np.zeros(d.size)
     for i in range(d.size):
         if not np.isfinite(d[i]):
             cand[i], score[i] = True, np.inf
             continue
-        nb = np.concatenate([d_fin[max(0, i - window):i], d_fin[i + 1:i + 1 + window]])
+        nb = np.concatenate([d_fin[max(0, i - window) : i], d_fin[i + 1 : i + 1 + window]])
         nb = nb[np.isfinite(nb)]
         bg = float(np.median(nb)) if nb.size else 0.0
         if d[i] > floor and d[i] > factor * bg:
@@ -144,9 +155,19 @@ def find_jumps(result: ScanResult, observable: str, *, param: str | None = None,
             j += 1
         with np.errstate(invalid="ignore"):
             size = abs(y[j + 1] - y[i])
-        jumps.append(Jump(param=param, observable=observable, lo=float(x[i]), hi=float(x[j + 1]),
-                          y_lo=float(y[i]), y_hi=float(y[j + 1]), size=float(size),
-                          score=float(np.max(score[i:j + 1])), index=i))
+        jumps.append(
+            Jump(
+                param=param,
+                observable=observable,
+                lo=float(x[i]),
+                hi=float(x[j + 1]),
+                y_lo=float(y[i]),
+                y_hi=float(y[j + 1]),
+                size=float(size),
+                score=float(np.max(score[i : j + 1])),
+                index=i,
+            )
+        )
         i = j + 1
     return jumps
 
@@ -211,8 +232,10 @@ class _Evaluator:
         status, steps = int(aux[0]), int(aux[1])
         self.steps += steps
         if status != SolveStatus.OK:
-            raise BifurcationError(f"the solve at {self.path} = {float(x)!r} failed: "
-                                   f"{SolveStatus(status).message}", n_solves=self.n_value + self.n_jvp)
+            raise BifurcationError(
+                f"the solve at {self.path} = {float(x)!r} failed: {SolveStatus(status).message}",
+                n_solves=self.n_value + self.n_jvp,
+            )
         return out
 
     def value(self, x) -> float:
@@ -269,18 +292,20 @@ class Bifurcation:
 
     @property
     def kind(self) -> str:
-        """"jump" if the observable still changes by more than 10 % of its change across the initial bracket
+        """ "jump" if the observable still changes by more than 10 % of its change across the initial bracket
         within the final one (a discontinuity), else "crossing" (a continuous, possibly steep, change)."""
         return "jump" if self.jump_fraction > 0.1 else "crossing"
 
     def summary(self) -> str:
         unit = "" if self.unit in ("-", "") else f" {self.unit}"
-        return (f"{self.param} * = {self.value:.10g}{unit} (bracket [{self.bracket[0]:.10g}, "
-                f"{self.bracket[1]:.10g}], width {self.width:.2g}): {self.observable} changes from "
-                f"{self.y_lo:.6g} to {self.y_hi:.6g} across it, {self.kind} ({100 * self.jump_fraction:.3g} % of "
-                f"the change across the initial bracket); {self.n_solves} solves ({self.n_derivative_solves} "
-                f"with derivatives, method {self.method}) vs {self.n_uniform} for a uniform grid at spacing "
-                f"{self.tol:g}")
+        return (
+            f"{self.param} * = {self.value:.10g}{unit} (bracket [{self.bracket[0]:.10g}, "
+            f"{self.bracket[1]:.10g}], width {self.width:.2g}): {self.observable} changes from "
+            f"{self.y_lo:.6g} to {self.y_hi:.6g} across it, {self.kind} ({100 * self.jump_fraction:.3g} % of "
+            f"the change across the initial bracket); {self.n_solves} solves ({self.n_derivative_solves} "
+            f"with derivatives, method {self.method}) vs {self.n_uniform} for a uniform grid at spacing "
+            f"{self.tol:g}"
+        )
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
@@ -289,8 +314,13 @@ class Bifurcation:
 
 
 def _options(solver, rtol, atol, dt0, max_steps):
-    return SolverOptions(solver=diffrax.Tsit5() if solver is None else solver, rtol=rtol, atol=atol, dt0=dt0,
-                         max_steps=max_steps)
+    return SolverOptions(
+        solver=diffrax.Tsit5() if solver is None else solver,
+        rtol=rtol,
+        atol=atol,
+        dt0=dt0,
+        max_steps=max_steps,
+    )
 
 
 def _times(scenario, t1, ts, n_save):
@@ -386,8 +416,23 @@ def locate_bifurcation(
     unit = param_unit(scenario, param)
 
     if method == "multisection":
-        return _multisection(scenario, param, obs, lo, hi, level, tol, ts, options, max_solves,
-                             points_per_round, lanes, n_uniform, unit, wall0)
+        return _multisection(
+            scenario,
+            param,
+            obs,
+            lo,
+            hi,
+            level,
+            tol,
+            ts,
+            options,
+            max_solves,
+            points_per_round,
+            lanes,
+            n_uniform,
+            unit,
+            wall0,
+        )
 
     ev = _Evaluator(scenario, param, obs, ts, options)
     use_d = method == "newton"
@@ -412,12 +457,15 @@ def locate_bifurcation(
     if g_a == 0.0 or g_b == 0.0 or np.sign(g_a) == np.sign(g_b):
         raise BifurcationError(
             f"{obs.name} - level has the same sign at both ends of the bracket ({param} = {lo:g}: {y_a:g}, "
-            f"{hi:g}: {y_b:g}, level {lev:g}); give a bracket across the change (see find_jumps)", n_solves=2)
+            f"{hi:g}: {y_b:g}, level {lev:g}); give a bracket across the change (see find_jumps)",
+            n_solves=2,
+        )
     notes: list[str] = []
     if slope_ok and not (np.isfinite(dy_a) or np.isfinite(dy_b)):
         slope_ok = False
-        notes.append("forward-mode derivatives are not finite at the bracket ends: bisection with value-only "
-                     "solves")
+        notes.append(
+            "forward-mode derivatives are not finite at the bracket ends: bisection with value-only solves"
+        )
     a, b, ga, gb = lo, hi, g_a, g_b
     ya, yb = y_a, y_b
     use_d = slope_ok  # no slope information across an event that stops happening: value-only solves
@@ -452,21 +500,50 @@ def locate_bifurcation(
         n_bad_slopes = 0 if (dy_new is None or np.isfinite(dy_new)) else n_bad_slopes + 1
         if use_d and n_bad_slopes >= 2:
             use_d = False
-            notes.append(f"forward-mode derivatives not finite twice in a row near {param} = {x_new:.10g}: "
-                         f"bisection with value-only solves from there")
-    return Bifurcation(param=param, unit=unit, observable=obs.name, value=0.5 * (a + b), bracket=(a, b),
-                       width=b - a, level=float(lev), y_lo=float(ya), y_hi=float(yb), tol=tol,
-                       n_solves=ev.n_value + ev.n_jvp, n_derivative_solves=ev.n_jvp, n_uniform=n_uniform,
-                       history=history, converged=(b - a) <= tol, method=method,
-                       wall_time=time.perf_counter() - wall0, compile_time=ev.compile_time, steps=ev.steps,
-                       notes=notes, jump_fraction=_fraction(ya, yb, y_a, y_b))
+            notes.append(
+                f"forward-mode derivatives not finite twice in a row near {param} = {x_new:.10g}: "
+                f"bisection with value-only solves from there"
+            )
+    return Bifurcation(
+        param=param,
+        unit=unit,
+        observable=obs.name,
+        value=0.5 * (a + b),
+        bracket=(a, b),
+        width=b - a,
+        level=float(lev),
+        y_lo=float(ya),
+        y_hi=float(yb),
+        tol=tol,
+        n_solves=ev.n_value + ev.n_jvp,
+        n_derivative_solves=ev.n_jvp,
+        n_uniform=n_uniform,
+        history=history,
+        converged=(b - a) <= tol,
+        method=method,
+        wall_time=time.perf_counter() - wall0,
+        compile_time=ev.compile_time,
+        steps=ev.steps,
+        notes=notes,
+        jump_fraction=_fraction(ya, yb, y_a, y_b),
+    )
 
 
-def _multisection(scenario, param, obs, lo, hi, level, tol, ts, options, max_solves, k, lanes, n_uniform, unit,
-                  wall0):
+def _multisection(
+    scenario, param, obs, lo, hi, level, tol, ts, options, max_solves, k, lanes, n_uniform, unit, wall0
+):
     """Each round solves `k` points in one vmapped scan and keeps the first sign change."""
-    kw = dict(observables={obs.name: obs}, ts=ts, solver=options.solver, rtol=options.rtol, atol=options.atol,
-              dt0=options.dt0, max_steps=options.max_steps, lanes=lanes, sort=False)
+    kw = dict(
+        observables={obs.name: obs},
+        ts=ts,
+        solver=options.solver,
+        rtol=options.rtol,
+        atol=options.atol,
+        dt0=options.dt0,
+        max_steps=options.max_steps,
+        lanes=lanes,
+        sort=False,
+    )
     if k < 2:
         raise ScenarioError(f"points_per_round must be >= 2 for multisection, got {k}")
     # Every round solves exactly k points (one compiled shape): the first round spans the bracket, ends
@@ -482,8 +559,11 @@ def _multisection(scenario, param, obs, lo, hi, level, tol, ts, options, max_sol
         lev = np.inf
     gs = [_indicator(float(y), lev, y_lo_end) for y in ys]
     if np.sign(gs[0]) == np.sign(gs[-1]) or gs[0] == 0 or gs[-1] == 0:
-        raise BifurcationError(f"{obs.name} - level has the same sign at both ends of the bracket "
-                               f"({lo:g}: {y_a:g}, {hi:g}: {y_b:g}, level {lev:g})", n_solves=k)
+        raise BifurcationError(
+            f"{obs.name} - level has the same sign at both ends of the bracket "
+            f"({lo:g}: {y_a:g}, {hi:g}: {y_b:g}, level {lev:g})",
+            n_solves=k,
+        )
     history = [(float(x), g, None, "multisection") for x, g in zip(xs, gs, strict=True)]
     n_solves, compile_time = k, first.attrs["timings_s"]["compile"]
     steps = int(np.sum(first.num_accepted_steps))
@@ -508,11 +588,28 @@ def _multisection(scenario, param, obs, lo, hi, level, tol, ts, options, max_sol
             if g1 == 0.0 or np.sign(g1) != np.sign(g0):
                 a, ga, ya, b, gb, yb = x0, g0, y0, x1, g1, y1
                 break
-    return Bifurcation(param=param, unit=unit, observable=obs.name, value=0.5 * (a + b), bracket=(a, b),
-                       width=b - a, level=float(lev), y_lo=float(ya), y_hi=float(yb), tol=tol, n_solves=n_solves,
-                       n_derivative_solves=0, n_uniform=n_uniform, history=history, converged=(b - a) <= tol,
-                       method="multisection", wall_time=time.perf_counter() - wall0, compile_time=compile_time,
-                       steps=steps, jump_fraction=_fraction(ya, yb, y_a, y_b))
+    return Bifurcation(
+        param=param,
+        unit=unit,
+        observable=obs.name,
+        value=0.5 * (a + b),
+        bracket=(a, b),
+        width=b - a,
+        level=float(lev),
+        y_lo=float(ya),
+        y_hi=float(yb),
+        tol=tol,
+        n_solves=n_solves,
+        n_derivative_solves=0,
+        n_uniform=n_uniform,
+        history=history,
+        converged=(b - a) <= tol,
+        method="multisection",
+        wall_time=time.perf_counter() - wall0,
+        compile_time=compile_time,
+        steps=steps,
+        jump_fraction=_fraction(ya, yb, y_a, y_b),
+    )
 
 
 def _fraction(ya, yb, y_a, y_b) -> float:
@@ -529,13 +626,16 @@ def _raise_failed(r: ScanResult, param):
         raise BifurcationError(f"the solve at {param} = {f['params'][param]!r} failed: {f['reason']}")
 
 
-def locate_jumps(scenario: Scenario, result: ScanResult, observable: str, *, max_jumps: int | None = None,
-                 **kw) -> list[Bifurcation]:
+def locate_jumps(
+    scenario: Scenario, result: ScanResult, observable: str, *, max_jumps: int | None = None, **kw
+) -> list[Bifurcation]:
     """`find_jumps` on a 1-D scan, then `locate_bifurcation` in every candidate bracket (largest first).
     Keyword arguments go to both (`factor`, `window`, `min_size` to `find_jumps`, the rest to the locator);
     a candidate whose refinement fails is skipped."""
     fj = {k: kw.pop(k) for k in ("factor", "window", "min_size") if k in kw}
-    jumps = sorted(find_jumps(result, observable, **fj), key=lambda j: -j.size if np.isfinite(j.size) else -np.inf)
+    jumps = sorted(
+        find_jumps(result, observable, **fj), key=lambda j: -j.size if np.isfinite(j.size) else -np.inf
+    )
     if max_jumps is not None:
         jumps = jumps[:max_jumps]
     out = []
@@ -638,8 +738,17 @@ def trace_boundary(
     span = max([hi, *fin.tolist()]) - min([lo, *fin.tolist()])
     n_dense = int(qs.size * (math.ceil(span / tol) + 1))
     widths = np.array([p.width if p is not None else np.nan for p in points])
-    return Boundary(param=param, along=along, along_values=qs, values=vals, widths=widths, n_solves=n_solves,
-                    n_dense=n_dense, points=points, tol=tol)
+    return Boundary(
+        param=param,
+        along=along,
+        along_values=qs,
+        values=vals,
+        widths=widths,
+        n_solves=n_solves,
+        n_dense=n_dense,
+        points=points,
+        tol=tol,
+    )
 
 
 # ---------------------------------------------------------------------------------------------- CLI
@@ -648,21 +757,33 @@ def trace_boundary(
 def configure_parser(subparsers) -> None:
     """Add `jaxhoist bifurcation SCENARIO --param PATH --bracket LO HI --observable NAME [...]`."""
     p = subparsers.add_parser(
-        "bifurcation", help="locate where an observable changes character as a parameter varies",
+        "bifurcation",
+        help="locate where an observable changes character as a parameter varies",
         description="Refine a change of character of an observable (a jump, or the sign change of an event-"
-                    "time difference) to a tolerance, with derivative-accelerated root finding. With --scan N, "
-                    "first scan N points across the bracket and refine every candidate jump.")
+        "time difference) to a tolerance, with derivative-accelerated root finding. With --scan N, "
+        "first scan N points across the bracket and refine every candidate jump.",
+    )
     p.add_argument("scenario", metavar="SCENARIO", help="preset name (e.g. paper-4.2) or TOML file")
     p.add_argument("--param", required=True, metavar="PATH", help="e.g. foundation.friction_coefficient")
     p.add_argument("--bracket", nargs=2, type=float, required=True, metavar=("LO", "HI"))
-    p.add_argument("--observable", default="final_psi",
-                   help="scalar observable (built-in name, a component like final_euler[1], or "
-                        "detach:E-D for a detachment-time difference); default final_psi")
-    p.add_argument("--level", type=float, default=None, help="indicator level (default: midpoint of the ends)")
+    p.add_argument(
+        "--observable",
+        default="final_psi",
+        help="scalar observable (built-in name, a component like final_euler[1], or "
+        "detach:E-D for a detachment-time difference); default final_psi",
+    )
+    p.add_argument(
+        "--level", type=float, default=None, help="indicator level (default: midpoint of the ends)"
+    )
     p.add_argument("--tol", type=float, default=1e-6, help="final bracket width (default 1e-6)")
     p.add_argument("--method", choices=("newton", "bisection", "multisection"), default="newton")
-    p.add_argument("--scan", type=int, default=0, metavar="N",
-                   help="first scan N points over the bracket and refine every candidate jump")
+    p.add_argument(
+        "--scan",
+        type=int,
+        default=0,
+        metavar="N",
+        help="first scan N points over the bracket and refine every candidate jump",
+    )
     p.add_argument("--t1", type=float, default=None)
     p.add_argument("--n-save", type=int, default=201)
     p.add_argument("--rtol", type=float, default=1e-6)
@@ -675,7 +796,7 @@ def configure_parser(subparsers) -> None:
 
 def _cli_observable(name: str):
     if name.startswith("detach:"):
-        a, _, b = name[len("detach:"):].partition("-")
+        a, _, b = name[len("detach:") :].partition("-")
         return obs_mod.detachment_time_difference(a, b)
     return name
 
@@ -703,19 +824,48 @@ def run_cli(args) -> int:
     lo, hi = args.bracket
     if args.scan:
         name = _resolve_one(observable).name
-        res = scan(scenario, {args.param: np.linspace(lo, hi, args.scan)}, observables={name: observable},
-                   out_dir=None if out is None else out / "scan", progress=True, **kw)
+        res = scan(
+            scenario,
+            {args.param: np.linspace(lo, hi, args.scan)},
+            observables={name: observable},
+            out_dir=None if out is None else out / "scan",
+            progress=True,
+            **kw,
+        )
         found = locate_jumps(scenario, res, name, level=args.level, tol=args.tol, method=args.method, **kw)
-        print(f"{len(find_jumps(res, name))} candidate jumps of {name} in {args.scan} points; located {len(found)}:")
+        print(
+            f"{len(find_jumps(res, name))} candidate jumps of {name} in {args.scan} points; "
+            f"located {len(found)}:"
+        )
     else:
-        found = [locate_bifurcation(scenario, args.param, observable, (lo, hi), level=args.level, tol=args.tol,
-                                    method=args.method, **kw)]
+        found = [
+            locate_bifurcation(
+                scenario,
+                args.param,
+                observable,
+                (lo, hi),
+                level=args.level,
+                tol=args.tol,
+                method=args.method,
+                **kw,
+            )
+        ]
     for b in found:
         print(b.summary())
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-        (out / "bifurcation.json").write_text(json.dumps(
-            {"scenario": scenario.name, "overrides": overrides, "command": getattr(args, "argv", sys.argv),
-             "bifurcations": [b.to_dict() for b in found]}, indent=1, default=float) + "\n")
+        (out / "bifurcation.json").write_text(
+            json.dumps(
+                {
+                    "scenario": scenario.name,
+                    "overrides": overrides,
+                    "command": getattr(args, "argv", sys.argv),
+                    "bifurcations": [b.to_dict() for b in found],
+                },
+                indent=1,
+                default=float,
+            )
+            + "\n"
+        )
         print(f"wrote {out / 'bifurcation.json'}")
     return 0 if all(b.converged for b in found) else 1

@@ -203,28 +203,82 @@ def _register(o: Observable) -> Observable:
 
 _register(Observable("final_position", _final_position, "m", "mass centre C at t1 (world x, y, z)", _XYZ))
 _register(Observable("final_velocity", _final_velocity, "m/s", "velocity of C at t1", _XYZ))
-_register(Observable("final_euler", _final_euler, "rad",
-                     "Euler angles (φ, ψ, ϑ) at t1, R = R_Z(ψ)R_Y(ϑ)R_X(φ), φ and ψ unwrapped", _EUL))
+_register(
+    Observable(
+        "final_euler",
+        _final_euler,
+        "rad",
+        "Euler angles (φ, ψ, ϑ) at t1, R = R_Z(ψ)R_Y(ϑ)R_X(φ), φ and ψ unwrapped",
+        _EUL,
+    )
+)
 for _i, _c in enumerate(_XYZ):
     _register(Observable(f"final_{_c}", _component(_final_position, _i), "m", f"mass centre {_c} at t1"))
 for _i, _c in enumerate(_EUL):
-    _register(Observable(f"final_{_c}", _component(_final_euler, _i), "rad", f"Euler angle {_c} at t1 (unwrapped)"))
-_register(Observable("max_tilt", _max_tilt, "rad", "largest angle between body ζ and the vertical over the saved times"))
-_register(Observable("liftoff_time", _liftoff_time, "s",
-                     "first time all four N_i are zero (interpolated; inf if never)"))
-_register(Observable("detachment_times", _detachment_times, "s",
-                     "per corner D, E, F, H: first time N_i = 0 (interpolated; inf if never)", CORNERS))
-_register(Observable("impact_counts", _impact_counts, "-",
-                     "per corner: times it returned to the ground after leaving it (on the saved grid)", CORNERS))
-_register(Observable("impacts", lambda traj, sc: jnp.sum(_impact_counts(traj, sc)), "-",
-                     "total number of corner impacts (on the saved grid)"))
-_register(Observable("contact_time", _contact_time, "s",
-                     "time spent with 0, 1, 2, 3, 4 corners in contact (trapezoid rule on the saved grid)",
-                     ("0", "1", "2", "3", "4")))
-_register(Observable("first_corner", _first_corner, "-",
-                     "index (0=D, 1=E, 2=F, 3=H) of the corner that leaves the ground first"))
-_register(Observable("max_rope_tension", lambda traj: jnp.max(traj.rope_tension), "N",
-                     "largest rope tension S over the saved times"))
+    _register(
+        Observable(f"final_{_c}", _component(_final_euler, _i), "rad", f"Euler angle {_c} at t1 (unwrapped)")
+    )
+_register(
+    Observable(
+        "max_tilt", _max_tilt, "rad", "largest angle between body ζ and the vertical over the saved times"
+    )
+)
+_register(
+    Observable(
+        "liftoff_time", _liftoff_time, "s", "first time all four N_i are zero (interpolated; inf if never)"
+    )
+)
+_register(
+    Observable(
+        "detachment_times",
+        _detachment_times,
+        "s",
+        "per corner D, E, F, H: first time N_i = 0 (interpolated; inf if never)",
+        CORNERS,
+    )
+)
+_register(
+    Observable(
+        "impact_counts",
+        _impact_counts,
+        "-",
+        "per corner: times it returned to the ground after leaving it (on the saved grid)",
+        CORNERS,
+    )
+)
+_register(
+    Observable(
+        "impacts",
+        lambda traj, sc: jnp.sum(_impact_counts(traj, sc)),
+        "-",
+        "total number of corner impacts (on the saved grid)",
+    )
+)
+_register(
+    Observable(
+        "contact_time",
+        _contact_time,
+        "s",
+        "time spent with 0, 1, 2, 3, 4 corners in contact (trapezoid rule on the saved grid)",
+        ("0", "1", "2", "3", "4"),
+    )
+)
+_register(
+    Observable(
+        "first_corner",
+        _first_corner,
+        "-",
+        "index (0=D, 1=E, 2=F, 3=H) of the corner that leaves the ground first",
+    )
+)
+_register(
+    Observable(
+        "max_rope_tension",
+        lambda traj: jnp.max(traj.rope_tension),
+        "N",
+        "largest rope tension S over the saved times",
+    )
+)
 _register(Observable("slide_distance", _slide_distance, "m", "horizontal distance of C from its start at t1"))
 
 
@@ -239,14 +293,22 @@ def detachment_time_difference(first: str, second: str) -> Observable:
         t = _detachment_times(traj, scenario)
         return t[i] - t[j]
 
-    return Observable(f"detach_{first.upper()}_minus_{second.upper()}", diff, "s",
-                      f"first detachment time of corner {first.upper()} minus that of {second.upper()}")
+    return Observable(
+        f"detach_{first.upper()}_minus_{second.upper()}",
+        diff,
+        "s",
+        f"first detachment time of corner {first.upper()} minus that of {second.upper()}",
+    )
 
 
 def _indexed(base: Observable, index: int) -> Observable:
     label = base.components[index] if base.components else str(index)
-    return Observable(f"{base.name}[{index}]", _component(base.fn, index), base.unit,
-                      f"{base.description} [component {label}]")
+    return Observable(
+        f"{base.name}[{index}]",
+        _component(base.fn, index),
+        base.unit,
+        f"{base.description} [component {label}]",
+    )
 
 
 def get(name: str) -> Observable:
@@ -290,10 +352,16 @@ def resolve(spec) -> tuple[Observable, ...]:
         elif isinstance(s, str):
             o = get(s)
         elif callable(s):
-            o = Observable(getattr(s, "__name__", "observable"), s, getattr(s, "unit", "?"),
-                           getattr(s, "__doc__", "") or "")
+            o = Observable(
+                getattr(s, "__name__", "observable"),
+                s,
+                getattr(s, "unit", "?"),
+                getattr(s, "__doc__", "") or "",
+            )
         else:
-            raise TypeError(f"an observable must be a name, a callable or an Observable, got {type(s).__name__}")
+            raise TypeError(
+                f"an observable must be a name, a callable or an Observable, got {type(s).__name__}"
+            )
         if name is not None and name != o.name:
             o = dataclasses.replace(o, name=str(name))
         items.append(o)

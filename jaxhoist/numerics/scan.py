@@ -71,8 +71,10 @@ class ScanStatus(enum.IntEnum):
     def message(self) -> str:
         if self.value < 4:
             return SolveStatus(self.value).message
-        return {4: "invalid parameter values (not solved)",
-                5: "the solve succeeded but an observable is NaN"}[self.value]
+        return {
+            4: "invalid parameter values (not solved)",
+            5: "the solve succeeded but an observable is NaN",
+        }[self.value]
 
 
 # ------------------------------------------------------------------------------------ parameter paths
@@ -84,20 +86,24 @@ def parse_path(path: str) -> tuple[str, int | None]:
     """`"load.mass_centre[0]"` -> `("load.mass_centre", 0)`; `"hoist.speed"` -> `("hoist.speed", None)`."""
     m = _PATH_RE.match(path.strip())
     if not m:
-        raise ScenarioError(f"{path!r} is not a parameter path: use dotted field names with an optional "
-                            f"component index, e.g. 'foundation.friction_coefficient' or 'load.mass_centre[0]'")
+        raise ScenarioError(
+            f"{path!r} is not a parameter path: use dotted field names with an optional "
+            f"component index, e.g. 'foundation.friction_coefficient' or 'load.mass_centre[0]'"
+        )
     return m.group(1), (None if m.group(2) is None else int(m.group(2)))
 
 
 def check_path(scenario: Scenario, path: str) -> None:
-    """Raise `ScenarioError` unless `path` names a float scalar leaf or one component of a float vector leaf."""
+    """Raise `ScenarioError` unless `path` names a float scalar leaf or one component of a float vector
+    leaf."""
     dotted, index = parse_path(path)
     leaf = np.asarray(get_leaf(scenario, dotted))
     if not np.issubdtype(leaf.dtype, np.floating):
         raise ScenarioError(f"{path!r} is not a float leaf (dtype {leaf.dtype})")
     if index is None and leaf.ndim != 0:
-        raise ScenarioError(f"{path!r} is a vector of shape {leaf.shape}: sweep one component, e.g. "
-                            f"'{dotted}[0]'")
+        raise ScenarioError(
+            f"{path!r} is a vector of shape {leaf.shape}: sweep one component, e.g. '{dotted}[0]'"
+        )
     if index is not None and (leaf.ndim != 1 or not 0 <= index < leaf.shape[0]):
         raise ScenarioError(f"{path!r}: index {index} out of range for a leaf of shape {leaf.shape}")
 
@@ -150,7 +156,9 @@ def parse_values(spec) -> np.ndarray:
                 return np.linspace(float(a), float(b), int(n))
             return np.array([float(x) for x in s.split(",") if x.strip()])
         except ValueError:
-            raise ScenarioError(f"parameter values {spec!r}: expected 'start:stop:num' or 'v1,v2,...'") from None
+            raise ScenarioError(
+                f"parameter values {spec!r}: expected 'start:stop:num' or 'v1,v2,...'"
+            ) from None
     a = np.asarray(spec, dtype=np.float64)
     if a.ndim == 0:
         a = a[None]
@@ -172,21 +180,31 @@ def _members(params: Mapping[str, Any], mode: str | None):
         mode = "sweep" if len(names) == 1 else None
     if mode == "sweep":
         if len(names) != 1:
-            raise ScenarioError(f"mode='sweep' sweeps one parameter, got {len(names)}: use mode='grid' "
-                                f"(every combination) or mode='points' (zipped lists)")
+            raise ScenarioError(
+                f"mode='sweep' sweeps one parameter, got {len(names)}: use mode='grid' "
+                f"(every combination) or mode='points' (zipped lists)"
+            )
         return mode, {names[0]: vals[0]}, (vals[0].size,), vals[0][:, None]
     if mode == "grid":
         mesh = np.meshgrid(*vals, indexing="ij")
-        return mode, dict(zip(names, vals, strict=True)), tuple(v.size for v in vals), \
-            np.stack([m.ravel() for m in mesh], axis=1)
+        return (
+            mode,
+            dict(zip(names, vals, strict=True)),
+            tuple(v.size for v in vals),
+            np.stack([m.ravel() for m in mesh], axis=1),
+        )
     if mode == "points":
         n = {v.size for v in vals}
         if len(n) != 1:
-            raise ScenarioError(f"mode='points' needs equally long value lists, got lengths "
-                                f"{dict(zip(names, [v.size for v in vals], strict=True))}")
+            raise ScenarioError(
+                f"mode='points' needs equally long value lists, got lengths "
+                f"{dict(zip(names, [v.size for v in vals], strict=True))}"
+            )
         return mode, dict(zip(names, vals, strict=True)), (vals[0].size,), np.stack(vals, axis=1)
     if mode is None:
-        raise ScenarioError("several parameters: say mode='grid' (every combination) or mode='points' (zipped)")
+        raise ScenarioError(
+            "several parameters: say mode='grid' (every combination) or mode='points' (zipped)"
+        )
     raise ScenarioError(f"mode must be 'sweep', 'grid' or 'points', got {mode!r}")
 
 
@@ -214,7 +232,7 @@ def _validate_members(scenario: Scenario, paths: Sequence[str], members: np.ndar
         pass
     for i in range(members.shape[0]):
         try:
-            check(members[i:i + 1])
+            check(members[i : i + 1])
         except ScenarioError as e:
             bad[i] = str(e)
     return bad
@@ -224,9 +242,19 @@ def _validate_members(scenario: Scenario, paths: Sequence[str], members: np.ndar
 
 
 _HISTORY_UNITS = {
-    "position": "m", "velocity": "m/s", "euler": "rad", "angular_velocity": "rad/s", "corners": "m",
-    "normal_forces": "N", "friction_forces": "N", "ground_reaction": "N", "rope_tension": "N",
-    "tip_position": "m", "hoist_work": "J", "damping_loss": "J", "friction_work": "J",
+    "position": "m",
+    "velocity": "m/s",
+    "euler": "rad",
+    "angular_velocity": "rad/s",
+    "corners": "m",
+    "normal_forces": "N",
+    "friction_forces": "N",
+    "ground_reaction": "N",
+    "rope_tension": "N",
+    "tip_position": "m",
+    "hoist_work": "J",
+    "damping_loss": "J",
+    "friction_work": "J",
 }
 
 
@@ -263,9 +291,13 @@ def _member(scenario, ts, row, spec: _Spec):
     obs = {k: jnp.where(ok, v, jnp.nan) for k, v in obs.items()}
     obs.update({f"d_{k}": jnp.where(ok, v, jnp.nan) for k, v in jac.items()})
     hist = {h: jnp.where(ok, getattr(traj, h), jnp.nan) for h in spec.histories}
-    return {"obs": obs, "hist": hist, "status": status,
-            "num_accepted_steps": traj.num_accepted_steps.astype(jnp.int32),
-            "num_rejected_steps": traj.num_rejected_steps.astype(jnp.int32)}
+    return {
+        "obs": obs,
+        "hist": hist,
+        "status": status,
+        "num_accepted_steps": traj.num_accepted_steps.astype(jnp.int32),
+        "num_rejected_steps": traj.num_rejected_steps.astype(jnp.int32),
+    }
 
 
 def _device_fn(scenario, ts, values, active, spec: _Spec):
@@ -275,8 +307,9 @@ def _device_fn(scenario, ts, values, active, spec: _Spec):
 
     def body(args):
         v, a = args
-        return jax.lax.cond(a, group, lambda _: jax.tree_util.tree_map(
-            lambda s: jnp.zeros(s.shape, s.dtype), shapes), v)
+        return jax.lax.cond(
+            a, group, lambda _: jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes), v
+        )
 
     return jax.lax.map(body, (values, active))
 
@@ -290,9 +323,13 @@ def _chunk_fn(spec: _Spec):
     from jax.sharding import PartitionSpec as P
 
     mesh = Mesh(np.array(spec.devices), ("members",))
-    f = jax.shard_map(lambda sc, ts, v, a: _device_fn(sc, ts, v, a, spec), mesh=mesh,
-                      in_specs=(P(), P(), P("members"), P("members")), out_specs=P("members"),
-                      check_vma=False)
+    f = jax.shard_map(
+        lambda sc, ts, v, a: _device_fn(sc, ts, v, a, spec),
+        mesh=mesh,
+        in_specs=(P(), P(), P("members"), P("members")),
+        out_specs=P("members"),
+        check_vma=False,
+    )
     return eqx.filter_jit(f)
 
 
@@ -321,8 +358,25 @@ class ScanResult:
     - `attrs`: JSON-able metadata (scenario, t1, solver options, lanes, devices, timings).
     """
 
-    def __init__(self, *, params, mode, coords, shape, data, components, status, reasons, num_accepted_steps,
-                 num_rejected_steps, ts, histories, units, descriptions, attrs):
+    def __init__(
+        self,
+        *,
+        params,
+        mode,
+        coords,
+        shape,
+        data,
+        components,
+        status,
+        reasons,
+        num_accepted_steps,
+        num_rejected_steps,
+        ts,
+        histories,
+        units,
+        descriptions,
+        attrs,
+    ):
         self.params = tuple(params)
         self.mode = mode
         self.coords = {k: np.asarray(v) for k, v in coords.items()}
@@ -347,8 +401,10 @@ class ScanResult:
             return self.histories[name]
         if name in self.params:
             return self.values(name)
-        raise KeyError(f"{name!r}: not an observable, history or parameter of this scan "
-                       f"(observables {list(self.data)}, histories {list(self.histories)})")
+        raise KeyError(
+            f"{name!r}: not an observable, history or parameter of this scan "
+            f"(observables {list(self.data)}, histories {list(self.histories)})"
+        )
 
     def values(self, path: str) -> np.ndarray:
         """The value of parameter `path` for every member, shape `shape`."""
@@ -376,16 +432,22 @@ class ScanResult:
         """One dict per failed member: flat index, parameter values, status name and reason."""
         out = []
         for flat in np.flatnonzero(self.status.ravel() != ScanStatus.OK):
-            out.append({"index": int(flat),
-                        "params": {p: float(self.values(p).ravel()[flat]) for p in self.params},
-                        "status": ScanStatus(int(self.status.ravel()[flat])).name.lower(),
-                        "reason": self.reason(int(flat))})
+            out.append(
+                {
+                    "index": int(flat),
+                    "params": {p: float(self.values(p).ravel()[flat]) for p in self.params},
+                    "status": ScanStatus(int(self.status.ravel()[flat])).name.lower(),
+                    "reason": self.reason(int(flat)),
+                }
+            )
         return out
 
     def __repr__(self) -> str:
         n_fail = int(np.sum(~self.ok))
-        return (f"ScanResult(mode={self.mode!r}, params={list(self.params)}, shape={self.shape}, "
-                f"observables={list(self.data)}, histories={list(self.histories)}, failed={n_fail})")
+        return (
+            f"ScanResult(mode={self.mode!r}, params={list(self.params)}, shape={self.shape}, "
+            f"observables={list(self.data)}, histories={list(self.histories)}, failed={n_fail})"
+        )
 
     # ---- files
     def _arrays(self) -> tuple[dict[str, np.ndarray], dict[str, tuple[str, str]]]:
@@ -417,12 +479,21 @@ class ScanResult:
         from ..io.results import save_arrays
 
         arrays, units = self._arrays()
-        meta = {"scan": {"mode": self.mode, "params": list(self.params), "shape": list(self.shape),
-                         "components": {k: (list(v) if v else None) for k, v in self.components.items()},
-                         "reasons": {str(k): v for k, v in self.reasons.items()},
-                         "units": self.units, "descriptions": self.descriptions},
-                "attrs": self.attrs}
-        return save_arrays(path, arrays, units, json.loads(json.dumps(meta, default=_json_default)), kind=FORMAT)
+        meta = {
+            "scan": {
+                "mode": self.mode,
+                "params": list(self.params),
+                "shape": list(self.shape),
+                "components": {k: (list(v) if v else None) for k, v in self.components.items()},
+                "reasons": {str(k): v for k, v in self.reasons.items()},
+                "units": self.units,
+                "descriptions": self.descriptions,
+            },
+            "attrs": self.attrs,
+        }
+        return save_arrays(
+            path, arrays, units, json.loads(json.dumps(meta, default=_json_default)), kind=FORMAT
+        )
 
     @classmethod
     def load(cls, path: str | Path) -> ScanResult:
@@ -431,22 +502,33 @@ class ScanResult:
 
         arrays, meta = load_arrays(path), load_metadata(path)
         s = meta["scan"]
-        return cls(params=s["params"], mode=s["mode"], coords={p: arrays[f"coord:{p}"] for p in s["params"]},
-                   shape=tuple(s["shape"]),
-                   data={k[4:]: v for k, v in arrays.items() if k.startswith("obs:")},
-                   components={k: (tuple(v) if v else None) for k, v in s["components"].items()},
-                   status=arrays["status"], reasons=s["reasons"], num_accepted_steps=arrays["num_accepted_steps"],
-                   num_rejected_steps=arrays["num_rejected_steps"], ts=arrays.get("ts"),
-                   histories={k[5:]: v for k, v in arrays.items() if k.startswith("hist:")},
-                   units=s["units"], descriptions=s["descriptions"], attrs=meta.get("attrs", {}))
+        return cls(
+            params=s["params"],
+            mode=s["mode"],
+            coords={p: arrays[f"coord:{p}"] for p in s["params"]},
+            shape=tuple(s["shape"]),
+            data={k[4:]: v for k, v in arrays.items() if k.startswith("obs:")},
+            components={k: (tuple(v) if v else None) for k, v in s["components"].items()},
+            status=arrays["status"],
+            reasons=s["reasons"],
+            num_accepted_steps=arrays["num_accepted_steps"],
+            num_rejected_steps=arrays["num_rejected_steps"],
+            ts=arrays.get("ts"),
+            histories={k[5:]: v for k, v in arrays.items() if k.startswith("hist:")},
+            units=s["units"],
+            descriptions=s["descriptions"],
+            attrs=meta.get("attrs", {}),
+        )
 
     def to_xarray(self):
         """An `xarray.Dataset` (only if xarray is installed; it is not a dependency of jaxhoist)."""
         try:
             import xarray as xr
         except ImportError:
-            raise ImportError("to_xarray() needs xarray, which jaxhoist does not depend on: "
-                              "`pip install xarray`, or use ScanResult.data / .coords directly") from None
+            raise ImportError(
+                "to_xarray() needs xarray, which jaxhoist does not depend on: "
+                "`pip install xarray`, or use ScanResult.data / .coords directly"
+            ) from None
         if self.mode == "grid":
             dims = list(self.params)
             coords = {p: (p, self.coords[p], {"units": self.units.get(p, "?")}) for p in self.params}
@@ -460,8 +542,11 @@ class ScanResult:
             extra = [f"{k}_component"] if v.ndim > len(dims) else []
             if extra and self.components.get(k):
                 coords[extra[0]] = (extra[0], list(self.components[k]))
-            data_vars[k] = (dims + extra, v, {"units": self.units.get(k, "?"),
-                                               "description": self.descriptions.get(k, "")})
+            data_vars[k] = (
+                dims + extra,
+                v,
+                {"units": self.units.get(k, "?"), "description": self.descriptions.get(k, "")},
+            )
         for k, v in self.histories.items():
             extra = ["t"] + [f"{k}_dim{i}" for i in range(v.ndim - len(dims) - 1)]
             data_vars[f"history_{k}"] = (dims + extra, v, {"units": self.units.get(k, "?")})
@@ -509,9 +594,13 @@ def print_progress(p: Progress, stream=None) -> None:
     stream = sys.stderr if stream is None else stream
     rate = f"{p.rate:.3g} members/s" if p.rate else "-"
     src = " (loaded)" if p.loaded else ""
-    print(f"scan: chunk {p.chunk + 1}/{p.n_chunks}{src}  {p.done}/{p.total} members  "
-          f"{100.0 * p.done / p.total:5.1f}%  elapsed {_fmt_time(p.elapsed)}  left ~{_fmt_time(p.eta)}  "
-          f"{rate}  failed {p.failed}", file=stream, flush=True)
+    print(
+        f"scan: chunk {p.chunk + 1}/{p.n_chunks}{src}  {p.done}/{p.total} members  "
+        f"{100.0 * p.done / p.total:5.1f}%  elapsed {_fmt_time(p.elapsed)}  left ~{_fmt_time(p.eta)}  "
+        f"{rate}  failed {p.failed}",
+        file=stream,
+        flush=True,
+    )
 
 
 # ------------------------------------------------------------------------------------------ the scan
@@ -526,11 +615,27 @@ def _fingerprint(scenario, spec: _Spec, members, ts, sort) -> str:
     h.update(np.ascontiguousarray(members).tobytes())
     h.update(np.ascontiguousarray(np.asarray(ts)).tobytes())
     o = spec.options
-    h.update(repr((spec.paths, spec.histories, spec.lanes, sort, type(o.solver).__name__, o.rtol, o.atol, o.dt0,
-                   o.max_steps, spec.derivatives)).encode())
+    h.update(
+        repr(
+            (
+                spec.paths,
+                spec.histories,
+                spec.lanes,
+                sort,
+                type(o.solver).__name__,
+                o.rtol,
+                o.atol,
+                o.dt0,
+                o.max_steps,
+                spec.derivatives,
+            )
+        ).encode()
+    )
     for ob in spec.observables:
         code = getattr(ob.fn, "__code__", None)
-        h.update(f"{ob.name}|{getattr(ob.fn, '__module__', '')}.{getattr(ob.fn, '__qualname__', '')}".encode())
+        h.update(
+            f"{ob.name}|{getattr(ob.fn, '__module__', '')}.{getattr(ob.fn, '__qualname__', '')}".encode()
+        )
         if code is not None:
             h.update(code.co_code)
     return h.hexdigest()[:32]
@@ -638,9 +743,17 @@ def scan(
     histories = tuple(histories)
     for h in histories:
         if h not in _HISTORY_UNITS:
-            raise ScenarioError(f"history {h!r} is not a Trajectory output; choose from {sorted(_HISTORY_UNITS)}")
-    options = SolverOptions(solver=diffrax.Tsit5() if solver is None else solver, rtol=rtol, atol=atol, dt0=dt0,
-                            max_steps=max_steps, adjoint="forward" if derivatives else "reverse")
+            raise ScenarioError(
+                f"history {h!r} is not a Trajectory output; choose from {sorted(_HISTORY_UNITS)}"
+            )
+    options = SolverOptions(
+        solver=diffrax.Tsit5() if solver is None else solver,
+        rtol=rtol,
+        atol=atol,
+        dt0=dt0,
+        max_steps=max_steps,
+        adjoint="forward" if derivatives else "reverse",
+    )
     if t1 is None:
         t1 = scenario.t1 if ts is None else float(np.asarray(ts)[-1])
     check_times(t1, ts)
@@ -682,8 +795,15 @@ def scan(
             raise ScenarioError(f"chunk_size must be >= 1, got {chunk_size}")
         per_dev = max(1, math.ceil(int(chunk_size) / (lanes * n_dev)))
     chunk = per_dev * lanes * n_dev
-    spec = _Spec(paths=paths, observables=obs, histories=histories, options=options, lanes=lanes, devices=devs,
-                 derivatives=bool(derivatives))
+    spec = _Spec(
+        paths=paths,
+        observables=obs,
+        histories=histories,
+        options=options,
+        lanes=lanes,
+        devices=devs,
+        derivatives=bool(derivatives),
+    )
     fp = _fingerprint(scenario, spec, members, ts, sort)
 
     # Resume from disk.
@@ -696,9 +816,11 @@ def scan(
         if mpath.exists() and resume:
             old = json.loads(mpath.read_text())
             if old.get("fingerprint") != fp:
-                raise ScenarioError(f"{out} holds chunks of a different scan (other scenario, values, times, "
-                                    f"observables or solver options): use another out_dir, or resume=False to "
-                                    f"overwrite it")
+                raise ScenarioError(
+                    f"{out} holds chunks of a different scan (other scenario, values, times, "
+                    f"observables or solver options): use another out_dir, or resume=False to "
+                    f"overwrite it"
+                )
             chunk = int(old["chunk_size"])  # the files' layout wins
             for k_str in old.get("chunks", {}):
                 f = out / f"chunk_{int(k_str):05d}.npz"
@@ -707,9 +829,17 @@ def scan(
                         done_chunks[int(k_str)] = {k: z[k] for k in z.files}
                 except (OSError, ValueError, KeyError):
                     pass  # missing or truncated: recompute
-        manifest = {"format": FORMAT + "-manifest", "fingerprint": fp, "chunk_size": chunk, "n_members": n,
-                    "params": list(paths), "mode": mode, "t1": float(ts[-1]), "lanes": lanes,
-                    "chunks": {str(k): {"file": f"chunk_{k:05d}.npz"} for k in sorted(done_chunks)}}
+        manifest = {
+            "format": FORMAT + "-manifest",
+            "fingerprint": fp,
+            "chunk_size": chunk,
+            "n_members": n,
+            "params": list(paths),
+            "mode": mode,
+            "t1": float(ts[-1]),
+            "lanes": lanes,
+            "chunks": {str(k): {"file": f"chunk_{k:05d}.npz"} for k in sorted(done_chunks)},
+        }
         _write_manifest(out, manifest)
 
     n_chunks = math.ceil(n / chunk)
@@ -748,20 +878,35 @@ def scan(
             compute_time += time.perf_counter() - t_start
             if out is not None:
                 _write_atomic_npz(out / f"chunk_{k:05d}.npz", res)
-                manifest["chunks"][str(k)] = {"file": f"chunk_{k:05d}.npz", "members": [lo, hi],
-                                              "wall_s": round(time.perf_counter() - t_start, 4)}
+                manifest["chunks"][str(k)] = {
+                    "file": f"chunk_{k:05d}.npz",
+                    "members": [lo, hi],
+                    "wall_s": round(time.perf_counter() - t_start, 4),
+                }
                 _write_manifest(out, manifest)
         results[k] = res
         failed += int(np.sum(res["status"] != 0))
         if report is not None:
             done = min(n, (k + 1) * chunk)
             rate = computed / compute_time if compute_time > 0 else None
-            remaining = sum(min(n, (j + 1) * chunk) - j * chunk for j in range(k + 1, n_chunks)
-                            if j not in done_chunks)
+            remaining = sum(
+                min(n, (j + 1) * chunk) - j * chunk for j in range(k + 1, n_chunks) if j not in done_chunks
+            )
             eta = remaining / rate if rate else (0.0 if remaining == 0 else None)
-            report(Progress(chunk=k, n_chunks=n_chunks, done=done, total=n,
-                            elapsed=time.perf_counter() - wall0, eta=eta, rate=rate, loaded=loaded,
-                            compile_time=compile_time, failed=failed))
+            report(
+                Progress(
+                    chunk=k,
+                    n_chunks=n_chunks,
+                    done=done,
+                    total=n,
+                    elapsed=time.perf_counter() - wall0,
+                    eta=eta,
+                    rate=rate,
+                    loaded=loaded,
+                    compile_time=compile_time,
+                    failed=failed,
+                )
+            )
 
     # Assemble in the original member order.
     keys = list(results[0])
@@ -801,24 +946,51 @@ def scan(
     if derivatives:
         for o in obs:
             units[f"d_{o.name}"] = " | ".join(f"{o.unit} per {units[p]}" for p in paths)
-            descriptions[f"d_{o.name}"] = (f"forward-mode sensitivity of {o.name} to each swept parameter "
-                                           f"(last axis: {', '.join(paths)})")
+            descriptions[f"d_{o.name}"] = (
+                f"forward-mode sensitivity of {o.name} to each swept parameter "
+                f"(last axis: {', '.join(paths)})"
+            )
             components[f"d_{o.name}"] = paths
     attrs = {
-        "scenario": scenario.name, "t1": float(ts[-1]), "n_save": int(len(ts)),
-        "solver": {"solver": type(options.solver).__name__, "rtol": rtol, "atol": atol, "dt0": dt0,
-                   "max_steps": max_steps},
-        "lanes": lanes, "chunk_size": chunk, "devices": [str(d) for d in devs], "sorted": bool(sort),
-        "timings_s": {"compile": round(compile_time, 4), "compute": round(compute_time, 4),
-                      "total": round(time.perf_counter() - wall0, 4), "members_computed": computed},
+        "scenario": scenario.name,
+        "t1": float(ts[-1]),
+        "n_save": int(len(ts)),
+        "solver": {
+            "solver": type(options.solver).__name__,
+            "rtol": rtol,
+            "atol": atol,
+            "dt0": dt0,
+            "max_steps": max_steps,
+        },
+        "lanes": lanes,
+        "chunk_size": chunk,
+        "devices": [str(d) for d in devs],
+        "sorted": bool(sort),
+        "timings_s": {
+            "compile": round(compile_time, 4),
+            "compute": round(compute_time, 4),
+            "total": round(time.perf_counter() - wall0, 4),
+            "members_computed": computed,
+        },
         "fingerprint": fp,
     }
-    result = ScanResult(params=paths, mode=mode, coords=coords, shape=shape, data=data,
-                        components=components, status=status.reshape(shape),
-                        reasons=reasons, num_accepted_steps=flat["num_accepted_steps"].reshape(shape),
-                        num_rejected_steps=flat["num_rejected_steps"].reshape(shape),
-                        ts=np.asarray(ts), histories=hist, units=units,
-                        descriptions=descriptions, attrs=attrs)
+    result = ScanResult(
+        params=paths,
+        mode=mode,
+        coords=coords,
+        shape=shape,
+        data=data,
+        components=components,
+        status=status.reshape(shape),
+        reasons=reasons,
+        num_accepted_steps=flat["num_accepted_steps"].reshape(shape),
+        num_rejected_steps=flat["num_rejected_steps"].reshape(shape),
+        ts=np.asarray(ts),
+        histories=hist,
+        units=units,
+        descriptions=descriptions,
+        attrs=attrs,
+    )
     if out is not None:
         result.save(out / "scan")
     return result
@@ -833,8 +1005,16 @@ def _cache_key(spec, scenario, ts, vals):
 
 
 def _hist_shape(name: str) -> tuple[int, ...]:
-    return {"corners": (4, 3), "friction_forces": (4, 3), "normal_forces": (4,), "ground_reaction": (),
-            "rope_tension": (), "hoist_work": (), "damping_loss": (), "friction_work": ()}.get(name, (3,))
+    return {
+        "corners": (4, 3),
+        "friction_forces": (4, 3),
+        "normal_forces": (4,),
+        "ground_reaction": (),
+        "rope_tension": (),
+        "hoist_work": (),
+        "damping_loss": (),
+        "friction_work": (),
+    }.get(name, (3,))
 
 
 # ---------------------------------------------------------------------------------------------- CLI
@@ -843,31 +1023,63 @@ def _hist_shape(name: str) -> tuple[int, ...]:
 def configure_parser(subparsers) -> None:
     """Add `jaxhoist scan SCENARIO --param PATH --values a:b:n [...] --t1 T --out DIR`."""
     p = subparsers.add_parser(
-        "scan", help="sweep scenario parameters; observables per member as npz/json",
+        "scan",
+        help="sweep scenario parameters; observables per member as npz/json",
         description="Solve a scenario for many values of one or more float leaves (vmapped, chunked, "
-                    "sharded over all devices, resumable) and save the observables of every member.")
+        "sharded over all devices, resumable) and save the observables of every member.",
+    )
     p.add_argument("scenario", metavar="SCENARIO", help="preset name (e.g. paper-4.2) or TOML file")
-    p.add_argument("--param", action="append", required=True, metavar="PATH",
-                   help="dotted parameter path, e.g. foundation.friction_coefficient or load.mass_centre[0] "
-                        "(repeat for several parameters, each followed by its --values)")
-    p.add_argument("--values", action="append", required=True, metavar="SPEC",
-                   help="values of the matching --param: start:stop:num (inclusive) or v1,v2,...")
-    p.add_argument("--mode", choices=("sweep", "grid", "points"), default=None,
-                   help="several parameters: grid (every combination) or points (zipped)")
-    p.add_argument("--observable", action="append", default=None, metavar="NAME",
-                   help="built-in observable to record (repeatable); default final_position, final_euler, "
-                        "max_tilt, liftoff_time")
-    p.add_argument("--history", action="append", default=[], metavar="FIELD",
-                   help="Trajectory field to keep at every saved time (e.g. position, euler)")
+    p.add_argument(
+        "--param",
+        action="append",
+        required=True,
+        metavar="PATH",
+        help="dotted parameter path, e.g. foundation.friction_coefficient or load.mass_centre[0] "
+        "(repeat for several parameters, each followed by its --values)",
+    )
+    p.add_argument(
+        "--values",
+        action="append",
+        required=True,
+        metavar="SPEC",
+        help="values of the matching --param: start:stop:num (inclusive) or v1,v2,...",
+    )
+    p.add_argument(
+        "--mode",
+        choices=("sweep", "grid", "points"),
+        default=None,
+        help="several parameters: grid (every combination) or points (zipped)",
+    )
+    p.add_argument(
+        "--observable",
+        action="append",
+        default=None,
+        metavar="NAME",
+        help="built-in observable to record (repeatable); default final_position, final_euler, "
+        "max_tilt, liftoff_time",
+    )
+    p.add_argument(
+        "--history",
+        action="append",
+        default=[],
+        metavar="FIELD",
+        help="Trajectory field to keep at every saved time (e.g. position, euler)",
+    )
     p.add_argument("--t1", type=float, default=None, help="end time [s] (default: the scenario's t1)")
-    p.add_argument("--n-save", type=int, default=201, help="saved times (event times are interpolated on them)")
+    p.add_argument(
+        "--n-save", type=int, default=201, help="saved times (event times are interpolated on them)"
+    )
     p.add_argument("--rtol", type=float, default=1e-6)
     p.add_argument("--atol", type=float, default=1e-8)
     p.add_argument("--max-steps", type=int, default=200_000)
     p.add_argument("--lanes", type=int, default=16, help="members per vmapped lock-step solve (default 16)")
-    p.add_argument("--chunk-size", type=int, default=None, help="members per compiled call (default: automatic)")
+    p.add_argument(
+        "--chunk-size", type=int, default=None, help="members per compiled call (default: automatic)"
+    )
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
-    p.add_argument("--out", default=None, help="output folder (chunk files, manifest, scan.npz/json); resumable")
+    p.add_argument(
+        "--out", default=None, help="output folder (chunk files, manifest, scan.npz/json); resumable"
+    )
     p.add_argument("--no-resume", action="store_true", help="recompute even if --out holds finished chunks")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run_cli)
@@ -878,8 +1090,9 @@ def run_cli(args) -> int:
     from ..io.scenario import load_scenario
 
     if len(args.param) != len(args.values):
-        raise ScenarioError(f"give one --values per --param (got {len(args.param)} --param and "
-                            f"{len(args.values)} --values)")
+        raise ScenarioError(
+            f"give one --values per --param (got {len(args.param)} --param and {len(args.values)} --values)"
+        )
     scenario = load_scenario(args.scenario)
     overrides = {}
     for item in args.set:
@@ -894,15 +1107,34 @@ def run_cli(args) -> int:
         scenario.check()
     params = {p: parse_values(v) for p, v in zip(args.param, args.values, strict=True)}
     out = Path(args.out) if args.out else Path("out") / f"scan-{scenario.name}"
-    res = scan(scenario, params, args.t1, mode=args.mode, observables=args.observable, histories=args.history,
-               n_save=args.n_save, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps, lanes=args.lanes,
-               chunk_size=args.chunk_size, out_dir=out, resume=not args.no_resume, progress=not args.quiet)
+    res = scan(
+        scenario,
+        params,
+        args.t1,
+        mode=args.mode,
+        observables=args.observable,
+        histories=args.history,
+        n_save=args.n_save,
+        rtol=args.rtol,
+        atol=args.atol,
+        max_steps=args.max_steps,
+        lanes=args.lanes,
+        chunk_size=args.chunk_size,
+        out_dir=out,
+        resume=not args.no_resume,
+        progress=not args.quiet,
+    )
     n_fail = int(np.sum(~res.ok))
     t = res.attrs["timings_s"]
     print(f"scan          {scenario.name}: {res.size} members over {', '.join(res.params)} ({res.mode})")
     print(f"failed        {n_fail}" + (f" (first: {res.failures()[0]})" if n_fail else ""))
-    print(f"steps         median {int(np.median(res.num_accepted_steps))}, max {int(res.num_accepted_steps.max())}")
-    print(f"wall time     compile {t['compile']:.3g} s, solve {t['compute']:.3g} s "
-          f"({1e3 * t['compute'] / max(1, t['members_computed']):.3g} ms per member), total {t['total']:.3g} s")
+    print(
+        f"steps         median {int(np.median(res.num_accepted_steps))}, "
+        f"max {int(res.num_accepted_steps.max())}"
+    )
+    print(
+        f"wall time     compile {t['compile']:.3g} s, solve {t['compute']:.3g} s "
+        f"({1e3 * t['compute'] / max(1, t['members_computed']):.3g} ms per member), total {t['total']:.3g} s"
+    )
     print(f"wrote         {out / 'scan.npz'}, {out / 'scan.json'}")
     return 0 if n_fail == 0 else 1
