@@ -158,16 +158,13 @@ def test_grid_mode_with_time_histories(box):
 
 def test_forward_sensitivities_match_differences(box):
     """d(final X)/dμ by forward mode, integrated over [0.29, 0.31] by Simpson's rule, equals the change of
-    the scan's own final X.
-
-    Over the first 3 ms corners D and H leave the ground (a continuous event: N_i falls to zero) and no
-    corner lands again. Across a touch-down the ground damper force jumps from 0 to h dp/dt, and
-    differentiating through the solver steps misses the saltation term of that jump: over 0.3 s, with 4
-    impacts, the same comparison is off by 1.4e-3 (reported with the benchmark, not asserted here)."""
+    the scan's own final X, across corners leaving and striking the ground again (the contact and rope
+    dampers build up over `damping_onset`, so the forces stay continuous at touch-down and the derivative
+    of the solution has no jump that differentiating through the solver steps would miss)."""
     res = scan(
         box,
         {MU: [0.29, 0.3, 0.31]},
-        0.003,
+        T1,
         derivatives=True,
         rtol=1e-9,
         atol=1e-11,
@@ -175,11 +172,12 @@ def test_forward_sensitivities_match_differences(box):
     )
     x, dx = res["final_x"], res["d_final_x"][:, 0]
     assert res["d_final_x"].shape == (3, 1) and res.units["d_final_x"] == "m per -"
-    assert np.all(res["impacts"] == 0)
+    assert np.all(res["impacts"] >= 4)
     assert np.all(dx < 0.0)  # more friction, less far
     simpson = 0.01 / 3 * (dx[0] + 4 * dx[1] + dx[2])
-    # Simpson's error ~ h^5 x^(5) is negligible, and so is the solver noise at rtol 1e-9.
-    assert simpson == pytest.approx(x[2] - x[0], rel=1e-5)
+    # Simpson's error ~ h^5 x^(5) and the solver noise (~1e-9 x 0.6 m over a change of 1.6 mm, 4e-7) are
+    # small; measured agreement 5e-6.
+    assert simpson == pytest.approx(x[2] - x[0], rel=2e-5)
 
 
 def test_member_layout_and_value_specs():

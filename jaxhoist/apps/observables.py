@@ -13,14 +13,15 @@ the labels of its components:
 Events (lift-off, a corner leaving or returning to the ground) are read from the contact function of
 each corner,
 
-    f_i = k p_i + h min(dp_i/dt, 0),       p_i = -Z_i (how far corner i is below the ground),
+    f_i = k p_i + h w(p_i) min(dp_i/dt, 0),       p_i = -Z_i (how far corner i is below the ground),
 
-which is continuous in time and positive exactly when the model's normal force N_i = max(0, k p_i + h ṗ_i)
-(p_i > 0) is positive (eqs. 3.1-3.2). Event times are its zero crossings, interpolated linearly between
-the saved times; they are continuous, piecewise smooth functions of the parameters (so Newton steps on an
-event-time difference converge), and accurate to O(Δt²) of the saved grid. An event that does not happen
-before t1 has time `+inf` (never NaN). Counts (impacts, contact configurations) are read on the saved grid
-and miss events shorter than its spacing.
+which is continuous in time and positive exactly when the model's normal force
+N_i = max(0, k p_i + h w(p_i) ṗ_i) (p_i > 0; w is the damper's onset ramp) is positive (eqs. 3.1-3.2).
+Event times are its zero crossings, interpolated linearly between the saved times; they are continuous,
+piecewise smooth functions of the parameters (so Newton steps on an event-time difference converge), and
+accurate to O(Δt²) of the saved grid. An event that does not happen before t1 has time `+inf` (never
+NaN). Counts (impacts, contact configurations) are read on the saved grid and miss events shorter than its
+spacing.
 
 User-defined observables: any callable `fn(traj)` or `fn(traj, scenario)` returning an array of fixed
 shape; wrap it in `Observable(name, fn, unit)` to give it a unit.
@@ -35,7 +36,7 @@ from collections.abc import Callable, Mapping, Sequence
 import jax
 import jax.numpy as jnp
 
-from ..physics import kinematics
+from ..physics import forces, kinematics
 
 CORNERS = ("D", "E", "F", "H")
 
@@ -83,7 +84,8 @@ def _n_positional(fn) -> int:
 def contact_function(traj, scenario):
     """f_i(t) [N] per corner D, E, F, H at the saved times, shape (n_t, 4): > 0 exactly when N_i > 0.
 
-    f_i = k p_i + h min(ṗ_i, 0), with p_i = -Z_i; continuous in time (see the module docstring).
+    f_i = k p_i + h w(p_i) min(ṗ_i, 0), with p_i = -Z_i and w the damper's onset ramp (the foundation's
+    `damping_onset`; w = 1 for the paper's law); continuous in time (see the module docstring).
     """
     st = traj.states
     load = scenario.load
@@ -96,7 +98,9 @@ def contact_function(traj, scenario):
     z_dot = jax.vmap(one)(st.velocity, st.quaternion, st.angular_velocity)
     p, p_dot = -traj.corners[..., 2], -z_dot
     fnd = scenario.foundation
-    return fnd.stiffness * p + fnd.damping * jnp.minimum(p_dot, 0.0)
+    onset = getattr(fnd, "damping_onset", None)
+    w = (p > 0.0).astype(p.dtype) if onset is None else forces.onset_ramp(p, onset)
+    return fnd.stiffness * p + fnd.damping * w * jnp.minimum(p_dot, 0.0)
 
 
 def first_down_crossing(ts, f):
