@@ -4,8 +4,16 @@ after Grabski & Strzałko, "Dynamic analysis of the load hoisting process" (2003
 from ._errors import Float64Error as Float64Error
 from ._errors import ScenarioError as ScenarioError
 from ._errors import SolveStatus as SolveStatus
+from .apps.bifurcation import Bifurcation as Bifurcation
+from .apps.bifurcation import find_jumps as find_jumps
+from .apps.bifurcation import locate_bifurcation as locate_bifurcation
+from .apps.bifurcation import trace_boundary as trace_boundary
 from .io.scenario import load_scenario as load_scenario
 from .io.scenario import scenario_from_dict as scenario_from_dict
+from .numerics.observables import Observable as Observable
+from .numerics.scan import ScanResult as ScanResult
+from .numerics.scan import ScanStatus as ScanStatus
+from .numerics.scan import scan as scan
 from .numerics.solve import SolverOptions as SolverOptions
 from .numerics.solve import Trajectory as Trajectory
 from .numerics.solve import simulate as simulate

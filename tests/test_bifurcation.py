@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.apps import observables as O  # noqa: E402
+from jaxhoist.numerics import observables as O  # noqa: E402
 from jaxhoist.apps.bifurcation import (  # noqa: E402
     BifurcationError,
     find_jumps,

@@ -15,7 +15,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.apps import observables as O  # noqa: E402
+from jaxhoist.numerics import observables as O  # noqa: E402
 from jaxhoist.numerics.scan import ScanResult, ScanStatus, _members, parse_path, parse_values, scan  # noqa: E402
 
 MU = "foundation.friction_coefficient"

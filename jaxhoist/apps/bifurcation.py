@@ -20,7 +20,8 @@ ends of the bracket). Two kinds of observables:
 Either way the result reports how many solves it took against a uniform grid of the same resolution.
 
     import jaxhoist as jh
-    from jaxhoist.apps import bifurcation, observables as obs
+    from jaxhoist.apps import bifurcation
+    from jaxhoist.numerics import observables as obs
     b = jh.locate_bifurcation(sc, "load.mass_centre[0]", obs.detachment_time_difference("E", "D"),
                               (0.4, 0.6), t1=0.2, n_save=101)
     print(b.summary())
@@ -48,7 +49,7 @@ from .._errors import ScenarioError, SolveStatus, require_x64
 from ..numerics.scan import ScanResult, check_path, param_unit, scan, set_param
 from ..numerics.solve import SolverOptions, check_times, solve
 from ..physics.params import Scenario
-from . import observables as obs_mod
+from ..numerics import observables as obs_mod
 
 
 class BifurcationError(RuntimeError):

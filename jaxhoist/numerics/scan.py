@@ -725,7 +725,7 @@ def scan(
     **Raises** `ScenarioError` for invalid paths, values or options (before compiling); a member with an
     invalid value is marked `INVALID_PARAMETER` instead, unless every member is invalid.
     """
-    from ..apps import observables as obs_mod  # built-in observables live with the applications
+    from . import observables as obs_mod
 
     require_x64()
     wall0 = time.perf_counter()

@@ -215,7 +215,8 @@ class BristleFriction(AbstractFrictionLaw):
     def state_rate(self, velocity, state, contact):
         delta, rb = self.deflection, self.breakaway_ratio
         z2 = jnp.sum(state**2, axis=-1)
-        r = jnp.sqrt(z2) / delta
+        # |z| with a finite derivative at z = 0 (every bristle starts there): the two-`where` guard.
+        r = jnp.where(z2 > 0.0, jnp.sqrt(jnp.where(z2 > 0.0, z2, 1.0)), 0.0) / delta
         alpha = (jnp.maximum(r - rb, 0.0) / (1.0 - rb)) ** 2
         # alpha is zero wherever |z| < r_b δ, so the division is guarded by a positive floor.
         beta = alpha / jnp.maximum(z2, (rb * delta) ** 2 + 1e-300)
