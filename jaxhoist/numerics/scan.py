@@ -701,7 +701,7 @@ def scan(
       equally spaced times; observables such as event times are interpolated on this grid).
     - `mode`: "sweep" (one parameter, the default), "grid" (every combination: one data axis per
       parameter) or "points" (equally long lists zipped together: one data axis).
-    - `observables`: names of built-in observables (`jaxhoist.apps.observables`), callables
+    - `observables`: names of built-in observables (`jaxhoist.numerics.observables`), callables
       `fn(traj[, scenario])`, `Observable`s, or a dict name -> any of these.
     - `histories`: `Trajectory` fields to keep at every saved time, e.g. `("position", "euler")`.
     - `solver`, `rtol`, `atol`, `dt0`, `max_steps`: as in `simulate` (one budget for every member).
