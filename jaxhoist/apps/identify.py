@@ -53,7 +53,9 @@ from ..io.measurement import (
     signal_groups,
 )
 from ..io.scenario import load_scenario
-from ..numerics.solve import SolverOptions, simulate, solve
+from ..numerics.solve import SolverOptions, outputs, simulate, solve
+from ..physics.elastic import vector_field
+from ..physics.equilibrium import initial_state
 from ..physics.params import Scenario, get_leaf, leaf_getter
 
 ALIASES: dict[str, str] = {
@@ -282,6 +284,7 @@ class _Config:
     drop_first: bool        # the solver's ts has t = 0 prepended to the measured times
     options: SolverOptions
     max_iterations: int
+    sensitivity: str = "equations"  # "equations" | "solver", see `_model_and_jacobian`
 
 
 def _scenario_at(cfg: _Config, scenario: Scenario, tr, z):
@@ -296,14 +299,92 @@ def _scenario_at(cfg: _Config, scenario: Scenario, tr, z):
     return scenario
 
 
+def _signals(cfg: _Config, traj):
+    m = jnp.stack([getattr(traj, f)[(slice(None), *idx)] for f, idx in cfg.signals])
+    return m[:, 1:] if cfg.drop_first else m
+
+
 def _model(cfg: _Config, z, args):
     """Whitened residuals (model - data) / σ, flattened signal-major, and the solve's status and steps."""
     scenario, tr, data, sigma, ts = args
     traj = solve(_scenario_at(cfg, scenario, tr, z), ts, cfg.options)
-    m = jnp.stack([getattr(traj, f)[(slice(None), *idx)] for f, idx in cfg.signals])
-    if cfg.drop_first:
-        m = m[:, 1:]
-    return ((m - data) / sigma).ravel(), traj.status, traj.num_accepted_steps
+    return ((_signals(cfg, traj) - data) / sigma).ravel(), traj.status, traj.num_accepted_steps
+
+
+def _sensitivity_solve(cfg: _Config, z, args):
+    """Model signals and their derivatives d(signal)/dz from the forward sensitivity equations.
+
+    The state y and its p sensitivities S_i = dy/dz_i are integrated together as one ODE,
+    dy/dt = f(t, y, θ(z)), dS_i/dt = ∂f/∂y S_i + ∂f/∂z_i, with the step-size controller watching the error
+    of both (the norm runs over the whole augmented state). Differentiating the solver's own steps instead
+    (`jax.jacfwd` through `diffrax.ForwardMode`) leaves the tangents without error control; on paper-4.2 the
+    explicit solver then runs at its stability limit for the stiff friction/contact modes and the tangents
+    can blow up by many orders of magnitude while the state stays accurate.
+
+    **Returns** `(m, dm, status, steps)`: signals (n_sig, n_t), derivatives (p, n_sig, n_t), a `SolveStatus`
+    code and the accepted steps.
+    """
+    import diffrax
+
+    scenario0, tr, _, _, ts = args
+    p = z.shape[0]
+    eye = jnp.eye(p, dtype=z.dtype)
+    opt = cfg.options
+
+    def scen(zz):
+        return _scenario_at(cfg, scenario0, tr, zz)
+
+    (y0, c), init_lin = jax.linearize(lambda zz: initial_state(scen(zz)), z)
+    Y0, dC = jax.vmap(init_lin)(eye)  # tangents of the initial state and of the derived constants
+
+    def rhs(t, state, a):
+        zz, cc, dcc = a
+        y, Y = state
+        ydot, lin = jax.linearize(lambda y_, z_, c_: vector_field(t, y_, (scen(z_), c_)), y, zz, cc)
+        return ydot, jax.vmap(lin)(Y, eye, dcc)
+
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(rhs), opt.solver, t0=ts[0] * 0.0, t1=ts[-1], dt0=opt.dt0, y0=(y0, Y0), args=(z, c, dC),
+        saveat=diffrax.SaveAt(ts=ts), stepsize_controller=diffrax.PIDController(rtol=opt.rtol, atol=opt.atol),
+        max_steps=opt.max_steps, adjoint=diffrax.ForwardMode(), throw=False)
+    ys, Ys = sol.ys
+    y1 = jax.tree_util.tree_map(lambda x: x[-1], ys)
+    finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves((y1, Ys))]))
+    status = jnp.where(
+        sol.result == diffrax.RESULTS.successful,
+        jnp.where(finite, SolveStatus.OK, SolveStatus.NONFINITE),
+        jnp.where(sol.result == diffrax.RESULTS.max_steps_reached, SolveStatus.MAX_STEPS,
+                  SolveStatus.SOLVER_FAILED)).astype(jnp.int32)
+    steps = sol.stats["num_accepted_steps"]
+    stats = {"num_accepted_steps": steps, "num_rejected_steps": sol.stats["num_rejected_steps"]}
+
+    def signals_of(ys_, z_, c_):
+        return _signals(cfg, outputs(ts, ys_, scen(z_), c_, status, stats))
+
+    m, out_lin = jax.linearize(signals_of, ys, z, c)
+    Ys_p = jax.tree_util.tree_map(lambda a: jnp.moveaxis(a, 1, 0), Ys)  # (p, n_t, ...)
+    dm = jax.vmap(out_lin)(Ys_p, eye, dC)
+    return m, dm, status, steps
+
+
+def _model_and_jacobian(cfg: _Config, z, args):
+    """Whitened residuals r (n,), their Jacobian dr/dz (n, p), status and solver steps.
+
+    `cfg.sensitivity = "equations"` (default): the forward sensitivity equations with error control
+    (`_sensitivity_solve`). `"solver"`: `jax.jacfwd` through the solve with `diffrax.ForwardMode`
+    (`simulate(..., adjoint="forward")`), cheaper but without error control on the tangents."""
+    _, _, data, sigma, _ = args
+    if cfg.sensitivity == "solver":
+        def f(zz):
+            r, status, steps = _model(cfg, zz, args)
+            return r, (r, status, steps)
+
+        J, (r, status, steps) = jax.jacfwd(f, has_aux=True)(z)
+        return r, J, status, steps
+    m, dm, status, steps = _sensitivity_solve(cfg, z, args)
+    r = ((m - data) / sigma).ravel()
+    J = (dm / sigma[None]).reshape(dm.shape[0], -1).T
+    return r, J, status, steps
 
 
 def _residual_fn(cfg: _Config):
@@ -328,11 +409,10 @@ def _residual_fn(cfg: _Config):
         # The data and scenario in `args` are constants of the fit: their tangents are ignored.
         (z, args), (dz, _) = primals, tangents
 
-        def f(z):
-            r, status, steps = _model(cfg, z, args)
-            return r, (r, status, steps)
-
-        J, (r, status, steps) = jax.jacfwd(f, has_aux=True)(z)
+        r, J, status, steps = _model_and_jacobian(cfg, z, args)
+        if _VERBOSE:
+            jax.debug.print("  z = {z}: status {s}, {n} solver steps, cost {c}", z=z, s=status, n=steps,
+                            c=0.5 * jnp.sum(r**2))
         r, J = guard(r, status, J)
         info = jnp.stack([status, steps]).astype(jnp.float64)
         return (r, info), (J @ dz, jnp.zeros_like(info))
@@ -344,17 +424,41 @@ def _residual_fn(cfg: _Config):
 
 
 @eqx.filter_jit
-def _fit_core(cfg: _Config, z0, args, lm_tol):
-    # The LM tolerances are traced (not static), so changing them does not recompile.
-    fn = _residual_fn(cfg)
+def _fit_core(cfg: _Config, z0, args, lm_tol, scale):
+    """Levenberg-Marquardt on the residuals multiplied by `scale`. The LM tolerances and the scale are traced
+    (not static), so changing them does not recompile; with infinite tolerances the run stops after the
+    first evaluation, which `identify` uses to probe the Jacobian at the start (same compiled program).
+
+    optimistix's LM starts with the damping λ = 1 (and changes it by the trust-region ratio test); `identify`
+    chooses `scale` so that λ = 1 equals the largest diagonal entry of JᵀJ at the start (Marquardt's τ = 1)
+    instead of a nearly undamped Gauss-Newton step, which on paper-4.2 jumps k and h by factors of 10³ into
+    stiff, expensive regions."""
+    inner = _residual_fn(cfg)
+
+    def fn(z, a):
+        r, info = inner(z, a)
+        return r * scale, info
+
     solver = optx.LevenbergMarquardt(rtol=lm_tol[0], atol=lm_tol[1], verbose=_VERBOSE)
     sol = optx.least_squares(fn, solver, z0, args, has_aux=True, max_steps=cfg.max_iterations, throw=False,
                              options={"jac": "fwd"})
     f_info = sol.state.f_info
-    J = f_info.jac.as_matrix()  # J @ e_i through the custom JVP: no new solve
+    J = f_info.jac.as_matrix() / scale  # J @ e_i through the custom JVP: no new solve
     codes = jnp.stack([sol.result == optx.RESULTS.successful,
                        sol.result == optx.RESULTS.nonlinear_max_steps_reached])
-    return sol.value, f_info.residual, J, sol.aux, sol.stats["num_steps"], sol.state.num_accepted_steps, codes
+    return sol.value, f_info.residual / scale, J, sol.aux, sol.stats["num_steps"], sol.state.num_accepted_steps, codes
+
+
+_COMPILED: dict = {}
+
+
+def _compiled_core(cfg: _Config, z0, args, lm_tol, scale):
+    """`_fit_core` compiled ahead of time (so compile and fit are timed apart), cached per structure."""
+    leaves, treedef = jax.tree_util.tree_flatten((z0, args, lm_tol, scale))
+    key = (cfg, treedef, tuple((x.shape, str(x.dtype)) if eqx.is_array(x) else x for x in leaves))
+    if key not in _COMPILED:
+        _COMPILED[key] = _fit_core.lower(cfg, z0, args, lm_tol, scale).compile()
+    return _COMPILED[key]
 
 
 # ------------------------------------------------------------------------------------- results
@@ -391,7 +495,10 @@ class IdentificationResult:
     - `condition_number`: of the information matrix JᵀJ in relative units (Δθ/θ); `weak_direction`: the
       unit vector in relative units along which the fit changes least; `identifiable`: False if the matrix is
       near-singular or a parameter's relative standard error exceeds the limit; `warnings`: plain sentences.
-    - `starts`: every LM run (several starts); `scenario`: the scenario with θ̂ set; `wall_time` [s].
+    - `starts`: every LM run (several starts); `scenario`: the scenario with θ̂ set.
+    - `wall_time`: the whole call [s]; `compile_time`: compiling the core (≈ 0 when cached) [s];
+      `fit_time`: the LM runs [s].
+    - `jacobian`: d(whitened residual)/dθ at θ̂ from the forward sensitivities, (n_residuals, p).
     """
 
     names: list[str]
@@ -424,6 +531,9 @@ class IdentificationResult:
     starts: list[StartResult]
     scenario: Scenario
     wall_time: float
+    compile_time: float
+    fit_time: float
+    jacobian: np.ndarray
     units: dict[str, str]
 
     @property
@@ -453,7 +563,8 @@ class IdentificationResult:
             f"covariance: Gauss-Newton at the optimum, {noise}; condition number of JᵀJ (relative units) "
             f"{self.condition_number:.3g}",
             f"simulation at the estimate: {self.solve_status.name.lower()}, {self.solver_steps} steps; "
-            f"wall time {self.wall_time:.3g} s" + (f" over {len(self.starts)} starts" if len(self.starts) > 1 else ""),
+            f"wall time {self.wall_time:.3g} s (compile {self.compile_time:.3g} s, fit {self.fit_time:.3g} s"
+            + (f" over {len(self.starts)} starts)" if len(self.starts) > 1 else ")"),
         ]
         if self.identifiable:
             lines.append("identifiable: yes")
@@ -480,7 +591,7 @@ class IdentificationResult:
             "identifiable": self.identifiable, "warnings": self.warnings,
             "rms_residuals": {k: float(np.sqrt(np.mean(v**2))) for k, v in self.residuals.items()},
             "starts": [dataclasses.asdict(s) for s in self.starts],
-            "wall_time_s": self.wall_time,
+            "wall_time_s": self.wall_time, "compile_time_s": self.compile_time, "fit_time_s": self.fit_time,
         }
 
 
@@ -562,6 +673,90 @@ def _sigmas(m: Measurement, noise, weights) -> tuple[dict[str, float], bool, lis
 # ------------------------------------------------------------------------------------- identify
 
 
+@dataclasses.dataclass(frozen=True)
+class _Problem:
+    scenario: Scenario
+    measurement: Measurement
+    params: list[_Param]
+    theta0: np.ndarray
+    names: list[str]
+    sigma: dict[str, float]
+    noise_known: bool
+    warnings: list[str]
+    n_residuals: int
+    cfg: _Config
+    args: tuple
+
+
+def _setup(scenario, measurement, params, *, signals=None, noise=None, weights=None, start=None, bounds=None,
+           t1=None, rtol=1e-6, atol=1e-8, max_steps=200_000, max_iterations=100) -> _Problem:
+    """Check every input on the host and build the static structure and the arrays of the problem."""
+    if isinstance(scenario, str | Path):
+        scenario = load_scenario(scenario)
+    if not isinstance(scenario, Scenario):
+        raise TypeError(f"scenario must be a jaxhoist.Scenario, a preset name or a path, got {type(scenario).__name__}")
+    scenario.check()
+    if isinstance(measurement, str | Path):
+        measurement = read_measurement(measurement)
+    if not isinstance(measurement, Measurement):
+        raise TypeError(f"measurement must be a Measurement or a CSV path, got {type(measurement).__name__}")
+    if signals is not None:
+        measurement = measurement.select([signals] if isinstance(signals, str) else signals)
+    t1 = scenario.t1 if t1 is None else float(t1)
+    if not (np.isfinite(t1) and t1 > 0):
+        raise ScenarioError(f"t1 must be a positive finite time [s], got {t1}")
+    measurement.check_span(t1)
+    plist, theta0 = _build_params(scenario, params, start or {}, bounds or {})
+    sig, noise_known, warnings = _sigmas(measurement, noise, weights)
+    if int(max_iterations) < 1:
+        raise ScenarioError(f"max_iterations must be >= 1, got {max_iterations}")
+    options = SolverOptions(rtol=rtol, atol=atol, max_steps=max_steps, adjoint="forward")
+    names = measurement.names
+    n_res = len(names) * measurement.t.size
+    if n_res <= theta0.size:
+        raise MeasurementError(f"{measurement.source}: {n_res} residuals cannot determine {theta0.size} parameters")
+    t = measurement.t
+    drop_first = bool(t[0] > 0.0)
+    ts = np.concatenate([[0.0], t]) if drop_first else t
+    data = np.stack([measurement.signals[s] for s in names])
+    sigma = np.stack([np.full(t.shape, sig[s]) for s in names])
+    cfg = _Config(
+        params=tuple((p.path, p.index, p.shape, p.kind) for p in plist),
+        signals=tuple((SIGNALS[s].field, SIGNALS[s].index) for s in names),
+        drop_first=drop_first, options=options, max_iterations=int(max_iterations))
+    tr = tuple(tuple(jnp.asarray(a, dtype=jnp.float64) for a in (p.ref, p.lo, p.hi, p.scale)) for p in plist)
+    args = (scenario, tr, jnp.asarray(data), jnp.asarray(sigma), jnp.asarray(ts))
+    return _Problem(scenario, measurement, plist, theta0, names, sig, noise_known, warnings, n_res, cfg, args)
+
+
+@eqx.filter_jit
+def _model_jit(cfg: _Config, z, args):
+    return _model(cfg, z, args)
+
+
+def residual_function(scenario, measurement, params, **kwargs):
+    """The whitened residual vector of `identify`'s problem as a plain numpy function of θ (flat, in the
+    order of `IdentificationResult.names`), for comparisons with other optimisers (e.g. scipy with finite
+    differences). Takes the same keyword arguments as `identify` (signals, noise, weights, start, bounds, t1,
+    rtol, atol, max_steps). A failed solve gives non-finite residuals.
+
+    **Returns** `(fn, theta0)`: `fn(theta) -> r` (n_residuals,) and the start θ0.
+    """
+    require_x64()
+    prob = _setup(scenario, measurement, params, **kwargs)
+    cfg = dataclasses.replace(prob.cfg, options=dataclasses.replace(prob.cfg.options, adjoint="reverse"))
+
+    def fn(theta):
+        z = jnp.asarray(_flat_z(prob.params, np.asarray(theta, dtype=np.float64)))
+        r, status, _ = _model_jit(cfg, z, prob.args)
+        r = np.asarray(r)
+        return r if int(status) == SolveStatus.OK else np.full_like(r, np.nan)
+
+    return fn, prob.theta0
+
+
+
+
 def identify(
     scenario: Scenario | str | Path,
     measurement: Measurement | str | Path,
@@ -619,23 +814,9 @@ def identify(
     require_x64()
     wall0 = time.perf_counter()
     # ---- host side: every input is checked before anything is compiled
-    if isinstance(scenario, str | Path):
-        scenario = load_scenario(scenario)
-    if not isinstance(scenario, Scenario):
-        raise TypeError(f"scenario must be a jaxhoist.Scenario, a preset name or a path, got {type(scenario).__name__}")
-    scenario.check()
-    if isinstance(measurement, str | Path):
-        measurement = read_measurement(measurement)
-    if not isinstance(measurement, Measurement):
-        raise TypeError(f"measurement must be a Measurement or a CSV path, got {type(measurement).__name__}")
-    if signals is not None:
-        measurement = measurement.select([signals] if isinstance(signals, str) else signals)
-    t1 = scenario.t1 if t1 is None else float(t1)
-    if not (np.isfinite(t1) and t1 > 0):
-        raise ScenarioError(f"t1 must be a positive finite time [s], got {t1}")
-    measurement.check_span(t1)
-    plist, theta0 = _build_params(scenario, params, start or {}, bounds or {})
-    sig, noise_known, warnings = _sigmas(measurement, noise, weights)
+    prob = _setup(scenario, measurement, params, signals=signals, noise=noise, weights=weights, start=start,
+                  bounds=bounds, t1=t1, rtol=rtol, atol=atol, max_steps=max_steps,
+                  max_iterations=max_iterations)
     if int(n_starts) < 1:
         raise ScenarioError(f"n_starts must be >= 1, got {n_starts}")
     if not (np.isfinite(start_spread) and start_spread >= 0):
@@ -643,38 +824,30 @@ def identify(
     for nm, v in (("lm_rtol", lm_rtol), ("lm_atol", lm_atol)):
         if not (np.isfinite(v) and v > 0):
             raise ScenarioError(f"{nm} must be a positive number, got {v}")
-    if int(max_iterations) < 1:
-        raise ScenarioError(f"max_iterations must be >= 1, got {max_iterations}")
-    options = SolverOptions(rtol=rtol, atol=atol, max_steps=max_steps, adjoint="forward")
-    names = measurement.names
-    n_res = len(names) * measurement.t.size
-    p_total = theta0.size
-    if n_res <= p_total:
-        raise MeasurementError(f"{measurement.source}: {n_res} residuals cannot determine {p_total} parameters")
+    scenario, measurement, plist, theta0 = prob.scenario, prob.measurement, prob.params, prob.theta0
+    cfg, args, names, sig, noise_known = prob.cfg, prob.args, prob.names, prob.sigma, prob.noise_known
+    warnings, n_res, t = list(prob.warnings), prob.n_residuals, measurement.t
     # Each start is checked as a scenario before compiling (e.g. a mass centre outside the box).
     starts = [theta0] + _random_starts(plist, theta0, int(n_starts) - 1, float(start_spread), int(seed))
     for th in starts:
         apply_params(scenario, _unflatten(plist, th)).check()
-
-    t = measurement.t
-    drop_first = bool(t[0] > 0.0)
-    ts = np.concatenate([[0.0], t]) if drop_first else t
-    data = np.stack([measurement.signals[s] for s in names])
-    sigma = np.stack([np.full(t.shape, sig[s]) for s in names])
-    cfg = _Config(
-        params=tuple((p.path, p.index, p.shape, p.kind) for p in plist),
-        signals=tuple((SIGNALS[s].field, SIGNALS[s].index) for s in names),
-        drop_first=drop_first, options=options, max_iterations=int(max_iterations))
     lm_tol = jnp.asarray([lm_rtol, lm_atol], dtype=jnp.float64)
-    tr = tuple(tuple(jnp.asarray(a, dtype=jnp.float64) for a in (p.ref, p.lo, p.hi, p.scale)) for p in plist)
-    args = (scenario, tr, jnp.asarray(data), jnp.asarray(sigma), jnp.asarray(ts))
 
     # ---- the compiled core, once per start
+    c0 = time.perf_counter()
+    one = jnp.asarray(1.0)
+    core = _compiled_core(cfg, jnp.asarray(_flat_z(plist, starts[0])), args, lm_tol, one)
+    compile_time = time.perf_counter() - c0
+    probe_tol = jnp.asarray([1e300, 1e300])  # stops after the first evaluation (inf * 0 would give NaN)
     runs, outs = [], []
     for th in starts:
         w0 = time.perf_counter()
         z0 = jnp.asarray(_flat_z(plist, th))
-        z, r, J, info, n_steps, n_acc, codes = jax.block_until_ready(_fit_core(cfg, z0, args, lm_tol))
+        # Probe J at the start (one evaluation), then set the damping scale (see `_fit_core`).
+        J0 = np.asarray(core(cfg, z0, args, probe_tol, one)[2])
+        d = float(np.max(np.sum(J0**2, axis=0))) if np.all(np.isfinite(J0)) else 0.0
+        scale = jnp.asarray(1.0 / math.sqrt(d) if d > 0 else 1.0)
+        z, r, J, info, n_steps, n_acc, codes = jax.block_until_ready(core(cfg, z0, args, lm_tol, scale))
         z, r, J, info, codes = (np.asarray(x) for x in (z, r, J, info, codes))
         theta = _theta_of(plist, z)
         converged = bool(codes[0])
@@ -697,18 +870,17 @@ def identify(
     J_theta = J / D[None, :]
     rel_scale = np.where(theta != 0, np.abs(theta), np.concatenate([p_.scale.ravel() for p_ in plist]))
     Jn = J_theta * rel_scale[None, :]  # sensitivity to relative changes Δθ/θ
-    Un, Sn, Vtn = np.linalg.svd(Jn, full_matrices=False)
+    _, Sn, Vtn = np.linalg.svd(Jn, full_matrices=False)
     cond = float((Sn[0] / Sn[-1]) ** 2) if Sn[-1] > 0 else math.inf
     tiny = Sn <= Sn[0] * 1e-12
     inv_s2 = np.where(tiny, 0.0, 1.0 / np.where(tiny, 1.0, Sn) ** 2)
-    cov_rel = sigma2 * (Vtn.T * inv_s2) @ Vtn
-    cov = cov_rel * rel_scale[:, None] * rel_scale[None, :]
-    if np.any(tiny):  # singular: parameters on a null direction have no finite error
-        null = np.any(np.abs(Vtn[tiny]) > 1e-6, axis=0)
-        cov[null, :] = np.inf
-        cov[:, null] = np.inf
-    se = np.sqrt(np.diag(cov))
-    with np.errstate(invalid="ignore", divide="ignore"):
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        cov = sigma2 * ((Vtn.T * inv_s2) @ Vtn) * rel_scale[:, None] * rel_scale[None, :]
+        if np.any(tiny):  # singular: parameters on a null direction have no finite error
+            null = np.any(np.abs(Vtn[tiny]) > 1e-6, axis=0)
+            cov[null, :] = np.inf
+            cov[:, null] = np.inf
+        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
         corr = cov / np.outer(se, se)
     corr[~np.isfinite(corr)] = np.nan
     np.fill_diagonal(corr, 1.0)
@@ -716,7 +888,7 @@ def identify(
     flat_names = [n for p_ in plist for n in p_.element_names()]
     weak = Vtn[-1] * np.sign(Vtn[-1][np.argmax(np.abs(Vtn[-1]))])
     weak_direction = {n: float(c) for n, c in zip(flat_names, weak, strict=True)}
-    rel_se = np.where(theta != 0, se / np.abs(np.where(theta != 0, theta, 1.0)), se)
+    rel_se = se / np.where(theta != 0, np.abs(theta), 1.0)
     poorly = [n for n, e in zip(flat_names, rel_se, strict=True) if not (e <= max_relative_se)]
     identifiable = not poorly and cond <= condition_limit
     if not identifiable:
@@ -755,6 +927,7 @@ def identify(
         converged=run.converged, message=run.message, solve_status=status, solver_steps=int(info[1]),
         condition_number=cond, weak_direction=weak_direction, identifiable=identifiable, warnings=warnings,
         starts=runs, scenario=fitted_scenario, wall_time=time.perf_counter() - wall0,
+        compile_time=compile_time, fit_time=sum(s_.wall_time for s_ in runs), jacobian=J_theta,
         units={n: _units_of(n) for n in flat_names} | {s: SIGNALS[s].unit for s in names})
 
 
