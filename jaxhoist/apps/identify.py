@@ -105,11 +105,11 @@ class _Param:
     def to_z(self, theta: np.ndarray) -> np.ndarray:
         theta = np.asarray(theta, dtype=np.float64)
         if self.kind == "log":
-            return np.log(theta / self.ref)
+            return np.asarray(np.log(theta / self.ref))
         if self.kind == "logit":
             u = (theta - self.lo) / (self.hi - self.lo)
-            return np.log(u) - np.log1p(-u)
-        return (theta - self.ref) / self.scale
+            return np.asarray(np.log(u) - np.log1p(-u))
+        return np.asarray((theta - self.ref) / self.scale)
 
 
 def _to_theta(kind: str, z, ref, lo, hi, scale):
@@ -190,7 +190,7 @@ def _build_params(scenario: Scenario, params: Sequence[str], start: Mapping[str,
         if index is not None:
             if leaf.ndim != 1 or not 0 <= index < leaf.shape[0]:
                 raise ScenarioError(f"parameter {given!r}: {path} has shape {leaf.shape}, index {index} is out of range")
-            value = leaf[index]
+            value = np.asarray(leaf[index])
         else:
             value = leaf
         name = path if index is None else f"{path}[{index}]"
@@ -223,10 +223,10 @@ def _build_params(scenario: Scenario, params: Sequence[str], start: Mapping[str,
             if np.any(value <= 0):
                 raise ScenarioError(f"{name} is fitted on a log scale (it is positive by nature) and needs a "
                                     f"start value > 0, got {value.tolist()}; give start={{{name!r}: ...}}")
-            kind, ref, scale, lo, hi = "log", value.copy(), np.ones_like(value), value * 0, value * 0
+            kind, ref, scale, lo, hi = "log", value.copy(), np.ones_like(value), np.zeros_like(value), np.zeros_like(value)
         else:
-            scale = np.where(np.abs(value) > 0, np.abs(value), 1.0)
-            kind, ref, lo, hi = "affine", value.copy(), value * 0, value * 0
+            scale = np.asarray(np.where(np.abs(value) > 0, np.abs(value), 1.0))
+            kind, ref, lo, hi = "affine", value.copy(), np.zeros_like(value), np.zeros_like(value)
         out.append(_Param(name, path, index, value.shape, kind, ref, lo, hi, scale))
         theta0.append(value.ravel())
     return out, np.concatenate(theta0)
@@ -892,16 +892,20 @@ def identify(
     poorly = [n for n, e in zip(flat_names, rel_se, strict=True) if not (e <= max_relative_se)]
     identifiable = not poorly and cond <= condition_limit
     if not identifiable:
-        direction = " ".join(f"{c:+.2f} Δ{_short(n)}/{_short(n)}" for n, c in weak_direction.items()
-                             if abs(c) >= 0.05)
         what = (f"{', '.join(poorly)} (relative standard error "
                 f"{', '.join(f'{100 * e:.3g} %' for e in rel_se[[flat_names.index(n) for n in poorly]])})"
                 if poorly else "the parameters jointly")
-        warnings.insert(0, (
-            f"the data cannot identify {what}: the information matrix JᵀJ is "
-            f"{'singular' if math.isinf(cond) else 'near-singular' if cond > condition_limit else 'weak'} "
-            f"(condition number {cond:.3g} in relative units); the poorly determined direction is "
-            f"{direction} (moving along it barely changes the fit)"))
+        info = float(Sn[0] ** 2 / sigma2) if sigma2 > 0 else math.inf
+        if p == 1:
+            why = (f"the fitted signals barely depend on it (information JᵀJ/σ² = {info:.3g} per unit relative "
+                   f"change Δθ/θ)")
+        else:
+            direction = " ".join(f"{c:+.2f} Δ{_short(n)}/{_short(n)}" for n, c in weak_direction.items()
+                                 if abs(c) >= 0.05)
+            kind = "singular" if math.isinf(cond) else "near-singular" if cond > condition_limit else "weak"
+            why = (f"the information matrix JᵀJ is {kind} (condition number {cond:.3g} in relative units); the "
+                   f"poorly determined direction is {direction} (moving along it barely changes the fit)")
+        warnings.insert(0, f"the data cannot identify {what}: {why}")
     elif cond > 1e8:
         warnings.append(f"the information matrix is ill-conditioned (condition number {cond:.3g}); "
                         f"poorly determined direction {weak_direction}")

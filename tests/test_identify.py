@@ -1,0 +1,246 @@
+"""Parameter identification (`jaxhoist.apps.identify`) and measurement files (`jaxhoist.io.measurement`).
+
+One compiled problem serves every fit here: μ of paper-4.2 from the mass-centre path on 21 samples over
+0.4 s (before the first corner touches down again, where the ground damper force jumps and no derivative
+of the flow exists). The tests change data values only, so the cached core is reused.
+"""
+
+import json
+import math
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+import scipy.stats  # noqa: E402
+
+import jaxhoist as jh  # noqa: E402
+from jaxhoist.apps import identify as ident  # noqa: E402
+from jaxhoist.apps.identify import identify, synthetic_measurement  # noqa: E402
+from jaxhoist.io.measurement import Measurement, MeasurementError, read_measurement, write_measurement  # noqa: E402
+
+MU = 0.25  # paper-4.2's friction coefficient
+T = np.linspace(0.0, 0.4, 21)  # 50 Hz
+SIGMA = 0.005  # position noise [m]
+
+
+@pytest.fixture(scope="session")
+def scenario():
+    return jh.load_scenario("paper-4.2")
+
+
+@pytest.fixture(scope="session")
+def clean(scenario):
+    """Noise-free mass-centre path of paper-4.2 (the same solver settings as `identify`'s defaults)."""
+    return synthetic_measurement(scenario, T, ["position"])
+
+
+def _noisy(clean, seed):
+    rng = np.random.default_rng(seed)
+    return Measurement(clean.t, {k: v + rng.normal(0.0, SIGMA, v.shape) for k, v in clean.signals.items()},
+                       {k: SIGMA for k in clean.signals}, f"draw {seed}")
+
+
+# ------------------------------------------------------------------------------------------ fitting
+
+
+def test_mu_recovered_noise_free(scenario, clean):
+    res = identify(scenario, clean, ["mu"], start={"mu": 0.3}, noise={"position": SIGMA},
+                   lm_rtol=1e-10, lm_atol=1e-10)
+    assert res.converged
+    assert res.solve_status == jh.SolveStatus.OK
+    assert abs(res.estimates["foundation.friction_coefficient"] / MU - 1.0) < 1e-6
+    # The fitted path reproduces the data to far below the noise level.
+    assert max(np.max(np.abs(v)) for v in res.residuals.values()) < 1e-3 * SIGMA
+    assert res.identifiable and res.noise_known
+    assert res.scenario.foundation.friction_coefficient == pytest.approx(res.values[0], rel=1e-15)
+
+
+def test_covariance_matches_scatter(scenario, clean):
+    """The Gauss-Newton standard error of μ̂ against the scatter of μ̂ over independent noise draws."""
+    n = 12
+    fits = [identify(scenario, _noisy(clean, 0), ["mu"], noise={"position": SIGMA})]
+    compiled = len(ident._COMPILED)
+    fits += [identify(scenario, _noisy(clean, seed), ["mu"], noise={"position": SIGMA}) for seed in range(1, n)]
+    assert len(ident._COMPILED) == compiled  # new data values reuse the compiled core
+    assert all(f.compile_time < 0.5 for f in fits[1:])
+    est = np.array([f.values[0] for f in fits])
+    se = np.array([f.std_errors[0] for f in fits])
+    assert all(f.converged and f.identifiable for f in fits)
+    # The predicted error is nearly the same for every draw (the Jacobian barely changes over ~1 SE).
+    assert np.ptp(se) < 0.1 * se.mean()
+    assert 0.002 < se.mean() / MU < 0.2  # a meaningful test: μ is determined to a few per cent
+    # Sample standard deviation over n draws: (n-1) s²/σ² ~ χ²(n-1). Two-sided 99.9 % band.
+    s = est.std(ddof=1)
+    lo, hi = (math.sqrt(scipy.stats.chi2.ppf(q, n - 1) / (n - 1)) for q in (0.0005, 0.9995))
+    assert lo < s / se.mean() < hi, (s, se.mean(), lo, hi)
+    # No bias beyond the sampling error of the mean (4 standard errors of the mean).
+    assert abs(est.mean() - MU) < 4 * se.mean() / math.sqrt(n)
+    # With noise levels given, χ²/dof scatters around 1: n_res - p = 62 degrees of freedom.
+    chi2 = np.array([f.chi2_reduced for f in fits])
+    dof = fits[0].n_residuals - 1
+    assert np.all(chi2 > scipy.stats.chi2.ppf(1e-4, dof) / dof)
+    assert np.all(chi2 < scipy.stats.chi2.ppf(1 - 1e-4, dof) / dof)
+    # The correlation of a single parameter with itself, and the unknown-noise variant: σ² = RSS/(n - p)
+    # gives the same standard error up to sqrt(χ²/dof).
+    assert fits[0].correlation.shape == (1, 1)
+    m = _noisy(clean, 0)
+    m_unknown = Measurement(m.t, m.signals, {}, "no noise levels")
+    u = identify(scenario, m_unknown, ["mu"], weights={"position": 1.0 / SIGMA})
+    assert not u.noise_known
+    assert u.values[0] == pytest.approx(fits[0].values[0], rel=1e-6)
+    assert u.std_errors[0] == pytest.approx(fits[0].std_errors[0] * math.sqrt(fits[0].chi2_reduced), rel=1e-4)
+
+
+def test_unidentifiable_parameter_reported(scenario, clean):
+    """Over the first 20 ms the load has barely moved, so the path cannot tell μ: the result says so."""
+    t = np.linspace(0.0, 0.02, T.size)  # same sizes: the compiled core is reused
+    m = synthetic_measurement(scenario, t, ["position"])
+    res = identify(scenario, m, ["mu"], noise={"position": SIGMA})
+    assert not res.identifiable
+    assert res.std_errors[0] > MU  # relative standard error above 100 %
+    assert "cannot identify foundation.friction_coefficient" in res.warnings[0]
+    assert "relative standard error" in res.warnings[0] and "barely depend" in res.warnings[0]
+    assert res.weak_direction == {"foundation.friction_coefficient": 1.0}
+    assert "identifiable: NO" in res.summary()
+
+
+def test_cli_identify_writes_estimates(scenario, clean, tmp_path):
+    from jaxhoist.apps.cli import main
+
+    csv = write_measurement(tmp_path / "lift.csv", _noisy(clean, 100), units={"position_z": "mm"})
+    out = tmp_path / "fit"
+    code = main(["identify", "paper-4.2", str(csv), "--fit", "mu", "--start", "mu=0.3", "--out", str(out),
+                 "--quiet"])
+    assert code == 0
+    doc = json.loads((out / "estimates.json").read_text())
+    est = doc["estimates"]["foundation.friction_coefficient"]
+    assert abs(est["value"] - MU) < 4 * est["std_error"]
+    assert doc["noise_known"] is True  # noise levels came from the side JSON written with the CSV
+    assert (out / "fit.png").stat().st_size > 1000
+
+
+# ---------------------------------------------------------------------------------- input validation
+
+
+def _write(path, text, side=None):
+    path.write_text(text)
+    if side is not None:
+        path.with_suffix(".json").write_text(json.dumps(side))
+    return path
+
+
+GOOD = "t [s],position_x [m],rope_tension [kN]\n0,1.0,0.0\n0.1,1.01,5.0\n0.2,1.03,7.5\n"
+
+
+def test_reader_converts_units_and_reads_side_file(tmp_path):
+    p = _write(tmp_path / "m.csv", GOOD, {"noise": {"position_x": 0.002, "rope_tension": "1%"}})
+    m = read_measurement(p)
+    assert m.names == ["position_x", "rope_tension"]
+    np.testing.assert_allclose(m.signals["rope_tension"], [0.0, 5e3, 7.5e3])  # kN -> N
+    assert m.noise["position_x"] == 0.002
+    rms = math.sqrt((5e3**2 + 7.5e3**2) / 3)
+    assert m.noise["rope_tension"] == pytest.approx(0.01 * rms)
+    # Units only in the side file.
+    q = _write(tmp_path / "q.csv", "t,position_x\n0,10\n1,20\n", {"units": {"t": "s", "position_x": "mm"}})
+    np.testing.assert_allclose(read_measurement(q).signals["position_x"], [0.01, 0.02])
+    # Write -> read round trip keeps values and noise levels (in other units on file).
+    w = write_measurement(tmp_path / "w.csv", m, units={"rope_tension": "MN", "t": "ms"})
+    back = read_measurement(w)
+    np.testing.assert_allclose(back.t, m.t)
+    np.testing.assert_allclose(back.signals["rope_tension"], m.signals["rope_tension"])
+    assert back.noise["rope_tension"] == pytest.approx(m.noise["rope_tension"])
+
+
+@pytest.mark.parametrize(
+    "text, match",
+    [
+        ("t [s],position_x [m]\n0,1\n0.2,1\n0.1,1\n", r"not sorted: t = 0\.1 s at line 4"),
+        ("t [s],position_x [m]\n0,1\n0.1,1\n0.1,1.1\n", r"duplicate time t = 0\.1 s at line 3 and line 4"),
+        ("t [s],position_x [m]\n0,1\n0.1,nan\n0.2,1\n", r"column 'position_x' holds NaN at line 3"),
+        ("t [s],position_x [m]\n0,1\n0.1,\n0.2,1\n", r"column 'position_x' holds NaN at line 3"),
+        ("t [s],positon_x [m]\n0,1\n0.1,1\n", r"unknown signal 'positon_x' \(did you mean 'position_x'\?\)"),
+        ("t [s],rope_tenson [N]\n0,1\n0.1,1\n", r"did you mean 'rope_tension'"),
+        ("t [s],position_x [kg]\n0,1\n0.1,1\n", r"column 'position_x': unknown unit 'kg'; expected m"),
+        ("t [s],position_x [N]\n0,1\n0.1,1\n", r"column 'position_x': wrong unit 'N' \(a unit of N\); expected m"),
+        ("t [s],euler_phi [m]\n0,1\n0.1,1\n", r"column 'euler_phi': wrong unit 'm'.*expected rad"),
+        ("t [s],position_x\n0,1\n0.1,1\n", r"column 'position_x' has no unit"),
+        ("time [s],position_x [m]\n0,1\n0.1,1\n", r"no time column 't'"),
+        ("t [s],position_x [m]\n0,1\n0.1,abc\n", r"line 3, column 'position_x': 'abc' is not a number"),
+        ("t [s],position_x [m]\n0,1\n0.1\n", r"line 3 has 1 values, the header has 2 columns"),
+    ],
+)
+def test_bad_measurement_files(tmp_path, text, match):
+    p = _write(tmp_path / "bad.csv", text)
+    with pytest.raises(MeasurementError, match=match) as e:
+        read_measurement(p)
+    assert str(p) in str(e.value)  # every message names the file
+
+
+def test_side_file_errors(tmp_path):
+    p = _write(tmp_path / "a.csv", "t [s],position_x [m]\n0,1\n0.1,1\n", {"units": {"position_x": "mm"}})
+    with pytest.raises(MeasurementError, match=r"'m' in the header but 'mm'"):
+        read_measurement(p)
+    p = _write(tmp_path / "b.csv", "t [s],position_x [m]\n0,1\n0.1,1\n", {"noise": {"position_y": 0.1}})
+    with pytest.raises(MeasurementError, match=r"noise given for 'position_y'.*did you mean 'position_x'"):
+        read_measurement(p)
+    p = _write(tmp_path / "c.csv", "t [s],position_x [m]\n0,1\n0.1,1\n", {"unit": {}})
+    with pytest.raises(MeasurementError, match=r"unknown key 'unit' \(did you mean 'units'\?\)"):
+        read_measurement(p)
+
+
+@pytest.fixture
+def no_compile(monkeypatch):
+    """Fail the test if identify reaches the compiled core."""
+
+    def boom(*a, **k):
+        raise AssertionError("identify compiled before rejecting invalid input")
+
+    monkeypatch.setattr(ident, "_compiled_core", boom)
+    monkeypatch.setattr(ident, "_fit_core", boom)
+
+
+def test_times_outside_span_rejected_before_compiling(scenario, tmp_path, no_compile):
+    p = _write(tmp_path / "long.csv", "t [s],position_x [m]\n0,1\n20,1\n30,1\n")
+    with pytest.raises(MeasurementError, match=r"outside the simulated span \[0, 25\] s, first t = 30 s"):
+        read_measurement(p, t1=scenario.t1)
+    with pytest.raises(MeasurementError, match=r"outside the simulated span \[0, 25\] s"):
+        identify(scenario, p, ["mu"])
+    with pytest.raises(MeasurementError, match=r"outside the simulated span \[0, 0\.15\] s"):
+        identify(scenario, _write(tmp_path / "ok.csv", GOOD), ["mu"], t1=0.15)  # 0.2 s > t1 = 0.15 s
+    neg = Measurement(np.array([-0.1, 0.0, 0.1]), {"position_x": np.ones(3)})
+    with pytest.raises(MeasurementError, match=r"first t = -0\.1 s"):
+        identify(scenario, neg, ["mu"])
+
+
+@pytest.mark.parametrize("bad", ["unsorted", "duplicate", "nan", "unknown"])
+def test_bad_files_rejected_by_identify_before_compiling(scenario, tmp_path, no_compile, bad):
+    text = {
+        "unsorted": "t [s],position_x [m]\n0,1\n0.2,1\n0.1,1\n",
+        "duplicate": "t [s],position_x [m]\n0,1\n0.1,1\n0.1,1\n",
+        "nan": "t [s],position_x [m]\n0,1\n0.1,NaN\n0.2,1\n",
+        "unknown": "t [s],mass_centre_x [m]\n0,1\n0.1,1\n",
+    }[bad]
+    with pytest.raises(MeasurementError):
+        identify(scenario, _write(tmp_path / f"{bad}.csv", text), ["mu"])
+
+
+def test_bad_arguments_rejected_before_compiling(scenario, clean, no_compile):
+    with pytest.raises(jh.ScenarioError, match=r"'muu'.*\(did you mean 'mu'\?\)"):
+        identify(scenario, clean, ["muu"])
+    with pytest.raises(jh.ScenarioError, match=r"foundation has no field 'stifness'"):
+        identify(scenario, clean, ["foundation.stifness"])
+    with pytest.raises(jh.ScenarioError, match=r"foundation.damping is fitted on a log scale.*start value > 0"):
+        identify(scenario, clean, ["h"], start={"h": 0.0})
+    with pytest.raises(jh.ScenarioError, match=r"listed twice"):
+        identify(scenario, clean, ["mu", "foundation.friction_coefficient"])
+    with pytest.raises(jh.ScenarioError, match=r"must lie strictly inside its bounds"):
+        identify(scenario, clean, ["load.mass_centre[0]"], start={"load.mass_centre[0]": 3.0})
+    with pytest.raises(MeasurementError, match=r"unknown signal 'postion' \(did you mean 'position'\?\)"):
+        identify(scenario, clean, ["mu"], noise={"postion": 0.005})
+    with pytest.raises(MeasurementError, match=r"'rope_tension' selects no measured signal"):
+        identify(scenario, clean, ["mu"], signals=["rope_tension"])
+    with pytest.raises(jh.ScenarioError, match=r"not both"):
+        identify(scenario, clean, ["mu"], noise={"position_x": 0.01}, weights={"position": 1.0})
