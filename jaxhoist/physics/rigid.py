@@ -34,7 +34,7 @@ from __future__ import annotations
 import equinox as eqx
 import jax
 import jax.numpy as jnp
-from jaxtyping import Array, Float, Int
+from jaxtyping import Array, Bool, Float, Int
 
 from .._typing import CornerVecs, PerCorner, Rot33, Scalar, Vec3
 from . import forces, kinematics, statics
@@ -61,21 +61,25 @@ class Phase(eqx.Module):
       the phase (needed when sliding starts from rest; otherwise the direction of the corner velocity).
     - `guard_offset`: added to each guard so that all guards start > 0 (a guard that starts at 0, such as
       the height of a corner that has just left the ground, must not end the phase at once).
+    - `starting`: per corner, sliding started from rest in this phase (its guard watches the speed reach
+      2 `Settings.stop_velocity`, or the corner turn back) rather than the slip dying out.
     """
 
-    contact: Int[Array, "4"]
+    contact: Int[Array, 4]
     slip_hint: Float[Array, "4 2"]
-    guard_offset: Float[Array, "10"]
+    guard_offset: Float[Array, 10]
+    starting: Bool[Array, 4]
     rest: bool = eqx.field(static=True, default=False)
 
 
-def make_phase(contact, rest=False, slip_hint=None, guard_offset=None) -> Phase:
+def make_phase(contact, rest=False, slip_hint=None, guard_offset=None, starting=None) -> Phase:
     """Build a `Phase` from Python values (host side)."""
     return Phase(
         contact=jnp.asarray(contact, dtype=jnp.int32),
         rest=bool(rest),
         slip_hint=jnp.zeros((4, 2)) if slip_hint is None else jnp.asarray(slip_hint, dtype=jnp.float64),
         guard_offset=jnp.zeros(N_GUARDS) if guard_offset is None else jnp.asarray(guard_offset, jnp.float64),
+        starting=jnp.zeros(4, dtype=bool) if starting is None else jnp.asarray(starting, dtype=bool),
     )
 
 
@@ -87,16 +91,22 @@ class Settings(eqx.Module):
     - `slip_velocity`: ε_v [m/s]; the sliding direction is that of v_h + ε_v t̂_hint, so it follows the
       hint at the start of sliding from rest and the corner velocity once |v_h| >> ε_v.
     - `rcond`: relative cut-off of singular values in the minimum-norm contact-force solve [-].
+    - `stop_velocity`: v_stop [m/s]; a sliding corner whose speed falls to v_stop ends its phase (it then
+      sticks or slides on): Coulomb friction's direction is singular at zero slip, and following it down to
+      zero would cost ever smaller steps. Sticking then removes the remaining slip (<= 2 v_stop) by a tiny
+      velocity projection whose energy is booked with the impact losses.
     """
 
     baumgarte: Scalar
     slip_velocity: Scalar
     rcond: Scalar
+    stop_velocity: Scalar
 
-    def __init__(self, baumgarte=20.0, slip_velocity=1e-6, rcond=1e-9):
+    def __init__(self, baumgarte=20.0, slip_velocity=1e-6, rcond=1e-9, stop_velocity=1e-4):
         self.baumgarte = jnp.asarray(baumgarte, dtype=jnp.float64)
         self.slip_velocity = jnp.asarray(slip_velocity, dtype=jnp.float64)
         self.rcond = jnp.asarray(rcond, dtype=jnp.float64)
+        self.stop_velocity = jnp.asarray(stop_velocity, dtype=jnp.float64)
 
 
 class Scales(eqx.Module):
@@ -153,7 +163,7 @@ class Loads(eqx.Module):
     corner_velocity: CornerVecs
     jacobians: Float[Array, "4 3 6"]
     bias: CornerVecs
-    generalised_force: Float[Array, "6"]
+    generalised_force: Float[Array, 6]
     rope_point: Vec3
     rope_tension: Scalar
     rope_direction: Vec3
@@ -213,7 +223,7 @@ def slip_directions(corner_velocity: CornerVecs, slip_hint: Float[Array, "4 2"],
     return jnp.where(pos[:, None], w / n[:, None], 0.0)
 
 
-def _maps(contact: Int[Array, "4"], tdir: Float[Array, "4 2"], mu: Scalar):
+def _maps(contact: Int[Array, 4], tdir: Float[Array, "4 2"], mu: Scalar):
     """Per corner: the force map P_i (world force = P_i λ_i) and the constrained-row selector S_i (3x3)."""
     stick = contact == STICK
     slide = contact == SLIDE
@@ -264,7 +274,7 @@ class ContactMatrices(eqx.Module):
     """
 
     mass: Float[Array, "6 6"]
-    force: Float[Array, "6"]
+    force: Float[Array, 6]
     jacobians: Float[Array, "4 3 6"]
     bias: CornerVecs
     corner_velocity: CornerVecs
@@ -294,7 +304,7 @@ class Contact(eqx.Module):
     - `loads`: the `Loads` of the instant.
     """
 
-    accel: Float[Array, "6"]
+    accel: Float[Array, 6]
     force: CornerVecs
     corner_accel: CornerVecs
     slip_direction: Float[Array, "4 2"]
@@ -376,7 +386,7 @@ def rest_conditions(ld: Loads, scenario: Scenario, c: Constants):
 
 
 def raw_guards(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
-               settings: Settings) -> Float[Array, "10"]:
+               settings: Settings) -> Float[Array, 10]:
     """The guards of `phase` without offsets, dimensionless (forces / G, heights / L, speeds / V); the
     phase is valid while all are > 0. Guards that do not apply (to a corner's mode, or to rest) are +1."""
     if phase.rest:
@@ -390,9 +400,15 @@ def raw_guards(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Pha
     T = jnp.sqrt(jnp.sum(ct.force[:, :2] ** 2, axis=1))
     contact = phase.contact
     g_normal = jnp.where(contact != FREE, N / sc.force, ld.corners[:, 2] / sc.length)
-    v_along = jnp.sum(ld.corner_velocity[:, :2] * phase.slip_hint, axis=1)
-    g_tan = jnp.where(contact == STICK, (mu * N - T) / sc.force,
-                      jnp.where(contact == SLIDE, v_along / sc.velocity, 1.0))
+    vh = ld.corner_velocity[:, :2]
+    speed = jnp.sqrt(jnp.sum(vh**2, axis=1))
+    v_stop = settings.stop_velocity
+    # A slip that started from rest: it must not turn back, and once its speed reaches 2 v_stop the phase
+    # is restarted as an ordinary slide (a bookkeeping event). An ordinary slide ends when the speed falls
+    # to v_stop.
+    g_start = jnp.minimum(jnp.sum(vh * phase.slip_hint, axis=1), 2.0 * v_stop - speed) / sc.velocity
+    g_slide = jnp.where(phase.starting, g_start, (speed - v_stop) / sc.velocity)
+    g_tan = jnp.where(contact == STICK, (mu * N - T) / sc.force, jnp.where(contact == SLIDE, g_slide, 1.0))
     return jnp.concatenate([g_normal, g_tan, jnp.ones(2)])
 
 
@@ -405,7 +421,7 @@ def event_condition(t, y, args, **kwargs) -> Scalar:
 # ------------------------------------------------------------------------------------------ impacts
 
 
-def impulse_response(y: State, scenario: Scenario, c: Constants, modes: Int[Array, "4"],
+def impulse_response(y: State, scenario: Scenario, c: Constants, modes: Int[Array, 4],
                      slip_dirs: Float[Array, "4 2"], normal_target: PerCorner, rcond) -> tuple:
     """Velocity jump of an impact with the ground: minimum-norm impulses P_i at the corners in `modes`
     (`STICK`: all three post-impact velocity components prescribed, tangential ones 0; `SLIDE`: normal only,
@@ -461,7 +477,7 @@ class Output(eqx.Module):
     friction: CornerVecs
     rope_tension: Scalar
     energy: Energy
-    euler: Float[Array, "3"]
+    euler: Float[Array, 3]
 
 
 def output(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Output:

@@ -1,0 +1,748 @@
+"""The rigid model's phase driver (paper §2): `simulate_rigid(scenario, t1)`.
+
+The motion is a sequence of phases, each a fixed contact configuration (`physics.rigid.Phase`). A phase
+is integrated by one compiled `diffrax.diffeqsolve` (the phase is an array argument, so every phase reuses
+the same compilation) that stops at the first zero of the phase's guards (`diffrax.Event` with bisection
+root finding). Between phases, on the host:
+
+1. the guards that fired are identified;
+2. a free corner reaching the ground with a downward velocity is an impact: the velocity jump is solved
+   with Newton's restitution law at the striking corner (coefficient `restitution`), zero normal velocity
+   after the impact at the other corners on the ground, and Coulomb friction impulses (sticking if the
+   sticking impulse lies in the friction cone, else sliding against the pre-impact slip);
+3. otherwise the old phase is continued a short time past the event (the *look-ahead*, until the fired
+   guards are clearly negative) and the next contact configuration is chosen there: every combination of
+   modes (free / slide / stick) of the corners on the ground is evaluated, and the ones that are
+   consistent (N_i >= 0, friction of sticking corners within μN_i, sliding from rest in the direction of the
+   resulting acceleration, free corners on the ground not accelerating into it, or, for a load at rest on
+   all four corners, the rest conditions of `statics`) are kept. Among them the one that changes the
+   fewest corners (then the most sticking, then the most contacts) is chosen. The next phase starts from the
+   event state.
+
+No consistent configuration (a Painlevé-type inconsistency, or contacts too close to degenerate for the
+tolerances) or two consistent ones with different accelerations (non-uniqueness) raise `RigidContactError`
+naming the time, the corners and what was tried; nothing is silently guessed.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+import optimistix as optx
+from jaxtyping import Array, Float, Int
+
+from .._errors import ScenarioError, SolveStatus, require_x64
+from ..physics import rigid
+from ..physics.elastic import Constants, State
+from ..physics.energy import Energy
+from ..physics.params import Scenario
+from ..physics.rigid import FREE, SLIDE, STICK, Phase
+
+
+class RigidContactError(RuntimeError):
+    """The rigid contact problem has no consistent solution, or several (Painlevé-type situations), or a
+    phase could not be continued (solver failure, too many phases)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class PhaseRecord:
+    """One phase of a rigid-model solve.
+
+    - `t_start`, `t_end`: [s]; `contact`: mode per corner D, E, F, H ("free", "slide", "stick");
+    - `rest`: the load rested on all four corners (held fixed);
+    - `end`: why the phase ended: the guards that fired (e.g. "normal:D", "tangential:E", "rest:slip"),
+      "impact:F" when an impact followed, or "t1".
+    - `state_end`: the state at `t_end` (before any impact).
+    """
+
+    t_start: float
+    t_end: float
+    contact: tuple[str, str, str, str]
+    rest: bool
+    end: str
+    state_end: State | None = dataclasses.field(default=None, compare=False, repr=False)
+
+    def __str__(self) -> str:
+        modes = "rest" if self.rest else " ".join(f"{c}:{m}" for c, m in zip(rigid.CORNERS, self.contact,
+                                                                            strict=True))
+        return f"{self.t_start:10.6f} - {self.t_end:10.6f} s  {modes:40s} -> {self.end}"
+
+
+class RigidTrajectory(eqx.Module):
+    """Outputs of `simulate_rigid` at the saved times; the field names are those of `Trajectory`.
+
+    - `ts`, `position`, `velocity`, `euler`, `angular_velocity`, `corners`, `normal_forces`,
+      `friction_forces`, `ground_reaction`, `rope_tension`, `tip_position`, `energy`, `hoist_work`,
+      `damping_loss`, `friction_work`, `states`, `status`, `num_accepted_steps`, `num_rejected_steps`:
+      as in `Trajectory` (`energy.ground_spring` is 0 on the rigid ground).
+    - `impact_loss`: kinetic energy lost in impacts up to each saved time [J].
+    - `phase_index`: index into `phases` of the phase each saved time belongs to.
+    - `phases`: the phase log, a tuple of `PhaseRecord` (static).
+    """
+
+    ts: Float[Array, " n_t"]
+    position: Float[Array, "n_t 3"]
+    velocity: Float[Array, "n_t 3"]
+    euler: Float[Array, "n_t 3"]
+    angular_velocity: Float[Array, "n_t 3"]
+    corners: Float[Array, "n_t 4 3"]
+    normal_forces: Float[Array, "n_t 4"]
+    friction_forces: Float[Array, "n_t 4 3"]
+    ground_reaction: Float[Array, " n_t"]
+    rope_tension: Float[Array, " n_t"]
+    tip_position: Float[Array, "n_t 3"]
+    energy: Energy
+    hoist_work: Float[Array, " n_t"]
+    damping_loss: Float[Array, " n_t"]
+    friction_work: Float[Array, " n_t"]
+    impact_loss: Float[Array, " n_t"]
+    states: State
+    status: Int[Array, ""]
+    num_accepted_steps: Int[Array, ""]
+    num_rejected_steps: Int[Array, ""]
+    phase_index: Int[Array, " n_t"]
+    phases: tuple = eqx.field(static=True)
+
+    @property
+    def ok(self):
+        return self.status == SolveStatus.OK
+
+    def energy_residual(self) -> Float[Array, " n_t"]:
+        """E(t) - E(0) - [W_hoist - D_damping - W_friction - W_impact](t) [J]: zero up to solver error."""
+        e = self.energy
+        mech = e.kinetic + e.potential + e.ground_spring + e.rope_spring + e.boom_spring
+        supplied = self.hoist_work - self.damping_loss - self.friction_work - self.impact_loss
+        return (mech - mech[..., :1]) - (supplied - supplied[..., :1])
+
+    def phase_log(self) -> str:
+        return "\n".join(str(p) for p in self.phases)
+
+
+# --------------------------------------------------------------------------------- compiled pieces
+
+
+@dataclasses.dataclass(frozen=True)
+class _Options:
+    rtol: float
+    atol: float
+    max_steps: int
+    event_atol: float
+
+
+def _phase_solve(scenario, c, phase, settings, y0, t0, t1, ts, options: _Options):
+    event = diffrax.Event(rigid.event_condition,
+                          root_finder=optx.Bisection(rtol=1e-14, atol=options.event_atol), direction=False)
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(rigid.vector_field), diffrax.Tsit5(), t0=t0, t1=t1, dt0=None, y0=y0,
+        args=(scenario, c, phase, settings), saveat=diffrax.SaveAt(ts=ts, t1=True),
+        stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
+        max_steps=options.max_steps, event=event, throw=False)
+    return sol.ts, sol.ys, sol.result, sol.stats["num_accepted_steps"], sol.stats["num_rejected_steps"]
+
+
+_phase_solve_jit = eqx.filter_jit(_phase_solve)
+_raw_guards_jit = eqx.filter_jit(rigid.raw_guards)
+
+
+@eqx.filter_jit
+def _eval_candidates(t, y, scenario, c, settings, contact, hints):
+    """Contact forces, corner accelerations and body accelerations for a batch of configurations."""
+
+    def one(ct, h):
+        ph = Phase(ct, h, jnp.zeros(rigid.N_GUARDS), jnp.zeros(4, dtype=bool), rest=False)
+        d = rigid.contact_dynamics(t, y, scenario, c, ph, settings)
+        return d.force, d.corner_accel, d.accel
+
+    return jax.vmap(one)(contact, hints)
+
+
+@eqx.filter_jit
+def _eval_impulses(y, scenario, c, modes, slip_dirs, normal_target, rcond):
+    return jax.vmap(lambda m, s: rigid.impulse_response(y, scenario, c, m, s, normal_target, rcond))(
+        modes, slip_dirs)
+
+
+_contact_matrices = eqx.filter_jit(rigid.contact_matrices)
+
+
+@eqx.filter_jit
+def _forces(t, y, scenario, c, phase, settings):
+    return rigid.contact_dynamics(t, y, scenario, c, phase, settings).force
+
+
+@eqx.filter_jit
+def _kin(t, y, scenario, c):
+    ld = rigid.loads(t, y, scenario, c)
+    return ld.corners, ld.corner_velocity, rigid.kinetic_energy(y, scenario, c)
+
+
+@eqx.filter_jit
+def _outputs(ts, ys, scenario, c, phases, settings):
+    return jax.vmap(lambda t, y, ph: rigid.output(t, y, scenario, c, ph, settings))(ts, ys, phases)
+
+
+def _tree_index(tree, i):
+    return jax.tree_util.tree_map(lambda x: x[i], tree)
+
+
+def _np(x):
+    return np.asarray(x)
+
+
+# --------------------------------------------------------------------------------- the driver
+
+
+class _Driver:
+    def __init__(self, scenario: Scenario, c: Constants, settings: rigid.Settings, options: _Options,
+                 restitution: float, tol: dict):
+        self.sc, self.c, self.settings, self.options = scenario, c, settings, options
+        self.e = float(restitution)
+        sc = rigid.scales(scenario)
+        self.G, self.L, self.V, self.g = (float(sc.force), float(sc.length), float(sc.velocity),
+                                          float(sc.acceleration))
+        self.mu = float(scenario.foundation.friction_coefficient)
+        self.v_stop = float(settings.stop_velocity)
+        self.tol = tol
+        self.accepted = 0
+        self.rejected = 0
+        self.debug = False
+
+    # ---------------------------------------------------------------------------- helpers
+    def guards(self, t, y, phase) -> np.ndarray:
+        return _np(_raw_guards_jit(jnp.asarray(t), y, self.sc, self.c, phase, self.settings))
+
+    def kin(self, t, y):
+        corners, cv, ke = _kin(jnp.asarray(t), y, self.sc, self.c)
+        return _np(corners), _np(cv), float(ke)
+
+    def with_offsets(self, t, y, phase: Phase) -> Phase:
+        raw = self.guards(t, y, phase)
+        off = np.where(raw <= self.tol["guard_start"], self.tol["guard_start"] - raw, 0.0)
+        return eqx.tree_at(lambda p: p.guard_offset, phase, jnp.asarray(off))
+
+    def solve(self, y, phase, t0, t1, ts):
+        ts_c = jnp.clip(jnp.asarray(ts), t0, t1)
+        out = _phase_solve_jit(self.sc, self.c, phase, self.settings, y, jnp.asarray(t0), jnp.asarray(t1),
+                               ts_c, self.options)
+        sts, sys_, result, acc, rej = out
+        self.accepted += int(acc)
+        self.rejected += int(rej)
+        return _np(sts), sys_, result
+
+    # ---------------------------------------------------------------------------- configurations
+    def near_ground(self, t, y):
+        corners, cv, _ = self.kin(t, y)
+        near = (corners[:, 2] < self.tol["z"] * self.L) & (np.abs(cv[:, 2]) < self.tol["v"] * self.V)
+        resting = near & (np.linalg.norm(cv[:, :2], axis=1) < 1.5 * self.v_stop)
+        return near, resting, corners, cv
+
+    def project(self, t, y, phase: Phase):
+        """Remove the velocity components that the phase's constraints forbid (sticking corners' slip,
+        contacts' normal velocity): the M-orthogonal projection, a tiny impulse whose kinetic energy
+        [J] is returned."""
+        if phase.rest:
+            _, _, ke = self.kin(t, y)
+            return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
+                               (jnp.zeros(3), jnp.zeros(3))), ke
+        mats = jax.tree_util.tree_map(_np, _contact_matrices(jnp.asarray(t), y, self.sc, self.c, self.settings))
+        contact = _np(phase.contact)
+        rows = [mats.jacobians[i] for i in range(4) if contact[i] == STICK]
+        rows += [mats.jacobians[i, 2:3] for i in range(4) if contact[i] == SLIDE]
+        if not rows:
+            return y, 0.0
+        J = np.concatenate(rows, axis=0)
+        u = np.concatenate([_np(y.velocity), _np(y.angular_velocity)])
+        Minv = np.linalg.inv(mats.mass)
+        du = -Minv @ J.T @ np.linalg.pinv(J @ Minv @ J.T, rcond=1e-10) @ (J @ u)
+        u1 = u + du
+        loss = 0.5 * u @ mats.mass @ u - 0.5 * u1 @ mats.mass @ u1
+        return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
+                           (jnp.asarray(u1[:3]), jnp.asarray(u1[3:]))), float(loss)
+
+    def select(self, t, y, where: str, previous: Phase | None = None) -> Phase:
+        """Choose the contact configuration at (t, y) (see the module docstring)."""
+        near, resting, corners, cv = self.near_ground(t, y)
+        body_at_rest = bool(np.all(near) and np.all(resting))
+
+        # The load resting flat on all four corners: the rest conditions decide.
+        rest_phase = rigid.make_phase([STICK] * 4, rest=True)
+        if body_at_rest:
+            g = self.guards(t, y, rest_phase)
+            if g[8] >= -self.tol["rest"] and g[9] >= -self.tol["rest"]:
+                return rest_phase
+
+        mats = jax.tree_util.tree_map(_np, _contact_matrices(jnp.asarray(t), y, self.sc, self.c, self.settings))
+        near_idx = [i for i in range(4) if near[i]]
+        combos, hints_list = [], []
+        for r in range(len(near_idx), -1, -1):
+            for subset in itertools.combinations(near_idx, r):
+                in_contact = np.zeros(4, dtype=bool)
+                in_contact[list(subset)] = True
+                modes, hints = coulomb_pattern(mats, in_contact, resting, self.mu, self.G, self.g,
+                                               debug=self.debug)
+                n_stick, n_contact = int(np.sum(modes == STICK)), int(np.sum(modes != FREE))
+                if np.all(near) and n_stick >= 2 and n_contact >= 3:
+                    continue  # held fixed: the rest configuration, which failed above
+                combos.append(modes)
+                hints_list.append(hints)
+        n_max = 16
+        contact = np.zeros((n_max, 4), dtype=np.int32)
+        hints = np.zeros((n_max, 4, 2))
+        contact[:len(combos)] = np.array(combos)
+        hints[:len(combos)] = np.array(hints_list)
+        force, acc_c, accel = _eval_candidates(jnp.asarray(t), y, self.sc, self.c, self.settings,
+                                               jnp.asarray(contact), jnp.asarray(hints))
+        force, acc_c, accel = map(_np, (force, acc_c, accel))
+
+        tF, tA = self.tol["force"] * self.G, self.tol["accel"] * self.g
+        consistent, why = [], []
+        for k, combo in enumerate(combos):
+            N = force[k, :, 2]
+            T = np.linalg.norm(force[k, :, :2], axis=1)
+            a = acc_c[k]
+            ok, reason = True, ""
+            for i in range(4):
+                if combo[i] != FREE and N[i] < -tF:
+                    ok, reason = False, f"N_{rigid.CORNERS[i]} = {N[i]:.4g} N < 0"
+                elif combo[i] == STICK and T[i] > self.mu * N[i] + tF:
+                    ok, reason = False, f"|T_{rigid.CORNERS[i]}| = {T[i]:.6g} N > μN = {self.mu * N[i]:.6g} N"
+                elif combo[i] == FREE and near[i] and a[i, 2] < -tA:
+                    ok, reason = False, f"free corner {rigid.CORNERS[i]} accelerates into the ground"
+                elif combo[i] == SLIDE and resting[i]:
+                    h = hints[k, i]
+                    ah = a[i, :2]
+                    along = float(ah @ h)
+                    perp = float(np.linalg.norm(ah - along * h))
+                    if along < -tA or perp > tA + self.tol["align"] * np.linalg.norm(ah):
+                        ok, reason = False, (f"{rigid.CORNERS[i]} would not slide along its friction direction "
+                                             f"(a_h = {ah}, t = {h})")
+                if not ok:
+                    break
+            (consistent if ok else why).append(k if ok else (combo, reason))
+            if self.debug:
+                print(f"  [{where} t={t:.9g}] {_fmt(combo)}: {'ok' if ok else reason}; N={np.round(N, 1)} "
+                      f"accel={np.round(accel[k], 6)}")
+        if not consistent:
+            tried = "; ".join(f"{_fmt(cb)}: {r}" for cb, r in why[:12])
+            raise RigidContactError(
+                f"t = {t:.9g} s ({where}): no consistent contact configuration (Painlevé-type inconsistency "
+                f"or a degenerate contact). Corners on the ground: "
+                f"{[rigid.CORNERS[i] for i in range(4) if near[i]]}. Tried: {tried}")
+        # Prefer the most corners in contact (every corner that can carry load does, as with (2.3)); among
+        # those, the one whose normal forces continue the previous phase's (the rigid limit of a stiff
+        # ground: the corner whose load has vanished is the one that unloads); then the most sticking.
+        if previous is not None:
+            prev_N = _np(_forces(jnp.asarray(t), y, self.sc, self.c, previous, self.settings))[:, 2]
+        else:
+            prev_N = None
+        jump = lambda k: 0.0 if prev_N is None else float(np.linalg.norm(force[k, :, 2] - prev_N))  # noqa: E731
+        n_contacts = lambda k: int(np.sum(combos[k] != FREE))  # noqa: E731
+        top = max(n_contacts(k) for k in consistent)
+        group = sorted([k for k in consistent if n_contacts(k) == top],
+                       key=lambda k: (round(jump(k) / (self.tol["jump"] * self.G)), -int(np.sum(combos[k] == STICK))))
+        best = group[0]
+        a_scale = np.linalg.norm(accel[best]) + tA
+        for k in group[1:]:
+            if abs(jump(k) - jump(best)) > self.tol["jump"] * self.G:
+                break
+            if np.linalg.norm(accel[k] - accel[best]) > 1e-5 * a_scale + 10 * tA:
+                raise RigidContactError(
+                    f"t = {t:.9g} s ({where}): two consistent contact configurations with different "
+                    f"accelerations and equally continuous contact forces, {_fmt(combos[best])} and "
+                    f"{_fmt(combos[k])} (non-uniqueness of the rigid contact problem with Coulomb friction, "
+                    f"Painlevé type)")
+        combo = combos[best]
+        hint = np.where((combo == SLIDE)[:, None], hints[best], 0.0)
+        return rigid.make_phase(combo, rest=False, slip_hint=hint, starting=(combo == SLIDE) & resting)
+
+    # ---------------------------------------------------------------------------- impacts
+    def impact(self, t, y, striking: list[int]):
+        """Velocity jump at an impact of the `striking` corners; returns (y+, loss [J], record)."""
+        corners, cv, ke0 = self.kin(t, y)
+        near = corners[:, 2] < self.tol["z"] * self.L
+        involved = [i for i in range(4) if near[i] or i in striking]
+        normal_target = np.zeros(4)
+        for i in striking:
+            if cv[i, 2] < -self.tol["bounce"] * self.V:
+                normal_target[i] = -self.e * cv[i, 2]
+        vh = cv[:, :2]
+        speed = np.linalg.norm(vh, axis=1)
+        slipping = speed >= self.tol["v"] * self.V
+        dirs = np.where(slipping[:, None], vh / np.maximum(speed, 1e-300)[:, None], 0.0)
+        options = [[FREE, SLIDE, STICK] if i in involved else [FREE] for i in range(4)]
+        combos = [np.array(cb) for cb in itertools.product(*options)]
+        # Sliding impulses need a direction: the pre-impact slip, else the opposite of the sticking impulse.
+        modes = np.zeros((81, 4), dtype=np.int32)
+        sd = np.zeros((81, 4, 2))
+        for k, cb in enumerate(combos):
+            modes[k] = np.where(cb == SLIDE, STICK, cb)  # first pass: sticking impulses
+        _, _, imp0, _ = map(_np, _eval_impulses(y, self.sc, self.c, jnp.asarray(modes), jnp.asarray(sd),
+                                                jnp.asarray(normal_target), self.settings.rcond))
+        for k, cb in enumerate(combos):
+            modes[k] = cb
+            for i in range(4):
+                if cb[i] == SLIDE:
+                    if slipping[i]:
+                        sd[k, i] = dirs[i]
+                    else:
+                        p = -imp0[k, i, :2]
+                        n = np.linalg.norm(p)
+                        sd[k, i] = p / n if n > 0 else 0.0
+        v1, w1, imp, cv1 = map(_np, _eval_impulses(y, self.sc, self.c, jnp.asarray(modes), jnp.asarray(sd),
+                                                   jnp.asarray(normal_target), self.settings.rcond))
+        tP = self.tol["force"] * self.G * 1e-3  # impulses [N s]
+        tV = self.tol["v"] * self.V
+        consistent = []
+        for k, cb in enumerate(combos):
+            ok = True
+            for i in range(4):
+                Pz, Ph = imp[k, i, 2], np.linalg.norm(imp[k, i, :2])
+                if cb[i] != FREE and Pz < -tP:
+                    ok = False
+                elif cb[i] == STICK and Ph > self.mu * Pz + tP:
+                    ok = False
+                elif cb[i] == SLIDE and float(cv1[k, i, :2] @ sd[k, i]) < -tV:
+                    ok = False  # the friction impulse would reverse the slip: it sticks instead
+                elif cb[i] == FREE and i in involved and cv1[k, i, 2] < -tV:
+                    ok = False
+                if not ok:
+                    break
+            if ok:
+                consistent.append(k)
+        if not consistent:
+            raise RigidContactError(
+                f"t = {t:.9g} s: impact of corner(s) {[rigid.CORNERS[i] for i in striking]} has no consistent "
+                f"impulse (Painlevé-type impact inconsistency)")
+        consistent.sort(key=lambda k: (-int(np.sum(combos[k] != FREE)), -int(np.sum(combos[k] == STICK))))
+        best = consistent[0]
+        u_best = np.concatenate([v1[best], w1[best]])
+        for k in consistent[1:]:
+            if (np.sum(combos[k] != FREE), np.sum(combos[k] == STICK)) != (
+                    np.sum(combos[best] != FREE), np.sum(combos[best] == STICK)):
+                break
+            if np.linalg.norm(np.concatenate([v1[k], w1[k]]) - u_best) > 1e-6 * (np.linalg.norm(u_best) + tV):
+                raise RigidContactError(
+                    f"t = {t:.9g} s: impact of corner(s) {[rigid.CORNERS[i] for i in striking]} has two "
+                    f"consistent impulses, {_fmt(combos[best])} and {_fmt(combos[k])} (non-unique)")
+        y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
+                         (jnp.asarray(v1[best]), jnp.asarray(w1[best])))
+        _, _, ke1 = self.kin(t, y1)
+        loss = ke0 - ke1
+        if loss < -1e-9 * max(ke0, 1.0):
+            raise RigidContactError(
+                f"t = {t:.9g} s: the impact of corner(s) {[rigid.CORNERS[i] for i in striking]} would gain "
+                f"kinetic energy ({-loss:.4g} J) with restitution {self.e} and friction μ = {self.mu}: "
+                "Newton's restitution law is not energy-consistent here")
+        return y1, loss
+
+
+def coulomb_pattern(mats, in_contact, resting, mu: float, G: float, g: float, n_outer: int = 12,
+                    debug: bool = False):
+    """Which resting contacts stick and in which direction the others start to slide, for the contact set
+    `in_contact`, from Coulomb's law in its maximum-dissipation form.
+
+    For given normal forces Ñ the accelerations u̇ = (dv_C/dt, dω/dt) minimise the convex function
+
+        ½ u̇ᵀ M u̇ - f̃·u̇ + Σ_{resting contacts i} μ Ñ_i |a_i,h(u̇)|   subject to a_i,z(u̇) = target_i (contacts),
+
+    (f̃: applied forces plus the known friction -μÑ_i t̂_i of contacts that already slide), whose optimality
+    conditions are exactly: a resting corner with a_i,h = 0 sticks with |T_i| <= μÑ_i, one with a_i,h != 0
+    slides with T_i = -μÑ_i a_i,h / |a_i,h|. The norm is smoothed, sqrt(|a|² + ε²), and ε decreased from
+    1e-2 g to 1e-13 g with Newton's method in the null space of the contact constraints; the normal forces
+    are the (minimum-norm) multipliers and are iterated to a fixed point (`n_outer` times). Host-side numpy.
+
+    **Returns** `(modes, hints)`: per corner FREE / SLIDE / STICK and the sliding directions (4, 2).
+    """
+    M, f, jac, bias = mats.mass, mats.force, mats.jacobians, mats.bias
+    cv, target = mats.corner_velocity, mats.target
+    idx = np.nonzero(in_contact)[0]
+    modes = np.full(4, FREE, dtype=np.int32)
+    hints = np.zeros((4, 2))
+    if idx.size == 0:
+        return modes, hints
+    speed = np.linalg.norm(cv[:, :2], axis=1)
+    res = in_contact & resting
+    mov = in_contact & ~resting
+    tdir = np.zeros((4, 2))
+    tdir[mov] = cv[mov, :2] / speed[mov, None]
+    Gz = jac[idx, 2, :]                       # (n_c, 6)
+    rz = target[idx, 2] - bias[idx, 2]
+    u0 = np.linalg.lstsq(Gz, rz, rcond=None)[0]
+    _, sv, Vt = np.linalg.svd(Gz)
+    rank = int(np.sum(sv > 1e-10 * sv.max()))
+    Z = Vt[rank:].T                           # null space of the contact rows (6, 6 - rank)
+    A = jac[:, :2, :]                         # horizontal rows (4, 2, 6)
+    b = bias[:, :2]
+
+    def multipliers(u, Nt, eps):
+        r = M @ u - f
+        for i in np.nonzero(mov)[0]:
+            r = r - A[i].T @ (-mu * Nt[i] * tdir[i])
+        for i in np.nonzero(res)[0]:
+            s = A[i] @ u + b[i]
+            r = r - A[i].T @ (-mu * Nt[i] * s / np.sqrt(s @ s + eps**2))
+        lam = np.linalg.lstsq(Gz.T, r, rcond=None)[0]
+        N = np.zeros(4)
+        N[idx] = lam
+        return N
+
+    def minimise(Nt, q, eps_list):
+        w = mu * np.maximum(Nt, 0.0)
+        ft = f.copy()
+        for i in np.nonzero(mov)[0]:
+            ft = ft + A[i].T @ (-w[i] * tdir[i])
+        ri = np.nonzero(res)[0]
+
+        def phi(q, eps):
+            u = u0 + Z @ q
+            val = 0.5 * u @ M @ u - ft @ u
+            for i in ri:
+                s = A[i] @ u + b[i]
+                val += w[i] * np.sqrt(s @ s + eps**2)
+            return val
+
+        for eps in eps_list:
+            for _ in range(30):
+                u = u0 + Z @ q
+                grad = M @ u - ft
+                H = M.copy()
+                for i in ri:
+                    s = A[i] @ u + b[i]
+                    r = np.sqrt(s @ s + eps**2)
+                    grad = grad + w[i] * A[i].T @ (s / r)
+                    H = H + w[i] * A[i].T @ (np.eye(2) / r - np.outer(s, s) / r**3) @ A[i]
+                gq, Hq = Z.T @ grad, Z.T @ H @ Z
+                if gq.size == 0:
+                    break
+                d = -np.linalg.solve(Hq, gq)
+                f0, step = phi(q, eps), 1.0
+                while phi(q + step * d, eps) > f0 + 1e-4 * step * (gq @ d) and step > 1e-12:
+                    step *= 0.5
+                q = q + step * d
+                if np.linalg.norm(step * d) <= 1e-15 * (1.0 + np.linalg.norm(q)):
+                    break
+        return q
+
+    eps_final = 1e-13 * g
+    eps_all = list(g * 10.0 ** -np.arange(2.0, 13.5, 1.0))
+    q = np.zeros(Z.shape[1])
+    # Frictionless normal forces to start the fixed point.
+    Nt = multipliers(u0 + Z @ minimise(np.zeros(4), q, [eps_final]), np.zeros(4), eps_final)
+    for it in range(n_outer):
+        q = minimise(Nt, q, eps_all if it == 0 else [eps_final])
+        u = u0 + Z @ q
+        N_new = multipliers(u, Nt, eps_final)
+        if np.max(np.abs(N_new - Nt)) <= 1e-10 * G:
+            Nt = N_new
+            break
+        Nt = N_new
+    u = u0 + Z @ q
+    if debug:
+        ah = np.einsum("kij,j->ki", A, u) + b
+        print(f"    coulomb_pattern {in_contact.astype(int)}: outer it {it}, N = {np.round(Nt, 3)}, "
+              f"|a_h| = {np.linalg.norm(ah, axis=1)}, u = {u}")
+    for i in idx:
+        if mov[i]:
+            modes[i], hints[i] = SLIDE, tdir[i]
+        else:
+            ah = A[i] @ u + b[i]
+            na = np.linalg.norm(ah)
+            if na > 1e3 * eps_final:
+                modes[i], hints[i] = SLIDE, ah / na
+            else:
+                modes[i] = STICK
+    return modes, hints
+
+
+def _fmt(combo) -> str:
+    return " ".join(f"{c}:{rigid.MODE_NAMES[int(m)]}" for c, m in zip(rigid.CORNERS, combo, strict=True))
+
+
+_DEFAULT_TOL = dict(
+    z=1e-7,            # a corner is on the ground if Z < z L
+    v=1e-6,            # ... and |v_z| < v V; it rests if also |v_h| < v V
+    force=1e-7,        # consistency tolerance on forces [G]
+    accel=1e-7,        # consistency tolerance on accelerations [g]
+    rest=1e-9,         # tolerance of the rest conditions (dimensionless guards)
+    guard_start=1e-9,  # every guard starts at least this positive (offsets)
+    trigger=1e-6,      # guards within this of zero at an event count as fired
+    lookahead=1e-5,    # the look-ahead runs until the fired guards are below -lookahead
+    align=1e-2,
+    jump=1e-3,         # normal-force jumps closer than this [G] count as equally continuous        # a corner sliding from rest must accelerate along its sliding direction (relative)
+    bounce=1e-4,       # impacts slower than bounce V are plastic (no restitution): avoids Zeno bouncing
+)
+
+
+def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_save: int = 501,
+                   restitution: float = 0.0, rtol: float = 1e-8, atol: float = 1e-9, max_steps: int = 100_000,
+                   max_phases: int = 2000, settings: rigid.Settings | None = None,
+                   verbose: bool = False) -> RigidTrajectory:
+    """Simulate a lift with the rigid-body-on-rigid-ground model (paper §2) from rest at t = 0 to `t1`.
+
+    Not differentiable and not vmappable (the phase sequence is decided on the host).
+
+    **Arguments**
+    - `scenario`: a `Scenario`; the foundation's stiffness, damping and friction law are not used (the
+      ground is rigid, friction is exact Coulomb with μ = `foundation.friction_coefficient`).
+    - `t1`: end time [s] (default `scenario.t1`); `ts` saved times (start 0, end t1), default `n_save` even.
+    - `restitution`: Newton's coefficient e [-] of corner impacts (0: plastic).
+    - `rtol`, `atol`, `max_steps`: Tsit5 settings of each phase; `max_phases`: guard against Zeno sequences.
+    - `settings`: `physics.rigid.Settings` (Baumgarte β, slip blend velocity, pseudo-inverse cut-off).
+    - `verbose`: print each phase as it ends.
+
+    **Returns** a `RigidTrajectory` (with the phase log in `.phases`).
+
+    **Raises** `ScenarioError` for invalid input, `RigidContactError` for inconsistent or ambiguous
+    contact situations and solver failures.
+    """
+    require_x64()
+    if not isinstance(scenario, Scenario):
+        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
+    scenario.check()
+    if not (0.0 <= restitution <= 1.0):
+        raise ScenarioError(f"restitution (e) must be in [0, 1], got {restitution}")
+    if t1 is None:
+        t1 = scenario.t1 if ts is None else float(np.asarray(ts)[-1])
+    t1 = float(t1)
+    if not (np.isfinite(t1) and t1 > 0):
+        raise ScenarioError(f"t1 must be a positive finite time [s], got {t1}")
+    if ts is None:
+        ts = np.linspace(0.0, t1, int(n_save))
+    ts = np.asarray(ts, dtype=np.float64)
+    if ts.ndim != 1 or ts.size < 2 or ts[0] != 0.0 or np.any(np.diff(ts) <= 0) or abs(ts[-1] - t1) > 1e-12:
+        raise ScenarioError("ts must be a 1-D, strictly increasing array from 0 to t1 [s]")
+    settings = rigid.Settings() if settings is None else settings
+    options = _Options(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps), event_atol=1e-10)
+    y0, c = rigid.initial_state(scenario)
+    drv = _Driver(scenario, c, settings, options, restitution, dict(_DEFAULT_TOL))
+    drv.debug = verbose == "debug"
+
+    n_t = ts.size
+    filled = np.zeros(n_t, dtype=bool)
+    saved_states: list = [None] * n_t
+    saved_phase = np.zeros(n_t, dtype=np.int64)
+    saved_impact = np.zeros(n_t)
+    records: list[PhaseRecord] = []
+    phases: list[Phase] = []
+    impact_total = 0.0
+
+    t, y = 0.0, y0
+    phase = drv.select(t, y, "start")
+    while True:
+        if len(records) >= max_phases:
+            raise RigidContactError(
+                f"more than max_phases = {max_phases} phases before t = {t:.9g} s (a Zeno sequence of "
+                f"events?). Last phases:\n" + "\n".join(str(r) for r in records[-8:]))
+        y, loss = drv.project(t, y, phase)
+        impact_total += loss
+        phase = drv.with_offsets(t, y, phase)
+        sts, sys_, result = drv.solve(y, phase, t, t1, ts)
+        last = int(np.nonzero(np.isfinite(sts))[0][-1])  # the final state is saved after the last ts kept
+        t_end = float(sts[last])
+        y_end = _tree_index(sys_, last)
+        ok = result == diffrax.RESULTS.successful
+        event = result == diffrax.RESULTS.event_occurred
+        if not (bool(ok) or bool(event)):
+            raise RigidContactError(f"the phase starting at t = {t:.9g} s failed: {result} "
+                                    f"(raise max_steps = {max_steps} or loosen rtol/atol)")
+        idx = len(phases)
+        phases.append(phase)
+        # Saved times of this phase: t <= ts <= t_end not yet filled.
+        for k in np.nonzero((ts >= t) & (ts <= t_end) & ~filled)[0]:
+            saved_states[k] = _tree_index(sys_, k)
+            saved_phase[k] = idx
+            saved_impact[k] = impact_total
+            filled[k] = True
+        modes = tuple(rigid.MODE_NAMES[int(m)] for m in _np(phase.contact))
+        if not bool(event) or t_end >= t1:
+            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), "t1", y_end))
+            break
+        g = drv.guards(t_end, y_end, phase) + _np(phase.guard_offset)
+        fired = [k for k in range(rigid.N_GUARDS) if g[k] <= drv.tol["trigger"]]
+        if not fired:
+            fired = [int(np.argmin(g))]
+        end = ",".join(rigid.GUARD_NAMES[k] for k in fired)
+        contact = _np(phase.contact)
+        corners, cv, _ = drv.kin(t_end, y_end)
+        striking = [k for k in fired if k < 4 and contact[k] == FREE and not bool(phase.rest)]
+        hard = [i for i in striking if cv[i, 2] < -drv.tol["v"] * drv.V]
+        if hard:
+            y_before = y_end
+            y_end, loss = drv.impact(t_end, y_end, hard)
+            impact_total += loss
+            end += f" impact:{''.join(rigid.CORNERS[i] for i in hard)} ({loss:.4g} J)"
+            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before))
+            new = drv.select(t_end, y_end, "after impact")
+        else:
+            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_end))
+            new = _transition(drv, t_end, y_end, phase, fired, ts)
+        if verbose:
+            print(records[-1], f"[{drv.accepted} steps so far]", flush=True)
+        t, y, phase = t_end, y_end, new
+
+    for k in np.nonzero(~filled)[0]:  # cannot happen unless ts extends past the last phase
+        raise RigidContactError(f"saved time {ts[k]} s was not reached")
+    states = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *saved_states)
+    # Outputs: once with every sample's motion phase (rest samples get a dummy one) and, if there are rest
+    # samples, once in the rest configuration; then pick per sample.
+    is_rest = np.array([phases[i].rest for i in saved_phase])
+    dummy = rigid.make_phase([STICK] * 4)
+    motion = [dummy if phases[i].rest else phases[i] for i in saved_phase]
+    motion_batch = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *motion)
+    out = _outputs(jnp.asarray(ts), states, scenario, c, motion_batch, settings)
+    if is_rest.any():
+        rest_batch = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs),
+                                            *[rigid.make_phase([STICK] * 4, rest=True)] * n_t)
+        out_rest = _outputs(jnp.asarray(ts), states, scenario, c, rest_batch, settings)
+        mask = jnp.asarray(is_rest)
+        out = jax.tree_util.tree_map(
+            lambda a, b: jnp.where(mask.reshape((-1,) + (1,) * (a.ndim - 1)), b, a), out, out_rest)
+    euler = out.euler.at[:, :2].set(jnp.unwrap(out.euler[:, :2], axis=0))
+    return RigidTrajectory(
+        ts=jnp.asarray(ts), position=states.position, velocity=states.velocity, euler=euler,
+        angular_velocity=states.angular_velocity, corners=out.corners, normal_forces=out.normal,
+        friction_forces=out.friction, ground_reaction=jnp.sum(out.normal, axis=-1),
+        rope_tension=out.rope_tension, tip_position=states.tip_position, energy=out.energy,
+        hoist_work=states.hoist_work, damping_loss=states.damping_loss, friction_work=states.friction_work,
+        impact_loss=jnp.asarray(saved_impact), states=states, status=jnp.asarray(SolveStatus.OK, jnp.int32),
+        num_accepted_steps=jnp.asarray(drv.accepted), num_rejected_steps=jnp.asarray(drv.rejected),
+        phase_index=jnp.asarray(saved_phase), phases=tuple(records))
+
+
+def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[int], ts) -> Phase:
+    """The next phase after the guards `fired` of `phase` reached zero at (t_e, y_e) (no impact)."""
+    contact, starting = _np(phase.contact), _np(phase.starting)
+    _, cv, _ = drv.kin(t_e, y_e)
+    speed = np.linalg.norm(cv[:, :2], axis=1)
+    tangential = [k - 4 for k in fired if 4 <= k < 8 and contact[k - 4] == SLIDE and not phase.rest]
+    # A slip started from rest has reached 2 v_stop: the same configuration, now an ordinary slide.
+    grown = [i for i in tangential if starting[i] and speed[i] >= 1.5 * drv.v_stop]
+    if grown and len(grown) == len(fired):
+        hint, start = _np(phase.slip_hint).copy(), starting.copy()
+        for i in grown:
+            hint[i], start[i] = cv[i, :2] / speed[i], False
+        return rigid.make_phase(contact, rest=False, slip_hint=hint, starting=start)
+    where = f"after {','.join(rigid.GUARD_NAMES[k] for k in fired)}"
+    # A slip that died out (or turned back): choose at the event itself (the corner is now resting).
+    if any(speed[i] < 1.5 * drv.v_stop for i in tangential):
+        return drv.select(t_e, y_e, where, phase)
+    # Otherwise look ahead: continue the old phase (guards disabled) until the fired guards are clearly
+    # negative, and choose there.
+    blind = eqx.tree_at(lambda p: p.guard_offset, phase, jnp.full(rigid.N_GUARDS, 1e6))
+    dt = 1e-6
+    y_la, t_la = y_e, t_e
+    for _ in range(11):
+        t_la = t_e + dt
+        sts, sys_, result = drv.solve(y_e, blind, t_e, t_la, ts)
+        y_la = _tree_index(sys_, int(np.nonzero(np.isfinite(sts))[0][-1]))
+        g = drv.guards(t_la, y_la, phase)
+        if all(g[k] < -drv.tol["lookahead"] for k in fired):
+            break
+        dt *= 2.0
+    return drv.select(t_la, y_la, where, phase)
