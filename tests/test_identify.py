@@ -107,6 +107,30 @@ def test_unidentifiable_parameter_reported(scenario, clean):
     assert "identifiable: NO" in res.summary()
 
 
+def test_collinear_parameters_give_condition_number_and_direction():
+    """Two parameters that enter only through k + 2 h (relative units): the report names the direction."""
+    rng = np.random.default_rng(0)
+    a = rng.normal(size=200)
+    theta = np.array([1.5e7, 2e6])  # k [N/m], h [N s/m]
+    Jrel = np.stack([a, 2 * a + 1e-7 * rng.normal(size=200)], axis=1)  # d r / d(Δθ/θ)
+    rep = ident.covariance_report(Jrel / theta, rng.normal(size=200), theta,
+                                  ["foundation.stiffness", "foundation.damping"], noise_known=True)
+    assert not rep["identifiable"]
+    assert rep["condition_number"] > 1e12
+    w = rep["weak_direction"]
+    # The null direction of [a, 2a] is (2, -1)/√5, normalised with its largest component positive.
+    assert w["foundation.stiffness"] == pytest.approx(2 / math.sqrt(5), abs=1e-6)
+    assert w["foundation.damping"] == pytest.approx(-1 / math.sqrt(5), abs=1e-6)
+    msg = rep["warnings"][0]
+    assert "near-singular" in msg and "+0.89 Δk/k -0.45 Δh/h" in msg
+    assert rep["correlation"][0, 1] == pytest.approx(-1.0, abs=1e-6)
+    # Well-conditioned columns: covariance = (JᵀJ)⁻¹ exactly, in the parameters' own units.
+    J = rng.normal(size=(200, 2)) / theta
+    rep = ident.covariance_report(J, rng.normal(size=200), theta, ["k", "h"], noise_known=True)
+    assert rep["identifiable"] and not rep["warnings"]
+    np.testing.assert_allclose(rep["covariance"], np.linalg.inv(J.T @ J), rtol=1e-10)
+
+
 def test_cli_identify_writes_estimates(scenario, clean, tmp_path):
     from jaxhoist.apps.cli import main
 

@@ -861,54 +861,15 @@ def identify(
     run = runs[best]
 
     # ---- covariance and identifiability at the optimum
-    p = theta.size
-    dof = n_res - p
-    rss = float(np.sum(r**2))
-    chi2 = rss / dof
-    sigma2 = 1.0 if noise_known else chi2
     D = _flat_dtheta_dz(plist, z)
     J_theta = J / D[None, :]
-    rel_scale = np.where(theta != 0, np.abs(theta), np.concatenate([p_.scale.ravel() for p_ in plist]))
-    Jn = J_theta * rel_scale[None, :]  # sensitivity to relative changes Δθ/θ
-    _, Sn, Vtn = np.linalg.svd(Jn, full_matrices=False)
-    cond = float((Sn[0] / Sn[-1]) ** 2) if Sn[-1] > 0 else math.inf
-    tiny = Sn <= Sn[0] * 1e-12
-    inv_s2 = np.where(tiny, 0.0, 1.0 / np.where(tiny, 1.0, Sn) ** 2)
-    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
-        cov = sigma2 * ((Vtn.T * inv_s2) @ Vtn) * rel_scale[:, None] * rel_scale[None, :]
-        if np.any(tiny):  # singular: parameters on a null direction have no finite error
-            null = np.any(np.abs(Vtn[tiny]) > 1e-6, axis=0)
-            cov[null, :] = np.inf
-            cov[:, null] = np.inf
-        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
-        corr = cov / np.outer(se, se)
-    corr[~np.isfinite(corr)] = np.nan
-    np.fill_diagonal(corr, 1.0)
-
     flat_names = [n for p_ in plist for n in p_.element_names()]
-    weak = Vtn[-1] * np.sign(Vtn[-1][np.argmax(np.abs(Vtn[-1]))])
-    weak_direction = {n: float(c) for n, c in zip(flat_names, weak, strict=True)}
-    rel_se = se / np.where(theta != 0, np.abs(theta), 1.0)
-    poorly = [n for n, e in zip(flat_names, rel_se, strict=True) if not (e <= max_relative_se)]
-    identifiable = not poorly and cond <= condition_limit
-    if not identifiable:
-        what = (f"{', '.join(poorly)} (relative standard error "
-                f"{', '.join(f'{100 * e:.3g} %' for e in rel_se[[flat_names.index(n) for n in poorly]])})"
-                if poorly else "the parameters jointly")
-        info = float(Sn[0] ** 2 / sigma2) if sigma2 > 0 else math.inf
-        if p == 1:
-            why = (f"the fitted signals barely depend on it (information JᵀJ/σ² = {info:.3g} per unit relative "
-                   f"change Δθ/θ)")
-        else:
-            direction = " ".join(f"{c:+.2f} Δ{_short(n)}/{_short(n)}" for n, c in weak_direction.items()
-                                 if abs(c) >= 0.05)
-            kind = "singular" if math.isinf(cond) else "near-singular" if cond > condition_limit else "weak"
-            why = (f"the information matrix JᵀJ is {kind} (condition number {cond:.3g} in relative units); the "
-                   f"poorly determined direction is {direction} (moving along it barely changes the fit)")
-        warnings.insert(0, f"the data cannot identify {what}: {why}")
-    elif cond > 1e8:
-        warnings.append(f"the information matrix is ill-conditioned (condition number {cond:.3g}); "
-                        f"poorly determined direction {weak_direction}")
+    rep = covariance_report(J_theta, r, theta, flat_names, noise_known=noise_known,
+                            scales=np.concatenate([p_.scale.ravel() for p_ in plist]),
+                            max_relative_se=max_relative_se, condition_limit=condition_limit)
+    sigma2, chi2, cov, se, corr = rep["sigma2"], rep["chi2_reduced"], rep["covariance"], rep["std_errors"], rep["correlation"]
+    cond, weak_direction, identifiable = rep["condition_number"], rep["weak_direction"], rep["identifiable"]
+    warnings = rep["warnings"] + warnings
     if not run.converged:
         warnings.append(f"Levenberg-Marquardt did not converge ({run.message}) after {run.iterations} "
                         f"iterations; raise max_iterations or try n_starts > 1")
@@ -933,6 +894,73 @@ def identify(
         starts=runs, scenario=fitted_scenario, wall_time=time.perf_counter() - wall0,
         compile_time=compile_time, fit_time=sum(s_.wall_time for s_ in runs), jacobian=J_theta,
         units={n: _units_of(n) for n in flat_names} | {s: SIGNALS[s].unit for s in names})
+
+
+def covariance_report(J: np.ndarray, r: np.ndarray, theta: np.ndarray, names: Sequence[str], *,
+                      noise_known: bool, scales: np.ndarray | None = None, max_relative_se: float = 0.5,
+                      condition_limit: float = 1e12) -> dict[str, Any]:
+    """Gauss-Newton covariance and identifiability at a least-squares optimum (host side, numpy).
+
+    **Arguments**
+    - `J`: d(whitened residual)/dθ, (n, p); `r`: the whitened residuals (n,); `theta`: θ̂ (p,); `names`.
+    - `noise_known`: residuals whitened by true noise levels (σ² = 1); else σ² = RSS/(n - p).
+    - `scales`: the size of a parameter that is zero at θ̂, for relative units (default 1).
+
+    **Returns** a dict: `covariance` σ²(JᵀJ)⁻¹ (p, p), `std_errors`, `correlation`, `sigma2`,
+    `chi2_reduced` = RSS/(n - p), `condition_number` of JᵀJ in relative units (columns scaled by |θ̂|),
+    `weak_direction` (its least-determined unit vector, by name, largest component positive),
+    `identifiable` (no relative standard error above `max_relative_se` and condition number at most
+    `condition_limit`), `warnings` (a sentence naming what cannot be identified, and why). Parameters on an
+    exactly singular direction get infinite standard errors.
+    """
+    J, r, theta = (np.asarray(x, dtype=np.float64) for x in (J, r, theta))
+    n, p = J.shape
+    scales = np.ones(p) if scales is None else np.asarray(scales, dtype=np.float64)
+    chi2 = float(np.sum(r**2)) / max(n - p, 1)
+    sigma2 = 1.0 if noise_known else chi2
+    rel_scale = np.where(theta != 0, np.abs(theta), scales)
+    Jn = J * rel_scale[None, :]  # sensitivity to relative changes Δθ/θ
+    _, Sn, Vtn = np.linalg.svd(Jn, full_matrices=False)
+    cond = float((Sn[0] / Sn[-1]) ** 2) if Sn[-1] > 0 else math.inf
+    tiny = Sn <= Sn[0] * 1e-12
+    inv_s2 = np.where(tiny, 0.0, 1.0 / np.where(tiny, 1.0, Sn) ** 2)
+    with np.errstate(invalid="ignore", divide="ignore", over="ignore"):
+        cov = sigma2 * ((Vtn.T * inv_s2) @ Vtn) * rel_scale[:, None] * rel_scale[None, :]
+        if np.any(tiny):  # singular: parameters on a null direction have no finite error
+            null = np.any(np.abs(Vtn[tiny]) > 1e-6, axis=0)
+            cov[null, :] = np.inf
+            cov[:, null] = np.inf
+        se = np.sqrt(np.maximum(np.diag(cov), 0.0))
+        corr = cov / np.outer(se, se)
+    corr[~np.isfinite(corr)] = np.nan
+    np.fill_diagonal(corr, 1.0)
+    weak = Vtn[-1] * np.sign(Vtn[-1][np.argmax(np.abs(Vtn[-1]))])
+    weak_direction = {str(k): float(c) for k, c in zip(names, weak, strict=True)}
+    rel_se = se / np.where(theta != 0, np.abs(theta), 1.0)
+    poorly = [k for k, e in zip(names, rel_se, strict=True) if not (e <= max_relative_se)]
+    identifiable = not poorly and cond <= condition_limit
+    warnings = []
+    if not identifiable:
+        what = (f"{', '.join(poorly)} (relative standard error "
+                f"{', '.join(f'{100 * rel_se[list(names).index(k)]:.3g} %' for k in poorly)})"
+                if poorly else "the parameters jointly")
+        if p == 1:
+            info = float(Sn[0] ** 2 / sigma2) if sigma2 > 0 else math.inf
+            why = (f"the fitted signals barely depend on it (information JᵀJ/σ² = {info:.3g} per unit relative "
+                   f"change Δθ/θ)")
+        else:
+            direction = " ".join(f"{c:+.2f} Δ{_short(k)}/{_short(k)}" for k, c in weak_direction.items()
+                                 if abs(c) >= 0.05)
+            kind = "singular" if math.isinf(cond) else "near-singular" if cond > condition_limit else "weak"
+            why = (f"the information matrix JᵀJ is {kind} (condition number {cond:.3g} in relative units); the "
+                   f"poorly determined direction is {direction} (moving along it barely changes the fit)")
+        warnings.append(f"the data cannot identify {what}: {why}")
+    elif cond > 1e8:
+        warnings.append(f"the information matrix is ill-conditioned (condition number {cond:.3g}); "
+                        f"poorly determined direction {weak_direction}")
+    return {"covariance": cov, "std_errors": se, "correlation": corr, "sigma2": sigma2, "chi2_reduced": chi2,
+            "condition_number": cond, "weak_direction": weak_direction, "identifiable": identifiable,
+            "warnings": warnings}
 
 
 def _short(name: str) -> str:
