@@ -38,8 +38,13 @@ from jaxhoist.apps.identify import (  # noqa: E402
 from jaxhoist.io.measurement import write_measurement  # noqa: E402
 
 PARAMS = ["mu", "k", "h", "c_l", "b_l"]
-PATHS = {"mu": "foundation.friction_coefficient", "k": "foundation.stiffness", "h": "foundation.damping",
-         "c_l": "rope.stiffness", "b_l": "rope.damping"}
+PATHS = {
+    "mu": "foundation.friction_coefficient",
+    "k": "foundation.stiffness",
+    "h": "foundation.damping",
+    "c_l": "rope.stiffness",
+    "b_l": "rope.damping",
+}
 PERTURB = {"mu": 1.3, "k": 0.7, "h": 1.3, "c_l": 0.7, "b_l": 1.3}  # ±30 %, alternating
 
 
@@ -51,8 +56,12 @@ def main(argv=None):
     p.add_argument("--seed", type=int, default=42)
     p.add_argument("--rtol", type=float, default=1e-8, help="ODE rtol for both fits (default 1e-8)")
     p.add_argument("--atol", type=float, default=1e-10, help="ODE atol for both fits (default 1e-10)")
-    p.add_argument("--diff-step", type=float, default=1e-4,
-                   help="scipy's relative finite-difference step in the log variables (default 1e-4)")
+    p.add_argument(
+        "--diff-step",
+        type=float,
+        default=1e-4,
+        help="scipy's relative finite-difference step in the log variables (default 1e-4)",
+    )
     p.add_argument("--no-scipy", action="store_true")
     args = p.parse_args(argv)
     out = Path(args.out)
@@ -65,15 +74,28 @@ def main(argv=None):
     solver = dict(rtol=args.rtol, atol=args.atol, max_steps=1_000_000)
 
     w = time.perf_counter()
-    meas = synthetic_measurement(truth_sc, t, ["position", "rope_tension"],
-                                 noise={"position": 0.005, "rope_tension": "1%"}, seed=args.seed,
-                                 source="paper-4.2 synthetic", **solver)
+    meas = synthetic_measurement(
+        truth_sc,
+        t,
+        ["position", "rope_tension"],
+        noise={"position": 0.005, "rope_tension": "1%"},
+        seed=args.seed,
+        source="paper-4.2 synthetic",
+        **solver,
+    )
     t_synth = time.perf_counter() - w
-    csv = write_measurement(out / "measurement.csv", meas, units={"rope_tension": "kN"},
-                            description=f"paper-4.2, 0..{t1:g} s at 50 Hz, 5 mm position noise, 1 % tension noise, "
-                                        f"seed {args.seed}")
-    print(f"measurement: {t.size} samples x {len(meas.names)} signals, 0..{t1:g} s -> {csv} "
-          f"(simulated in {t_synth:.2f} s incl. compile)", flush=True)
+    csv = write_measurement(
+        out / "measurement.csv",
+        meas,
+        units={"rope_tension": "kN"},
+        description=f"paper-4.2, 0..{t1:g} s at 50 Hz, 5 mm position noise, 1 % tension noise, "
+        f"seed {args.seed}",
+    )
+    print(
+        f"measurement: {t.size} samples x {len(meas.names)} signals, 0..{t1:g} s -> {csv} "
+        f"(simulated in {t_synth:.2f} s incl. compile)",
+        flush=True,
+    )
 
     # ---- jaxhoist: LM with forward-mode sensitivities (reads the CSV back: units and noise from the JSON)
     res = identify(truth_sc, csv, PARAMS, start=start, t1=t1, max_iterations=200, **solver)
@@ -95,14 +117,33 @@ def main(argv=None):
             return np.where(np.isfinite(r), r, 1e6)
 
         w = time.perf_counter()
-        sol = scipy.optimize.least_squares(fun, np.zeros(len(PARAMS)), jac="2-point", diff_step=args.diff_step,
-                                           method="trf", xtol=1e-8, ftol=1e-8, gtol=1e-8, max_nfev=400)
+        sol = scipy.optimize.least_squares(
+            fun,
+            np.zeros(len(PARAMS)),
+            jac="2-point",
+            diff_step=args.diff_step,
+            method="trf",
+            xtol=1e-8,
+            ftol=1e-8,
+            gtol=1e-8,
+            max_nfev=400,
+        )
         t_sp = time.perf_counter() - w
-        sp = {"estimate": dict(zip(PARAMS, (th0 * np.exp(sol.x)).tolist(), strict=True)),
-              "cost": float(sol.cost), "nfev": int(sol.nfev), "njev": int(sol.njev or 0),
-              "residual_evaluations": nfev[0], "time_s": t_sp, "status": int(sol.status), "message": sol.message}
-        print(f"scipy least_squares: {sol.message} cost {sol.cost:.6g}, {sol.nfev} fev + {sol.njev} jev "
-              f"({nfev[0]} forward solves), {t_sp:.2f} s", flush=True)
+        sp = {
+            "estimate": dict(zip(PARAMS, (th0 * np.exp(sol.x)).tolist(), strict=True)),
+            "cost": float(sol.cost),
+            "nfev": int(sol.nfev),
+            "njev": int(sol.njev or 0),
+            "residual_evaluations": nfev[0],
+            "time_s": t_sp,
+            "status": int(sol.status),
+            "message": sol.message,
+        }
+        print(
+            f"scipy least_squares: {sol.message} cost {sol.cost:.6g}, {sol.nfev} fev + {sol.njev} jev "
+            f"({nfev[0]} forward solves), {t_sp:.2f} s",
+            flush=True,
+        )
 
     # ---- forward-mode Jacobian vs central differences at the estimate (relative steps 1e-3)
     J_ad = res.jacobian
@@ -113,17 +154,25 @@ def main(argv=None):
         tp[i] += h
         tm[i] -= h
         J_fd[:, i] = (fn(tp) - fn(tm)) / (2 * h)
-    jac_err = {k: float(np.linalg.norm(J_ad[:, i] - J_fd[:, i]) / np.linalg.norm(J_fd[:, i]))
-               for i, k in enumerate(PARAMS)}
+    jac_err = {
+        k: float(np.linalg.norm(J_ad[:, i] - J_fd[:, i]) / np.linalg.norm(J_fd[:, i]))
+        for i, k in enumerate(PARAMS)
+    }
 
     # ---- report
     rows = []
     for k in PARAMS:
         z = (est[k] - truth[k]) / se[k]
-        rows.append(f"| {k} ({PATHS[k]}) | {truth[k]:.6g} | {start[k]:.6g} | {est[k]:.6g} | {se[k]:.3g} "
-                    f"({100 * se[k] / abs(est[k]):.2g} %) | {100 * (est[k] / truth[k] - 1):+.3f} % | {z:+.2f} | "
-                    + (f"{sp['estimate'][k]:.6g} ({100 * (sp['estimate'][k] / truth[k] - 1):+.3f} %) |" if sp else "- |")
-                    + f" {100 * jac_err[k]:.2g} % |")
+        rows.append(
+            f"| {k} ({PATHS[k]}) | {truth[k]:.6g} | {start[k]:.6g} | {est[k]:.6g} | {se[k]:.3g} "
+            f"({100 * se[k] / abs(est[k]):.2g} %) | {100 * (est[k] / truth[k] - 1):+.3f} % | {z:+.2f} | "
+            + (
+                f"{sp['estimate'][k]:.6g} ({100 * (sp['estimate'][k] / truth[k] - 1):+.3f} %) |"
+                if sp
+                else "- |"
+            )
+            + f" {100 * jac_err[k]:.2g} % |"
+        )
     within = {k: abs(est[k] - truth[k]) <= 2 * se[k] for k in PARAMS}
     one_pct = {k: abs(est[k] / truth[k] - 1) <= 0.01 for k in ("mu", "c_l")}
     cmd = "python " + " ".join([sys.argv[0], *(argv if argv is not None else sys.argv[1:])])
@@ -132,17 +181,22 @@ def main(argv=None):
         "",
         f"Command: `{cmd}`  ",
         f"Data: {t.size} samples at 50 Hz of position_x/y/z (σ = 5 mm) and rope_tension (σ = 1 % of its RMS "
-        f"= {meas.noise['rope_tension']:.4g} N), seed {args.seed}; ODE rtol {args.rtol:g}, atol {args.atol:g}.",
+        f"= {meas.noise['rope_tension']:.4g} N), seed {args.seed}; "
+        f"ODE rtol {args.rtol:g}, atol {args.atol:g}.",
         "",
-        "| parameter | truth | start (±30 %) | estimate | std error | error | (est - truth)/SE | scipy FD estimate | "
-        "AD vs FD Jacobian |",
+        "| parameter | truth | start (±30 %) | estimate | std error | error | (est - truth)/SE | "
+        "scipy FD estimate | AD vs FD Jacobian |",
         "|---|---|---|---|---|---|---|---|---|",
         *rows,
         "",
         "| | jaxhoist LM (forward sensitivities) | scipy least_squares (2-point FD) |",
         "|---|---|---|",
         f"| iterations | {res.iterations} LM steps ({res.accepted_steps} accepted) | "
-        + (f"{sp['nfev']} fev + {sp['njev']} Jacobians ({sp['residual_evaluations']} forward solves) |" if sp else "- |"),
+        + (
+            f"{sp['nfev']} fev + {sp['njev']} Jacobians ({sp['residual_evaluations']} forward solves) |"
+            if sp
+            else "- |"
+        ),
         f"| cost 0.5Σr² | {res.cost:.6g} | " + (f"{sp['cost']:.6g} |" if sp else "- |"),
         f"| wall time | {res.fit_time:.2f} s fit + {res.compile_time:.2f} s compile | "
         + (f"{sp['time_s']:.2f} s (forward solve compiled beforehand) |" if sp else "- |"),
@@ -152,14 +206,17 @@ def main(argv=None):
         f"Within 2 SE of the truth: {', '.join(f'{k}: {v}' for k, v in within.items())}.  ",
         f"μ and c_l within 1 %: {', '.join(f'{k}: {v}' for k, v in one_pct.items())}.  ",
         f"Condition number of JᵀJ (relative units): {res.condition_number:.3g}.  ",
-        "AD vs FD Jacobian: ‖J_fwd - J_cd‖/‖J_cd‖ per column at the estimate (central differences, relative step "
-        "1e-3).",
+        "AD vs FD Jacobian: ‖J_fwd - J_cd‖/‖J_cd‖ per column at the estimate (central differences, "
+        "relative step 1e-3).",
         "",
         "Correlations:",
         "",
         "| | " + " | ".join(PARAMS) + " |",
         "|---|" + "---|" * len(PARAMS),
-        *[f"| {k} | " + " | ".join(f"{c:+.3f}" for c in res.correlation[i]) + " |" for i, k in enumerate(PARAMS)],
+        *[
+            f"| {k} | " + " | ".join(f"{c:+.3f}" for c in res.correlation[i]) + " |"
+            for i, k in enumerate(PARAMS)
+        ],
     ]
     if res.warnings:
         md += ["", "Warnings:", "", *[f"- {w_}" for w_ in res.warnings]]
@@ -167,9 +224,23 @@ def main(argv=None):
     print(text)
     name = "identify_paper42_quick" if args.quick else "identify_paper42"
     (out / f"{name}.md").write_text(text)
-    (out / f"{name}.json").write_text(json.dumps(
-        {"truth": truth, "start": start, "jaxhoist": res.to_dict(), "scipy": sp, "jacobian_rel_error": jac_err,
-         "within_2se": within, "within_1pct": one_pct, "command": cmd}, indent=2, default=str) + "\n")
+    (out / f"{name}.json").write_text(
+        json.dumps(
+            {
+                "truth": truth,
+                "start": start,
+                "jaxhoist": res.to_dict(),
+                "scipy": sp,
+                "jacobian_rel_error": jac_err,
+                "within_2se": within,
+                "within_1pct": one_pct,
+                "command": cmd,
+            },
+            indent=2,
+            default=str,
+        )
+        + "\n"
+    )
     fig = plot_fit(res)
     fig.savefig(out / f"{name}_fit.png", dpi=110)
     print(f"wrote {out / (name + '.md')}, {out / (name + '.json')}, {out / (name + '_fit.png')}")

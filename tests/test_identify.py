@@ -39,16 +39,21 @@ def clean(scenario):
 
 def _noisy(clean, seed):
     rng = np.random.default_rng(seed)
-    return Measurement(clean.t, {k: v + rng.normal(0.0, SIGMA, v.shape) for k, v in clean.signals.items()},
-                       {k: SIGMA for k in clean.signals}, f"draw {seed}")
+    return Measurement(
+        clean.t,
+        {k: v + rng.normal(0.0, SIGMA, v.shape) for k, v in clean.signals.items()},
+        {k: SIGMA for k in clean.signals},
+        f"draw {seed}",
+    )
 
 
 # ------------------------------------------------------------------------------------------ fitting
 
 
 def test_mu_recovered_noise_free(scenario, clean):
-    res = identify(scenario, clean, ["mu"], start={"mu": 0.3}, noise={"position": SIGMA},
-                   lm_rtol=1e-10, lm_atol=1e-10)
+    res = identify(
+        scenario, clean, ["mu"], start={"mu": 0.3}, noise={"position": SIGMA}, lm_rtol=1e-10, lm_atol=1e-10
+    )
     assert res.converged
     assert res.solve_status == jh.SolveStatus.OK
     assert abs(res.estimates["foundation.friction_coefficient"] / MU - 1.0) < 1e-6
@@ -63,7 +68,9 @@ def test_covariance_matches_scatter(scenario, clean):
     n = 12
     fits = [identify(scenario, _noisy(clean, 0), ["mu"], noise={"position": SIGMA})]
     compiled = len(ident._COMPILED)
-    fits += [identify(scenario, _noisy(clean, seed), ["mu"], noise={"position": SIGMA}) for seed in range(1, n)]
+    fits += [
+        identify(scenario, _noisy(clean, seed), ["mu"], noise={"position": SIGMA}) for seed in range(1, n)
+    ]
     assert len(ident._COMPILED) == compiled  # new data values reuse the compiled core
     assert all(f.compile_time < 0.5 for f in fits[1:])
     est = np.array([f.values[0] for f in fits])
@@ -113,8 +120,13 @@ def test_collinear_parameters_give_condition_number_and_direction():
     a = rng.normal(size=200)
     theta = np.array([1.5e7, 2e6])  # k [N/m], h [N s/m]
     Jrel = np.stack([a, 2 * a + 1e-7 * rng.normal(size=200)], axis=1)  # d r / d(Δθ/θ)
-    rep = ident.covariance_report(Jrel / theta, rng.normal(size=200), theta,
-                                  ["foundation.stiffness", "foundation.damping"], noise_known=True)
+    rep = ident.covariance_report(
+        Jrel / theta,
+        rng.normal(size=200),
+        theta,
+        ["foundation.stiffness", "foundation.damping"],
+        noise_known=True,
+    )
     assert not rep["identifiable"]
     assert rep["condition_number"] > 1e12
     w = rep["weak_direction"]
@@ -136,8 +148,9 @@ def test_cli_identify_writes_estimates(scenario, clean, tmp_path):
 
     csv = write_measurement(tmp_path / "lift.csv", _noisy(clean, 100), units={"position_z": "mm"})
     out = tmp_path / "fit"
-    code = main(["identify", "paper-4.2", str(csv), "--fit", "mu", "--start", "mu=0.3", "--out", str(out),
-                 "--quiet"])
+    code = main(
+        ["identify", "paper-4.2", str(csv), "--fit", "mu", "--start", "mu=0.3", "--out", str(out), "--quiet"]
+    )
     assert code == 0
     doc = json.loads((out / "estimates.json").read_text())
     est = doc["estimates"]["foundation.friction_coefficient"]
@@ -188,7 +201,10 @@ def test_reader_converts_units_and_reads_side_file(tmp_path):
         ("t [s],positon_x [m]\n0,1\n0.1,1\n", r"unknown signal 'positon_x' \(did you mean 'position_x'\?\)"),
         ("t [s],rope_tenson [N]\n0,1\n0.1,1\n", r"did you mean 'rope_tension'"),
         ("t [s],position_x [kg]\n0,1\n0.1,1\n", r"column 'position_x': unknown unit 'kg'; expected m"),
-        ("t [s],position_x [N]\n0,1\n0.1,1\n", r"column 'position_x': wrong unit 'N' \(a unit of N\); expected m"),
+        (
+            "t [s],position_x [N]\n0,1\n0.1,1\n",
+            r"column 'position_x': wrong unit 'N' \(a unit of N\); expected m",
+        ),
         ("t [s],euler_phi [m]\n0,1\n0.1,1\n", r"column 'euler_phi': wrong unit 'm'.*expected rad"),
         ("t [s],position_x\n0,1\n0.1,1\n", r"column 'position_x' has no unit"),
         ("time [s],position_x [m]\n0,1\n0.1,1\n", r"no time column 't'"),
@@ -256,7 +272,9 @@ def test_bad_arguments_rejected_before_compiling(scenario, clean, no_compile):
         identify(scenario, clean, ["muu"])
     with pytest.raises(jh.ScenarioError, match=r"foundation has no field 'stifness'"):
         identify(scenario, clean, ["foundation.stifness"])
-    with pytest.raises(jh.ScenarioError, match=r"foundation.damping is fitted on a log scale.*start value > 0"):
+    with pytest.raises(
+        jh.ScenarioError, match=r"foundation.damping is fitted on a log scale.*start value > 0"
+    ):
         identify(scenario, clean, ["h"], start={"h": 0.0})
     with pytest.raises(jh.ScenarioError, match=r"listed twice"):
         identify(scenario, clean, ["mu", "foundation.friction_coefficient"])

@@ -8,10 +8,11 @@
 
 The fit is weighted nonlinear least squares, solved by optimistix's Levenberg-Marquardt
 (`optimistix.least_squares` with `optimistix.LevenbergMarquardt`) through the differentiable solver. The
-Jacobian of the residuals comes from forward-mode sensitivities (`jax.jacfwd` through `diffrax.ForwardMode`,
-i.e. `simulate(..., adjoint="forward")`): one solve carries the state and all p tangents; there are no
-finite differences. It enters optimistix through a `jax.custom_jvp` whose rule computes the whole Jacobian
-once, so each LM step costs one forward-sensitivity solve and the damped linear solves reuse the matrix.
+Jacobian comes from forward-mode sensitivities, no finite differences: the state and its p sensitivities are
+integrated together as one ODE whose step-size control also watches the sensitivities (see
+`_sensitivity_solve` for why `jax.jacfwd` through `diffrax.ForwardMode` is not used by default). It enters
+optimistix through a `jax.custom_jvp` whose rule returns the whole Jacobian once, so each LM step costs one
+augmented solve and the damped linear solves reuse the matrix.
 
 Positivity and bounds are kept by reparameterisation: a positive leaf θ = θ_ref exp(z) (log), a bounded
 leaf θ = lo + (hi - lo) sigmoid(z) (scaled logit), any other θ = θ_ref + scale z. The covariance is the
@@ -70,8 +71,20 @@ ALIASES: dict[str, str] = {
 SYMBOLS: dict[str, str] = {v: k for k, v in ALIASES.items()}
 
 # Leaves (by last path component) that are positive by nature: fitted as θ = θ_ref exp(z).
-_POSITIVE = {"stiffness", "damping", "friction_coefficient", "mass", "tip_mass", "size", "speed", "gravity",
-             "regularisation_velocity", "deflection", "relaxation_time", "ramp_time"}
+_POSITIVE = {
+    "stiffness",
+    "damping",
+    "friction_coefficient",
+    "mass",
+    "tip_mass",
+    "size",
+    "speed",
+    "gravity",
+    "regularisation_velocity",
+    "deflection",
+    "relaxation_time",
+    "ramp_time",
+}
 _PENALTY = 1e6  # whitened residual entry used when a trial solve fails: LM rejects such a step
 _VERBOSE = False
 
@@ -83,15 +96,15 @@ _VERBOSE = False
 class _Param:
     """One fitted leaf (or one element of a vector leaf, `path[i]`)."""
 
-    name: str                 # as reported: "foundation.stiffness", "load.mass_centre[1]"
-    path: str                 # dotted leaf path
-    index: int | None         # element of a vector leaf, or None for the whole leaf
-    shape: tuple[int, ...]    # shape of the fitted value
-    kind: str                 # "log" | "logit" | "affine"
-    ref: np.ndarray           # θ_ref (log, affine) [unit of the leaf]
-    lo: np.ndarray            # lower bound (logit)
-    hi: np.ndarray            # upper bound (logit)
-    scale: np.ndarray         # affine scale
+    name: str  # as reported: "foundation.stiffness", "load.mass_centre[1]"
+    path: str  # dotted leaf path
+    index: int | None  # element of a vector leaf, or None for the whole leaf
+    shape: tuple[int, ...]  # shape of the fitted value
+    kind: str  # "log" | "logit" | "affine"
+    ref: np.ndarray  # θ_ref (log, affine) [unit of the leaf]
+    lo: np.ndarray  # lower bound (logit)
+    hi: np.ndarray  # upper bound (logit)
+    scale: np.ndarray  # affine scale
 
     @property
     def size(self) -> int:
@@ -145,10 +158,13 @@ def _leaf(scenario: Scenario, path: str, given: str) -> np.ndarray:
         hint = difflib.get_close_matches(path, list(ALIASES), n=1, cutoff=0.5)
         raise ScenarioError(
             f"parameter {given!r} is neither a short name ({', '.join(ALIASES)}) nor a dotted leaf path such "
-            f"as 'foundation.stiffness'" + (f" (did you mean {hint[0]!r}?)" if hint else ""))
+            f"as 'foundation.stiffness'" + (f" (did you mean {hint[0]!r}?)" if hint else "")
+        )
     leaf = get_leaf(scenario, path)
     if not isinstance(leaf, jax.Array | np.ndarray):
-        raise ScenarioError(f"parameter {given!r}: {path} is not an array leaf of the scenario and cannot be fitted")
+        raise ScenarioError(
+            f"parameter {given!r}: {path} is not an array leaf of the scenario and cannot be fitted"
+        )
     return np.asarray(leaf, dtype=np.float64)
 
 
@@ -161,8 +177,12 @@ def _default_bounds(scenario: Scenario, path: str) -> tuple[np.ndarray, np.ndarr
     return None
 
 
-def _build_params(scenario: Scenario, params: Sequence[str], start: Mapping[str, Any],
-                  bounds: Mapping[str, tuple[float, float]]) -> tuple[list[_Param], np.ndarray]:
+def _build_params(
+    scenario: Scenario,
+    params: Sequence[str],
+    start: Mapping[str, Any],
+    bounds: Mapping[str, tuple[float, float]],
+) -> tuple[list[_Param], np.ndarray]:
     """Check the parameter list on the host; return the parameter specs and the flat start θ0."""
     if isinstance(params, str):
         params = [p for p in params.split(",") if p.strip()]
@@ -177,19 +197,23 @@ def _build_params(scenario: Scenario, params: Sequence[str], start: Mapping[str,
     start_r = {resolve_param(k): v for k, v in (start or {}).items()}
     for k, given in zip(start_r, (start or {}), strict=True):
         if k not in resolved:
-            raise ScenarioError(f"start value given for {given!r}, which is not a fitted parameter "
-                                f"({', '.join(params)})")
+            raise ScenarioError(
+                f"start value given for {given!r}, which is not a fitted parameter ({', '.join(params)})"
+            )
     bounds_r = {resolve_param(k): v for k, v in (bounds or {}).items()}
     for k, given in zip(bounds_r, (bounds or {}), strict=True):
         if k not in resolved:
-            raise ScenarioError(f"bounds given for {given!r}, which is not a fitted parameter "
-                                f"({', '.join(params)})")
+            raise ScenarioError(
+                f"bounds given for {given!r}, which is not a fitted parameter ({', '.join(params)})"
+            )
     out, theta0 = [], []
     for given, (path, index) in zip(params, resolved, strict=True):
         leaf = _leaf(scenario, path, given)
         if index is not None:
             if leaf.ndim != 1 or not 0 <= index < leaf.shape[0]:
-                raise ScenarioError(f"parameter {given!r}: {path} has shape {leaf.shape}, index {index} is out of range")
+                raise ScenarioError(
+                    f"parameter {given!r}: {path} has shape {leaf.shape}, index {index} is out of range"
+                )
             value = np.asarray(leaf[index])
         else:
             value = leaf
@@ -199,8 +223,10 @@ def _build_params(scenario: Scenario, params: Sequence[str], start: Mapping[str,
                 v = np.asarray(start_r[(path, index)], dtype=np.float64)
                 value = np.broadcast_to(v, value.shape).copy()
             except (ValueError, TypeError):
-                raise ScenarioError(f"start value of {name} must be a number or array of shape {value.shape}, "
-                                    f"got {start_r[(path, index)]!r}") from None
+                raise ScenarioError(
+                    f"start value of {name} must be a number or array of shape {value.shape}, "
+                    f"got {start_r[(path, index)]!r}"
+                ) from None
         if not np.all(np.isfinite(value)):
             raise ScenarioError(f"start value of {name} must be finite, got {value.tolist()}")
         b = bounds_r.get((path, index))
@@ -216,14 +242,24 @@ def _build_params(scenario: Scenario, params: Sequence[str], start: Mapping[str,
             if not (np.all(np.isfinite(lo)) and np.all(np.isfinite(hi)) and np.all(lo < hi)):
                 raise ScenarioError(f"bounds of {name} must be finite with low < high, got {b!r}")
             if np.any(value <= lo) or np.any(value >= hi):
-                raise ScenarioError(f"start value of {name} = {value.tolist()} must lie strictly inside its "
-                                    f"bounds ({lo.tolist()}, {hi.tolist()})")
+                raise ScenarioError(
+                    f"start value of {name} = {value.tolist()} must lie strictly inside its "
+                    f"bounds ({lo.tolist()}, {hi.tolist()})"
+                )
             kind, ref, scale = "logit", np.zeros_like(value), np.ones_like(value)
         elif path.rsplit(".", 1)[-1] in _POSITIVE:
             if np.any(value <= 0):
-                raise ScenarioError(f"{name} is fitted on a log scale (it is positive by nature) and needs a "
-                                    f"start value > 0, got {value.tolist()}; give start={{{name!r}: ...}}")
-            kind, ref, scale, lo, hi = "log", value.copy(), np.ones_like(value), np.zeros_like(value), np.zeros_like(value)
+                raise ScenarioError(
+                    f"{name} is fitted on a log scale (it is positive by nature) and needs a "
+                    f"start value > 0, got {value.tolist()}; give start={{{name!r}: ...}}"
+                )
+            kind, ref, scale, lo, hi = (
+                "log",
+                value.copy(),
+                np.ones_like(value),
+                np.zeros_like(value),
+                np.zeros_like(value),
+            )
         else:
             scale = np.asarray(np.where(np.abs(value) > 0, np.abs(value), 1.0))
             kind, ref, lo, hi = "affine", value.copy(), np.zeros_like(value), np.zeros_like(value)
@@ -235,7 +271,7 @@ def _build_params(scenario: Scenario, params: Sequence[str], start: Mapping[str,
 def _unflatten(params: list[_Param], flat: np.ndarray) -> dict[str, np.ndarray | float]:
     out, i = {}, 0
     for p in params:
-        v = flat[i:i + p.size].reshape(p.shape)
+        v = flat[i : i + p.size].reshape(p.shape)
         out[p.name] = float(v) if p.shape == () else v.copy()
         i += p.size
     return out
@@ -244,7 +280,7 @@ def _unflatten(params: list[_Param], flat: np.ndarray) -> dict[str, np.ndarray |
 def _flat_z(params: list[_Param], theta: np.ndarray) -> np.ndarray:
     out, i = [], 0
     for p in params:
-        out.append(p.to_z(theta[i:i + p.size].reshape(p.shape)).ravel())
+        out.append(p.to_z(theta[i : i + p.size].reshape(p.shape)).ravel())
         i += p.size
     return np.concatenate(out)
 
@@ -252,7 +288,7 @@ def _flat_z(params: list[_Param], theta: np.ndarray) -> np.ndarray:
 def _flat_dtheta_dz(params: list[_Param], z: np.ndarray) -> np.ndarray:
     out, i = [], 0
     for p in params:
-        seg = z[i:i + p.size].reshape(p.shape)
+        seg = z[i : i + p.size].reshape(p.shape)
         out.append(np.asarray(_dtheta_dz(p.kind, seg, p.ref, p.lo, p.hi, p.scale)).ravel())
         i += p.size
     return np.concatenate(out)
@@ -280,8 +316,8 @@ class _Config:
     """The static structure of one identification problem (a change recompiles the core)."""
 
     params: tuple[tuple[str, int | None, tuple[int, ...], str], ...]  # (path, index, shape, kind)
-    signals: tuple[tuple[str, tuple[int, ...]], ...]                   # (Trajectory field, index)
-    drop_first: bool        # the solver's ts has t = 0 prepended to the measured times
+    signals: tuple[tuple[str, tuple[int, ...]], ...]  # (Trajectory field, index)
+    drop_first: bool  # the solver's ts has t = 0 prepended to the measured times
     options: SolverOptions
     max_iterations: int
     sensitivity: str = "equations"  # "equations" | "solver", see `_model_and_jacobian`
@@ -291,7 +327,7 @@ def _scenario_at(cfg: _Config, scenario: Scenario, tr, z):
     i = 0
     for (path, index, shape, kind), (ref, lo, hi, scale) in zip(cfg.params, tr, strict=True):
         n = int(np.prod(shape, dtype=int))
-        theta = _to_theta(kind, z[i:i + n].reshape(shape), ref, lo, hi, scale)
+        theta = _to_theta(kind, z[i : i + n].reshape(shape), ref, lo, hi, scale)
         i += n
         get = leaf_getter(path)
         new = theta if index is None else get(scenario).at[index].set(theta)
@@ -344,17 +380,29 @@ def _sensitivity_solve(cfg: _Config, z, args):
         return ydot, jax.vmap(lin)(Y, eye, dcc)
 
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(rhs), opt.solver, t0=ts[0] * 0.0, t1=ts[-1], dt0=opt.dt0, y0=(y0, Y0), args=(z, c, dC),
-        saveat=diffrax.SaveAt(ts=ts), stepsize_controller=diffrax.PIDController(rtol=opt.rtol, atol=opt.atol),
-        max_steps=opt.max_steps, adjoint=diffrax.ForwardMode(), throw=False)
+        diffrax.ODETerm(rhs),
+        opt.solver,
+        t0=ts[0] * 0.0,
+        t1=ts[-1],
+        dt0=opt.dt0,
+        y0=(y0, Y0),
+        args=(z, c, dC),
+        saveat=diffrax.SaveAt(ts=ts),
+        stepsize_controller=diffrax.PIDController(rtol=opt.rtol, atol=opt.atol),
+        max_steps=opt.max_steps,
+        adjoint=diffrax.ForwardMode(),
+        throw=False,
+    )
     ys, Ys = sol.ys
     y1 = jax.tree_util.tree_map(lambda x: x[-1], ys)
     finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves((y1, Ys))]))
     status = jnp.where(
         sol.result == diffrax.RESULTS.successful,
         jnp.where(finite, SolveStatus.OK, SolveStatus.NONFINITE),
-        jnp.where(sol.result == diffrax.RESULTS.max_steps_reached, SolveStatus.MAX_STEPS,
-                  SolveStatus.SOLVER_FAILED)).astype(jnp.int32)
+        jnp.where(
+            sol.result == diffrax.RESULTS.max_steps_reached, SolveStatus.MAX_STEPS, SolveStatus.SOLVER_FAILED
+        ),
+    ).astype(jnp.int32)
     steps = sol.stats["num_accepted_steps"]
     stats = {"num_accepted_steps": steps, "num_rejected_steps": sol.stats["num_rejected_steps"]}
 
@@ -375,6 +423,7 @@ def _model_and_jacobian(cfg: _Config, z, args):
     (`simulate(..., adjoint="forward")`), cheaper but without error control on the tangents."""
     _, _, data, sigma, _ = args
     if cfg.sensitivity == "solver":
+
         def f(zz):
             r, status, steps = _model(cfg, zz, args)
             return r, (r, status, steps)
@@ -411,8 +460,13 @@ def _residual_fn(cfg: _Config):
 
         r, J, status, steps = _model_and_jacobian(cfg, z, args)
         if _VERBOSE:
-            jax.debug.print("  z = {z}: status {s}, {n} solver steps, cost {c}", z=z, s=status, n=steps,
-                            c=0.5 * jnp.sum(r**2))
+            jax.debug.print(
+                "  z = {z}: status {s}, {n} solver steps, cost {c}",
+                z=z,
+                s=status,
+                n=steps,
+                c=0.5 * jnp.sum(r**2),
+            )
         r, J = guard(r, status, J)
         info = jnp.stack([status, steps]).astype(jnp.float64)
         return (r, info), (J @ dz, jnp.zeros_like(info))
@@ -440,13 +494,23 @@ def _fit_core(cfg: _Config, z0, args, lm_tol, scale):
         return r * scale, info
 
     solver = optx.LevenbergMarquardt(rtol=lm_tol[0], atol=lm_tol[1], verbose=_VERBOSE)
-    sol = optx.least_squares(fn, solver, z0, args, has_aux=True, max_steps=cfg.max_iterations, throw=False,
-                             options={"jac": "fwd"})
+    sol = optx.least_squares(
+        fn, solver, z0, args, has_aux=True, max_steps=cfg.max_iterations, throw=False, options={"jac": "fwd"}
+    )
     f_info = sol.state.f_info
     J = f_info.jac.as_matrix() / scale  # J @ e_i through the custom JVP: no new solve
-    codes = jnp.stack([sol.result == optx.RESULTS.successful,
-                       sol.result == optx.RESULTS.nonlinear_max_steps_reached])
-    return sol.value, f_info.residual / scale, J, sol.aux, sol.stats["num_steps"], sol.state.num_accepted_steps, codes
+    codes = jnp.stack(
+        [sol.result == optx.RESULTS.successful, sol.result == optx.RESULTS.nonlinear_max_steps_reached]
+    )
+    return (
+        sol.value,
+        f_info.residual / scale,
+        J,
+        sol.aux,
+        sol.stats["num_steps"],
+        sol.state.num_accepted_steps,
+        codes,
+    )
 
 
 _COMPILED: dict = {}
@@ -549,8 +613,10 @@ class IdentificationResult:
         lines = [f"{'parameter':<{w}} {'start':>12} {'estimate':>14} {'std error':>11} {'rel.':>8}  unit"]
         for i, n in enumerate(self.names):
             rel = self.std_errors[i] / abs(self.values[i]) if self.values[i] != 0 else math.inf
-            lines.append(f"{n:<{w}} {self.start_values[i]:>12.5g} {self.values[i]:>14.8g} "
-                         f"{self.std_errors[i]:>11.3g} {100 * rel:>7.2g}%  {self.units.get(n, '')}")
+            lines.append(
+                f"{n:<{w}} {self.start_values[i]:>12.5g} {self.values[i]:>14.8g} "
+                f"{self.std_errors[i]:>11.3g} {100 * rel:>7.2g}%  {self.units.get(n, '')}"
+            )
         if len(self.names) > 1:
             lines.append("correlations:")
             for i, n in enumerate(self.names):
@@ -559,7 +625,8 @@ class IdentificationResult:
         lines += [
             f"fit: {self.iterations} LM iterations ({self.accepted_steps} accepted), "
             f"{'converged' if self.converged else 'NOT converged: ' + self.message}; "
-            f"cost 0.5Σr² = {self.cost:.6g} over {self.n_residuals} residuals; χ²/dof = {self.chi2_reduced:.4g}",
+            f"cost 0.5Σr² = {self.cost:.6g} over {self.n_residuals} residuals; "
+            f"χ²/dof = {self.chi2_reduced:.4g}",
             f"covariance: Gauss-Newton at the optimum, {noise}; condition number of JᵀJ (relative units) "
             f"{self.condition_number:.3g}",
             f"simulation at the estimate: {self.solve_status.name.lower()}, {self.solver_steps} steps; "
@@ -576,34 +643,66 @@ class IdentificationResult:
     def to_dict(self) -> dict[str, Any]:
         """JSON-ready summary (no arrays of the time series)."""
         return {
-            "estimates": {n: {"value": float(v), "std_error": float(s), "start": float(s0),
-                              "unit": self.units.get(n, "")}
-                          for n, v, s, s0 in zip(self.names, self.values, self.std_errors, self.start_values,
-                                                 strict=True)},
+            "estimates": {
+                n: {
+                    "value": float(v),
+                    "std_error": float(s),
+                    "start": float(s0),
+                    "unit": self.units.get(n, ""),
+                }
+                for n, v, s, s0 in zip(
+                    self.names, self.values, self.std_errors, self.start_values, strict=True
+                )
+            },
             "correlation": self.correlation.tolist(),
             "covariance": self.covariance.tolist(),
-            "sigma2": self.sigma2, "noise_known": self.noise_known, "chi2_reduced": self.chi2_reduced,
-            "sigma": self.sigma, "cost": self.cost, "n_residuals": self.n_residuals,
-            "iterations": self.iterations, "accepted_steps": self.accepted_steps,
-            "converged": self.converged, "message": self.message,
-            "solve_status": self.solve_status.name.lower(), "solver_steps": self.solver_steps,
-            "condition_number": self.condition_number, "weak_direction": self.weak_direction,
-            "identifiable": self.identifiable, "warnings": self.warnings,
+            "sigma2": self.sigma2,
+            "noise_known": self.noise_known,
+            "chi2_reduced": self.chi2_reduced,
+            "sigma": self.sigma,
+            "cost": self.cost,
+            "n_residuals": self.n_residuals,
+            "iterations": self.iterations,
+            "accepted_steps": self.accepted_steps,
+            "converged": self.converged,
+            "message": self.message,
+            "solve_status": self.solve_status.name.lower(),
+            "solver_steps": self.solver_steps,
+            "condition_number": self.condition_number,
+            "weak_direction": self.weak_direction,
+            "identifiable": self.identifiable,
+            "warnings": self.warnings,
             "rms_residuals": {k: float(np.sqrt(np.mean(v**2))) for k, v in self.residuals.items()},
             "starts": [dataclasses.asdict(s) for s in self.starts],
-            "wall_time_s": self.wall_time, "compile_time_s": self.compile_time, "fit_time_s": self.fit_time,
+            "wall_time_s": self.wall_time,
+            "compile_time_s": self.compile_time,
+            "fit_time_s": self.fit_time,
         }
 
 
 def _units_of(scenario_leaf_path: str) -> str:
     last = scenario_leaf_path.split("[")[0]
     return {
-        "foundation.stiffness": "N/m", "foundation.damping": "N s/m", "foundation.friction_coefficient": "-",
-        "rope.stiffness": "N/m", "rope.damping": "N s/m", "rope.attachment": "m", "rope.slack": "m",
-        "boom.stiffness": "N/m", "boom.damping": "N s/m", "boom.tip_mass": "kg", "boom.tip_position": "m",
-        "load.mass": "kg", "load.mass_centre": "m", "load.size": "m", "load.inertia": "kg m^2",
-        "hoist.speed": "m/s", "gravity": "m/s^2", "foundation.friction.regularisation_velocity": "m/s",
-        "foundation.friction.deflection": "m", "foundation.friction.relaxation_time": "s",
+        "foundation.stiffness": "N/m",
+        "foundation.damping": "N s/m",
+        "foundation.friction_coefficient": "-",
+        "rope.stiffness": "N/m",
+        "rope.damping": "N s/m",
+        "rope.attachment": "m",
+        "rope.slack": "m",
+        "boom.stiffness": "N/m",
+        "boom.damping": "N s/m",
+        "boom.tip_mass": "kg",
+        "boom.tip_position": "m",
+        "load.mass": "kg",
+        "load.mass_centre": "m",
+        "load.size": "m",
+        "load.inertia": "kg m^2",
+        "hoist.speed": "m/s",
+        "gravity": "m/s^2",
+        "foundation.friction.regularisation_velocity": "m/s",
+        "foundation.friction.deflection": "m",
+        "foundation.friction.relaxation_time": "s",
         "foundation.friction.breakaway_ratio": "-",
     }.get(last, "")
 
@@ -623,8 +722,9 @@ def _spec_value(raw, name: str, y: np.ndarray, what: str) -> float:
         try:
             value = float(raw)
         except (TypeError, ValueError):
-            raise ScenarioError(f"{what} of {name!r} must be a positive number (or 'x%' for noise), "
-                                f"got {raw!r}") from None
+            raise ScenarioError(
+                f"{what} of {name!r} must be a positive number (or 'x%' for noise), got {raw!r}"
+            ) from None
     if not (np.isfinite(value) and value > 0):
         raise ScenarioError(f"{what} of {name!r} must be positive, got {raw!r}")
     return value
@@ -663,10 +763,15 @@ def _sigmas(m: Measurement, noise, weights) -> tuple[dict[str, float], bool, lis
             sig[s] = spread if spread > 0 else (float(np.sqrt(np.mean(y**2))) or 1.0)
     unknown = [s for s in names if s not in noise_e and s not in m.noise]
     if unknown:
-        warn.append(f"no noise level for {', '.join(unknown)}: "
-                    + ("residuals weighted by the given weights" if weight_e else
-                       "each such signal is scaled by its spread (standard deviation over time)")
-                    + "; the covariance uses the residual variance estimate RSS/(n - p)")
+        warn.append(
+            f"no noise level for {', '.join(unknown)}: "
+            + (
+                "residuals weighted by the given weights"
+                if weight_e
+                else "each such signal is scaled by its spread (standard deviation over time)"
+            )
+            + "; the covariance uses the residual variance estimate RSS/(n - p)"
+        )
     return sig, not unknown, warn
 
 
@@ -688,13 +793,29 @@ class _Problem:
     args: tuple
 
 
-def _setup(scenario, measurement, params, *, signals=None, noise=None, weights=None, start=None, bounds=None,
-           t1=None, rtol=1e-6, atol=1e-8, max_steps=200_000, max_iterations=100) -> _Problem:
+def _setup(
+    scenario,
+    measurement,
+    params,
+    *,
+    signals=None,
+    noise=None,
+    weights=None,
+    start=None,
+    bounds=None,
+    t1=None,
+    rtol=1e-6,
+    atol=1e-8,
+    max_steps=200_000,
+    max_iterations=100,
+) -> _Problem:
     """Check every input on the host and build the static structure and the arrays of the problem."""
     if isinstance(scenario, str | Path):
         scenario = load_scenario(scenario)
     if not isinstance(scenario, Scenario):
-        raise TypeError(f"scenario must be a jaxhoist.Scenario, a preset name or a path, got {type(scenario).__name__}")
+        raise TypeError(
+            f"scenario must be a jaxhoist.Scenario, a preset name or a path, got {type(scenario).__name__}"
+        )
     scenario.check()
     if isinstance(measurement, str | Path):
         measurement = read_measurement(measurement)
@@ -714,7 +835,9 @@ def _setup(scenario, measurement, params, *, signals=None, noise=None, weights=N
     names = measurement.names
     n_res = len(names) * measurement.t.size
     if n_res <= theta0.size:
-        raise MeasurementError(f"{measurement.source}: {n_res} residuals cannot determine {theta0.size} parameters")
+        raise MeasurementError(
+            f"{measurement.source}: {n_res} residuals cannot determine {theta0.size} parameters"
+        )
     t = measurement.t
     drop_first = bool(t[0] > 0.0)
     ts = np.concatenate([[0.0], t]) if drop_first else t
@@ -723,7 +846,10 @@ def _setup(scenario, measurement, params, *, signals=None, noise=None, weights=N
     cfg = _Config(
         params=tuple((p.path, p.index, p.shape, p.kind) for p in plist),
         signals=tuple((SIGNALS[s].field, SIGNALS[s].index) for s in names),
-        drop_first=drop_first, options=options, max_iterations=int(max_iterations))
+        drop_first=drop_first,
+        options=options,
+        max_iterations=int(max_iterations),
+    )
     tr = tuple(tuple(jnp.asarray(a, dtype=jnp.float64) for a in (p.ref, p.lo, p.hi, p.scale)) for p in plist)
     args = (scenario, tr, jnp.asarray(data), jnp.asarray(sigma), jnp.asarray(ts))
     return _Problem(scenario, measurement, plist, theta0, names, sig, noise_known, warnings, n_res, cfg, args)
@@ -753,8 +879,6 @@ def residual_function(scenario, measurement, params, **kwargs):
         return r if int(status) == SolveStatus.OK else np.full_like(r, np.nan)
 
     return fn, prob.theta0
-
-
 
 
 def identify(
@@ -814,9 +938,21 @@ def identify(
     require_x64()
     wall0 = time.perf_counter()
     # ---- host side: every input is checked before anything is compiled
-    prob = _setup(scenario, measurement, params, signals=signals, noise=noise, weights=weights, start=start,
-                  bounds=bounds, t1=t1, rtol=rtol, atol=atol, max_steps=max_steps,
-                  max_iterations=max_iterations)
+    prob = _setup(
+        scenario,
+        measurement,
+        params,
+        signals=signals,
+        noise=noise,
+        weights=weights,
+        start=start,
+        bounds=bounds,
+        t1=t1,
+        rtol=rtol,
+        atol=atol,
+        max_steps=max_steps,
+        max_iterations=max_iterations,
+    )
     if int(n_starts) < 1:
         raise ScenarioError(f"n_starts must be >= 1, got {n_starts}")
     if not (np.isfinite(start_spread) and start_spread >= 0):
@@ -853,8 +989,18 @@ def identify(
         converged = bool(codes[0])
         msg = "converged" if converged else ("reached max_iterations" if codes[1] else "LM failed")
         cost = 0.5 * float(np.sum(r**2))
-        runs.append(StartResult(_unflatten(plist, th), _unflatten(plist, theta), cost, int(n_steps), int(n_acc),
-                                converged, msg, time.perf_counter() - w0))
+        runs.append(
+            StartResult(
+                _unflatten(plist, th),
+                _unflatten(plist, theta),
+                cost,
+                int(n_steps),
+                int(n_acc),
+                converged,
+                msg,
+                time.perf_counter() - w0,
+            )
+        )
         outs.append((z, r, J, info, theta))
     best = int(np.argmin([s.cost if np.isfinite(s.cost) else np.inf for s in runs]))
     z, r, J, info, theta = outs[best]
@@ -864,41 +1010,91 @@ def identify(
     D = _flat_dtheta_dz(plist, z)
     J_theta = J / D[None, :]
     flat_names = [n for p_ in plist for n in p_.element_names()]
-    rep = covariance_report(J_theta, r, theta, flat_names, noise_known=noise_known,
-                            scales=np.concatenate([p_.scale.ravel() for p_ in plist]),
-                            max_relative_se=max_relative_se, condition_limit=condition_limit)
-    sigma2, chi2, cov, se, corr = rep["sigma2"], rep["chi2_reduced"], rep["covariance"], rep["std_errors"], rep["correlation"]
+    rep = covariance_report(
+        J_theta,
+        r,
+        theta,
+        flat_names,
+        noise_known=noise_known,
+        scales=np.concatenate([p_.scale.ravel() for p_ in plist]),
+        max_relative_se=max_relative_se,
+        condition_limit=condition_limit,
+    )
+    sigma2, chi2, cov, se, corr = (
+        rep["sigma2"],
+        rep["chi2_reduced"],
+        rep["covariance"],
+        rep["std_errors"],
+        rep["correlation"],
+    )
     cond, weak_direction, identifiable = rep["condition_number"], rep["weak_direction"], rep["identifiable"]
     warnings = rep["warnings"] + warnings
     if not run.converged:
-        warnings.append(f"Levenberg-Marquardt did not converge ({run.message}) after {run.iterations} "
-                        f"iterations; raise max_iterations or try n_starts > 1")
+        warnings.append(
+            f"Levenberg-Marquardt did not converge ({run.message}) after {run.iterations} "
+            f"iterations; raise max_iterations or try n_starts > 1"
+        )
     status = SolveStatus(int(info[0]))
     if status != SolveStatus.OK:
         warnings.append(f"the simulation at the estimate failed: {status.message}")
     if noise_known and not (0.5 < chi2 < 2.0):
-        warnings.append(f"χ²/dof = {chi2:.3g} is far from 1: the given noise levels or the model do not fit "
-                        f"the data's scatter, so the standard errors may be off")
+        warnings.append(
+            f"χ²/dof = {chi2:.3g} is far from 1: the given noise levels or the model do not fit "
+            f"the data's scatter, so the standard errors may be off"
+        )
 
     sig_rows = r.reshape(len(names), -1)
     fitted = {s: measurement.signals[s] + sig[s] * sig_rows[i] for i, s in enumerate(names)}
     fitted_scenario = apply_params(scenario, _unflatten(plist, theta))
     return IdentificationResult(
-        names=flat_names, params=[p_.name for p_ in plist], values=theta, std_errors=se,
-        start_values=starts[best], covariance=cov, correlation=corr, sigma2=sigma2, noise_known=noise_known,
-        chi2_reduced=chi2, t=t.copy(), measured=dict(measurement.signals), fitted=fitted,
-        residuals={s: fitted[s] - measurement.signals[s] for s in names}, sigma=sig, cost=run.cost,
-        n_residuals=n_res, iterations=run.iterations, accepted_steps=run.accepted_steps,
-        converged=run.converged, message=run.message, solve_status=status, solver_steps=int(info[1]),
-        condition_number=cond, weak_direction=weak_direction, identifiable=identifiable, warnings=warnings,
-        starts=runs, scenario=fitted_scenario, wall_time=time.perf_counter() - wall0,
-        compile_time=compile_time, fit_time=sum(s_.wall_time for s_ in runs), jacobian=J_theta,
-        units={n: _units_of(n) for n in flat_names} | {s: SIGNALS[s].unit for s in names})
+        names=flat_names,
+        params=[p_.name for p_ in plist],
+        values=theta,
+        std_errors=se,
+        start_values=starts[best],
+        covariance=cov,
+        correlation=corr,
+        sigma2=sigma2,
+        noise_known=noise_known,
+        chi2_reduced=chi2,
+        t=t.copy(),
+        measured=dict(measurement.signals),
+        fitted=fitted,
+        residuals={s: fitted[s] - measurement.signals[s] for s in names},
+        sigma=sig,
+        cost=run.cost,
+        n_residuals=n_res,
+        iterations=run.iterations,
+        accepted_steps=run.accepted_steps,
+        converged=run.converged,
+        message=run.message,
+        solve_status=status,
+        solver_steps=int(info[1]),
+        condition_number=cond,
+        weak_direction=weak_direction,
+        identifiable=identifiable,
+        warnings=warnings,
+        starts=runs,
+        scenario=fitted_scenario,
+        wall_time=time.perf_counter() - wall0,
+        compile_time=compile_time,
+        fit_time=sum(s_.wall_time for s_ in runs),
+        jacobian=J_theta,
+        units={n: _units_of(n) for n in flat_names} | {s: SIGNALS[s].unit for s in names},
+    )
 
 
-def covariance_report(J: np.ndarray, r: np.ndarray, theta: np.ndarray, names: Sequence[str], *,
-                      noise_known: bool, scales: np.ndarray | None = None, max_relative_se: float = 0.5,
-                      condition_limit: float = 1e12) -> dict[str, Any]:
+def covariance_report(
+    J: np.ndarray,
+    r: np.ndarray,
+    theta: np.ndarray,
+    names: Sequence[str],
+    *,
+    noise_known: bool,
+    scales: np.ndarray | None = None,
+    max_relative_se: float = 0.5,
+    condition_limit: float = 1e12,
+) -> dict[str, Any]:
     """Gauss-Newton covariance and identifiability at a least-squares optimum (host side, numpy).
 
     **Arguments**
@@ -941,26 +1137,44 @@ def covariance_report(J: np.ndarray, r: np.ndarray, theta: np.ndarray, names: Se
     identifiable = not poorly and cond <= condition_limit
     warnings = []
     if not identifiable:
-        what = (f"{', '.join(poorly)} (relative standard error "
-                f"{', '.join(f'{100 * rel_se[list(names).index(k)]:.3g} %' for k in poorly)})"
-                if poorly else "the parameters jointly")
+        what = (
+            f"{', '.join(poorly)} (relative standard error "
+            f"{', '.join(f'{100 * rel_se[list(names).index(k)]:.3g} %' for k in poorly)})"
+            if poorly
+            else "the parameters jointly"
+        )
         if p == 1:
             info = float(Sn[0] ** 2 / sigma2) if sigma2 > 0 else math.inf
-            why = (f"the fitted signals barely depend on it (information JᵀJ/σ² = {info:.3g} per unit relative "
-                   f"change Δθ/θ)")
+            why = (
+                f"the fitted signals barely depend on it (information JᵀJ/σ² = {info:.3g} per unit relative "
+                f"change Δθ/θ)"
+            )
         else:
-            direction = " ".join(f"{c:+.2f} Δ{_short(k)}/{_short(k)}" for k, c in weak_direction.items()
-                                 if abs(c) >= 0.05)
+            direction = " ".join(
+                f"{c:+.2f} Δ{_short(k)}/{_short(k)}" for k, c in weak_direction.items() if abs(c) >= 0.05
+            )
             kind = "singular" if math.isinf(cond) else "near-singular" if cond > condition_limit else "weak"
-            why = (f"the information matrix JᵀJ is {kind} (condition number {cond:.3g} in relative units); the "
-                   f"poorly determined direction is {direction} (moving along it barely changes the fit)")
+            why = (
+                f"the information matrix JᵀJ is {kind} (condition number {cond:.3g} in relative units); the "
+                f"poorly determined direction is {direction} (moving along it barely changes the fit)"
+            )
         warnings.append(f"the data cannot identify {what}: {why}")
     elif cond > 1e8:
-        warnings.append(f"the information matrix is ill-conditioned (condition number {cond:.3g}); "
-                        f"poorly determined direction {weak_direction}")
-    return {"covariance": cov, "std_errors": se, "correlation": corr, "sigma2": sigma2, "chi2_reduced": chi2,
-            "condition_number": cond, "weak_direction": weak_direction, "identifiable": identifiable,
-            "warnings": warnings}
+        warnings.append(
+            f"the information matrix is ill-conditioned (condition number {cond:.3g}); "
+            f"poorly determined direction {weak_direction}"
+        )
+    return {
+        "covariance": cov,
+        "std_errors": se,
+        "correlation": corr,
+        "sigma2": sigma2,
+        "chi2_reduced": chi2,
+        "condition_number": cond,
+        "weak_direction": weak_direction,
+        "identifiable": identifiable,
+        "warnings": warnings,
+    }
 
 
 def _short(name: str) -> str:
@@ -970,19 +1184,21 @@ def _short(name: str) -> str:
 def _theta_of(plist: list[_Param], z: np.ndarray) -> np.ndarray:
     out, i = [], 0
     for p in plist:
-        seg = z[i:i + p.size].reshape(p.shape)
+        seg = z[i : i + p.size].reshape(p.shape)
         out.append(np.asarray(_to_theta(p.kind, seg, p.ref, p.lo, p.hi, p.scale)).ravel())
         i += p.size
     return np.concatenate(out).astype(np.float64)
 
 
-def _random_starts(plist: list[_Param], theta0: np.ndarray, n: int, spread: float, seed: int) -> list[np.ndarray]:
+def _random_starts(
+    plist: list[_Param], theta0: np.ndarray, n: int, spread: float, seed: int
+) -> list[np.ndarray]:
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(n):
         parts, i = [], 0
         for p in plist:
-            v = theta0[i:i + p.size]
+            v = theta0[i : i + p.size]
             u = rng.uniform(-1.0, 1.0, size=v.shape)
             if p.kind == "log":
                 w = v * (1.0 + spread) ** u
@@ -1000,9 +1216,18 @@ def _random_starts(plist: list[_Param], theta0: np.ndarray, n: int, spread: floa
 # ------------------------------------------------------------------------------------- synthetic data
 
 
-def synthetic_measurement(scenario: Scenario, t, signals: Sequence[str], *, noise: Mapping[str, Any] | None = None,
-                          seed: int = 0, rtol: float = 1e-6, atol: float = 1e-8, max_steps: int = 200_000,
-                          source: str = "synthetic") -> Measurement:
+def synthetic_measurement(
+    scenario: Scenario,
+    t,
+    signals: Sequence[str],
+    *,
+    noise: Mapping[str, Any] | None = None,
+    seed: int = 0,
+    rtol: float = 1e-6,
+    atol: float = 1e-8,
+    max_steps: int = 200_000,
+    source: str = "synthetic",
+) -> Measurement:
     """Simulate `scenario`, sample `signals` (names or groups) at times `t` [s] and add Gaussian noise.
 
     - `noise`: signal or group -> standard deviation [SI unit] or "x%" of the true signal's RMS value;
@@ -1048,13 +1273,15 @@ def plot_fit(result: IdentificationResult, *, max_signals: int = 12, title: str 
         ax.plot(result.t, result.fitted[n], "-", lw=1.2, color="tab:red", label="fitted")
         ax.set_ylabel(f"{n} [{unit}]")
         ax.grid(alpha=0.3)
-    for ax in axes[len(names):]:
+    for ax in axes[len(names) :]:
         ax.set_visible(False)
-    for ax in axes[max(0, len(names) - ncols):len(names)]:
+    for ax in axes[max(0, len(names) - ncols) : len(names)]:
         ax.set_xlabel("t [s]")
     axes[0].legend(loc="best", fontsize=8)
-    est = ", ".join(f"{_short(n)} = {v:.5g} ± {s:.2g}" for n, v, s in
-                    zip(result.names, result.values, result.std_errors, strict=True))
+    est = ", ".join(
+        f"{_short(n)} = {v:.5g} ± {s:.2g}"
+        for n, v, s in zip(result.names, result.values, result.std_errors, strict=True)
+    )
     fig.suptitle(title or f"measured vs fitted: {est}", fontsize=9)
     return fig
 
@@ -1077,24 +1304,50 @@ def _parse_kv(text: str | None, what: str) -> dict[str, str]:
 def configure_parser(subparsers) -> None:
     """Register `jaxhoist identify SCENARIO MEASUREMENT.csv --fit mu,k,... [--out DIR]`."""
     p = subparsers.add_parser(
-        "identify", help="fit scenario parameters to a measured CSV (Levenberg-Marquardt, forward sensitivities)",
+        "identify",
+        help="fit scenario parameters to a measured CSV (Levenberg-Marquardt, forward sensitivities)",
         description="Fit scenario leaves to measured time series by weighted least squares "
-                    "(optimistix Levenberg-Marquardt with forward-mode sensitivities) and write the estimates "
-                    "(JSON) and a plot of measured against fitted signals. Short names: "
-                    + ", ".join(f"{k} -> {v}" for k, v in ALIASES.items()) + "; any dotted leaf path works.")
-    p.add_argument("scenario", metavar="SCENARIO", help="a preset name (e.g. paper-4.2) or a TOML scenario file")
-    p.add_argument("measurement", metavar="MEASUREMENT.csv",
-                   help="CSV with a time column 't [s]' and signal columns such as 'position_x [m]'")
-    p.add_argument("--fit", required=True, metavar="P1,P2,...",
-                   help="parameters to fit: mu, k, h, c_l, b_l or dotted paths (load.mass_centre[0], boom.stiffness)")
-    p.add_argument("--signals", default=None, metavar="S1,S2,...",
-                   help="fit only these signals or groups (default: every column)")
-    p.add_argument("--noise", default=None, metavar="S=SIGMA,...",
-                   help="noise standard deviation per signal or group in SI units, or x%% of its RMS, e.g. "
-                        "position=0.005,rope_tension=1%% (overrides the side JSON)")
-    p.add_argument("--start", default=None, metavar="P=VALUE,...", help="start values (default: the scenario's)")
-    p.add_argument("--starts", type=int, default=1, help="number of starts (extra ones random around --start)")
-    p.add_argument("--t1", type=float, default=None, help="end of the simulated span [s] (default the scenario's)")
+        "(optimistix Levenberg-Marquardt with forward-mode sensitivities) and write the estimates "
+        "(JSON) and a plot of measured against fitted signals. Short names: "
+        + ", ".join(f"{k} -> {v}" for k, v in ALIASES.items())
+        + "; any dotted leaf path works.",
+    )
+    p.add_argument(
+        "scenario", metavar="SCENARIO", help="a preset name (e.g. paper-4.2) or a TOML scenario file"
+    )
+    p.add_argument(
+        "measurement",
+        metavar="MEASUREMENT.csv",
+        help="CSV with a time column 't [s]' and signal columns such as 'position_x [m]'",
+    )
+    p.add_argument(
+        "--fit",
+        required=True,
+        metavar="P1,P2,...",
+        help="parameters to fit: mu, k, h, c_l, b_l or dotted paths (load.mass_centre[0], boom.stiffness)",
+    )
+    p.add_argument(
+        "--signals",
+        default=None,
+        metavar="S1,S2,...",
+        help="fit only these signals or groups (default: every column)",
+    )
+    p.add_argument(
+        "--noise",
+        default=None,
+        metavar="S=SIGMA,...",
+        help="noise standard deviation per signal or group in SI units, or x%% of its RMS, e.g. "
+        "position=0.005,rope_tension=1%% (overrides the side JSON)",
+    )
+    p.add_argument(
+        "--start", default=None, metavar="P=VALUE,...", help="start values (default: the scenario's)"
+    )
+    p.add_argument(
+        "--starts", type=int, default=1, help="number of starts (extra ones random around --start)"
+    )
+    p.add_argument(
+        "--t1", type=float, default=None, help="end of the simulated span [s] (default the scenario's)"
+    )
     p.add_argument("--rtol", type=float, default=1e-6, help="ODE relative tolerance (default 1e-6)")
     p.add_argument("--atol", type=float, default=1e-8, help="ODE absolute tolerance (default 1e-8)")
     p.add_argument("--max-iterations", type=int, default=100, help="LM step budget (default 100)")
@@ -1126,15 +1379,30 @@ def run(args: argparse.Namespace) -> int:
             raise ScenarioError(f"--start {k}: value must be a number, got {v!r}") from None
     signals = [s.strip() for s in args.signals.split(",")] if args.signals else None
     out_dir = Path(args.out) if args.out else Path("out") / f"identify-{scenario.name}"
-    note(f"fitting {', '.join(params)} of {scenario.name} to {len(measurement.names)} signals x "
-         f"{measurement.t.size} samples of {args.measurement} (compiles once, then iterates) ...")
-    res = identify(scenario, measurement, params, signals=signals, noise=noise or None, start=start,
-                   n_starts=args.starts, t1=args.t1, rtol=args.rtol, atol=args.atol,
-                   max_iterations=args.max_iterations)
+    note(
+        f"fitting {', '.join(params)} of {scenario.name} to {len(measurement.names)} signals x "
+        f"{measurement.t.size} samples of {args.measurement} (compiles once, then iterates) ..."
+    )
+    res = identify(
+        scenario,
+        measurement,
+        params,
+        signals=signals,
+        noise=noise or None,
+        start=start,
+        n_starts=args.starts,
+        t1=args.t1,
+        rtol=args.rtol,
+        atol=args.atol,
+        max_iterations=args.max_iterations,
+    )
     out_dir.mkdir(parents=True, exist_ok=True)
     doc = res.to_dict() | {
         "command": ["jaxhoist", *args.argv] if getattr(args, "argv", None) is not None else sys.argv,
-        "scenario": scenario.name, "measurement": str(args.measurement), "fitted_signals": list(res.measured)}
+        "scenario": scenario.name,
+        "measurement": str(args.measurement),
+        "fitted_signals": list(res.measured),
+    }
     (out_dir / "estimates.json").write_text(json.dumps(doc, indent=2, default=_json_default) + "\n")
     written = [out_dir / "estimates.json"]
     if not args.no_plots:

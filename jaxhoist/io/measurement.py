@@ -68,9 +68,12 @@ def _build_signals() -> dict[str, SignalSpec]:
     for j, k in enumerate(corners):
         for i, c in enumerate(xyz):
             out[f"corners_{k}_{c}"] = SignalSpec("corners", (j, i), "m", f"corner {k}, world {c}")
-            out[f"friction_forces_{k}_{c}"] = SignalSpec("friction_forces", (j, i), "N",
-                                                         f"friction force at corner {k}, world {c}")
-        out[f"normal_forces_{k}"] = SignalSpec("normal_forces", (j,), "N", f"ground normal force N at corner {k}")
+            out[f"friction_forces_{k}_{c}"] = SignalSpec(
+                "friction_forces", (j, i), "N", f"friction force at corner {k}, world {c}"
+            )
+        out[f"normal_forces_{k}"] = SignalSpec(
+            "normal_forces", (j,), "N", f"ground normal force N at corner {k}"
+        )
     out["ground_reaction"] = SignalSpec("ground_reaction", (), "N", "total ground reaction R = Σ N_i")
     out["rope_tension"] = SignalSpec("rope_tension", (), "N", "rope tension S")
     return out
@@ -106,14 +109,16 @@ def _hint(word: str, options: Iterable[str]) -> str:
 def check_signal_names(names: Iterable[str], where: str, *, groups: bool = False) -> None:
     """Raise `MeasurementError` for a name that is no signal (nor, with `groups`, a group of signals)."""
     for name in names:
-        if (signal_groups(name) if groups else name in SIGNALS):
+        if signal_groups(name) if groups else name in SIGNALS:
             continue
         options = list(SIGNALS)
         if groups:
             options += sorted({s.rsplit("_", 1)[0] for s in SIGNALS})
-        raise MeasurementError(f"{where}: unknown signal {name!r}{_hint(name, options)}; "
-                               f"known signals are e.g. position_x, euler_phi, corners_D_z, normal_forces_E, "
-                               f"rope_tension (all: jaxhoist.io.measurement.SIGNALS)")
+        raise MeasurementError(
+            f"{where}: unknown signal {name!r}{_hint(name, options)}; "
+            f"known signals are e.g. position_x, euler_phi, corners_D_z, normal_forces_E, "
+            f"rope_tension (all: jaxhoist.io.measurement.SIGNALS)"
+        )
 
 
 def unit_factor(unit: str, si_unit: str, where: str) -> float:
@@ -124,10 +129,13 @@ def unit_factor(unit: str, si_unit: str, where: str) -> float:
         return table[u]
     dims = [si for si, t in UNITS.items() if u in t]
     if dims:
-        raise MeasurementError(f"{where}: wrong unit {u!r} (a unit of {dims[0]}); expected {si_unit} "
-                               f"(or {', '.join(k for k in table if k != si_unit)})")
-    raise MeasurementError(f"{where}: unknown unit {u!r}; expected {si_unit} "
-                           f"(or {', '.join(k for k in table if k != si_unit)})")
+        raise MeasurementError(
+            f"{where}: wrong unit {u!r} (a unit of {dims[0]}); expected {si_unit} "
+            f"(or {', '.join(k for k in table if k != si_unit)})"
+        )
+    raise MeasurementError(
+        f"{where}: unknown unit {u!r}; expected {si_unit} (or {', '.join(k for k in table if k != si_unit)})"
+    )
 
 
 # ------------------------------------------------------------------------------------------ object
@@ -150,8 +158,9 @@ class Measurement:
 
     def __post_init__(self):
         object.__setattr__(self, "t", np.asarray(self.t, dtype=np.float64))
-        object.__setattr__(self, "signals",
-                           {k: np.asarray(v, dtype=np.float64) for k, v in self.signals.items()})
+        object.__setattr__(
+            self, "signals", {k: np.asarray(v, dtype=np.float64) for k, v in self.signals.items()}
+        )
         object.__setattr__(self, "noise", {k: float(v) for k, v in self.noise.items()})
         self.validate()
 
@@ -168,7 +177,9 @@ class Measurement:
         duplicate times, non-positive noise."""
         src, t = self.source, self.t
         if t.ndim != 1 or t.size < 2:
-            raise MeasurementError(f"{src}: the time column t must hold at least 2 samples, got shape {t.shape}")
+            raise MeasurementError(
+                f"{src}: the time column t must hold at least 2 samples, got shape {t.shape}"
+            )
         if not self.signals:
             raise MeasurementError(f"{src}: no signal columns besides t")
         check_signal_names(self.signals, src)
@@ -176,15 +187,20 @@ class Measurement:
         _check_times(src, t, None)
         for name, v in self.signals.items():
             if v.shape != t.shape:
-                raise MeasurementError(f"{src}: signal {name!r} has shape {v.shape}, the time column {t.shape}")
+                raise MeasurementError(
+                    f"{src}: signal {name!r} has shape {v.shape}, the time column {t.shape}"
+                )
             _check_finite(src, name, v, None)
         for name, s in self.noise.items():
             if name not in self.signals:
-                raise MeasurementError(f"{src}: noise given for {name!r}, which is not a measured signal "
-                                       f"(signals: {self.names})")
+                raise MeasurementError(
+                    f"{src}: noise given for {name!r}, which is not a measured signal (signals: {self.names})"
+                )
             if not (np.isfinite(s) and s > 0):
-                raise MeasurementError(f"{src}: noise of {name!r} must be a positive standard deviation "
-                                       f"[{SIGNALS[name].unit}], got {s}")
+                raise MeasurementError(
+                    f"{src}: noise of {name!r} must be a positive standard deviation "
+                    f"[{SIGNALS[name].unit}], got {s}"
+                )
 
     def check_span(self, t1: float) -> None:
         """Raise `MeasurementError` unless every sample time lies in the simulated span [0, t1] [s]."""
@@ -193,7 +209,8 @@ class Measurement:
         if bad.size:
             raise MeasurementError(
                 f"{self.source}: {bad.size} sample time(s) outside the simulated span [0, {t1:g}] s, first "
-                f"t = {t[bad[0]]:g} s (sample {bad[0]}); shorten the measurement or simulate longer (t1)")
+                f"t = {t[bad[0]]:g} s (sample {bad[0]}); shorten the measurement or simulate longer (t1)"
+            )
 
     def select(self, names: Iterable[str]) -> Measurement:
         """A measurement with only the named signals (group names such as `position` allowed)."""
@@ -203,20 +220,27 @@ class Measurement:
         for n in names:
             hits = [s for s in signal_groups(n) if s in self.signals]
             if not hits:
-                raise MeasurementError(f"{self.source}: {n!r} selects no measured signal "
-                                       f"(measured: {self.names})")
+                raise MeasurementError(
+                    f"{self.source}: {n!r} selects no measured signal (measured: {self.names})"
+                )
             chosen += [s for s in hits if s not in chosen]
-        return Measurement(self.t, {s: self.signals[s] for s in chosen},
-                           {s: v for s, v in self.noise.items() if s in chosen}, self.source)
+        return Measurement(
+            self.t,
+            {s: self.signals[s] for s in chosen},
+            {s: v for s, v in self.noise.items() if s in chosen},
+            self.source,
+        )
 
 
 def _check_finite(src: str, name: str, v: np.ndarray, lines: np.ndarray | None) -> None:
     bad = np.flatnonzero(~np.isfinite(v))
     if bad.size:
-        where = (f"line {int(lines[bad[0]])}" if lines is not None else f"sample {bad[0]}")
+        where = f"line {int(lines[bad[0]])}" if lines is not None else f"sample {bad[0]}"
         kind = "NaN" if np.isnan(v[bad[0]]) else "an infinite value"
-        raise MeasurementError(f"{src}: column {name!r} holds {kind} at {where} "
-                               f"({bad.size} non-finite value(s) in that column); drop or fill those samples")
+        raise MeasurementError(
+            f"{src}: column {name!r} holds {kind} at {where} "
+            f"({bad.size} non-finite value(s) in that column); drop or fill those samples"
+        )
 
 
 def _check_times(src: str, t: np.ndarray, lines: np.ndarray | None) -> None:
@@ -228,13 +252,17 @@ def _check_times(src: str, t: np.ndarray, lines: np.ndarray | None) -> None:
     dup = np.flatnonzero(d == 0)
     if dup.size:
         i = dup[0]
-        raise MeasurementError(f"{src}: duplicate time t = {t[i]:g} s at {where(i)} and {where(i + 1)}; "
-                               f"every sample needs its own time")
+        raise MeasurementError(
+            f"{src}: duplicate time t = {t[i]:g} s at {where(i)} and {where(i + 1)}; "
+            f"every sample needs its own time"
+        )
     back = np.flatnonzero(d < 0)
     if back.size:
         i = back[0]
-        raise MeasurementError(f"{src}: times are not sorted: t = {t[i + 1]:g} s at {where(i + 1)} comes after "
-                               f"t = {t[i]:g} s at {where(i)}; sort the rows by time")
+        raise MeasurementError(
+            f"{src}: times are not sorted: t = {t[i + 1]:g} s at {where(i + 1)} comes after "
+            f"t = {t[i]:g} s at {where(i)}; sort the rows by time"
+        )
 
 
 # ------------------------------------------------------------------------------------------ reading
@@ -256,8 +284,10 @@ def _side_json(path: Path, units_file: str | Path | None) -> tuple[dict, str | N
         raise MeasurementError(f"{side}: expected a JSON object with keys 'units' and/or 'noise'")
     for key in data:
         if key not in ("units", "noise", "description", "metadata"):
-            raise MeasurementError(f"{side}: unknown key {key!r}{_hint(key, ['units', 'noise'])}; "
-                                   f"expected 'units', 'noise', 'description', 'metadata'")
+            raise MeasurementError(
+                f"{side}: unknown key {key!r}{_hint(key, ['units', 'noise'])}; "
+                f"expected 'units', 'noise', 'description', 'metadata'"
+            )
     for key in ("units", "noise"):
         if key in data and not isinstance(data[key], dict):
             raise MeasurementError(f"{side}: {key!r} must map column names to values")
@@ -271,23 +301,30 @@ def _noise_value(raw, name: str, factor: float, values: np.ndarray, where: str) 
             try:
                 pct = float(s[:-1])
             except ValueError:
-                raise MeasurementError(f"{where}: noise of {name!r} must be a number or 'x%', got {raw!r}") from None
+                raise MeasurementError(
+                    f"{where}: noise of {name!r} must be a number or 'x%', got {raw!r}"
+                ) from None
             rms = float(np.sqrt(np.mean(values**2)))
             if not (np.isfinite(pct) and pct > 0) or rms == 0.0:
-                raise MeasurementError(f"{where}: relative noise of {name!r} needs a positive percentage and a "
-                                       f"signal that is not all zero, got {raw!r}")
+                raise MeasurementError(
+                    f"{where}: relative noise of {name!r} needs a positive percentage and a "
+                    f"signal that is not all zero, got {raw!r}"
+                )
             return pct / 100.0 * rms
         try:
             raw = float(s)
         except ValueError:
-            raise MeasurementError(f"{where}: noise of {name!r} must be a number or 'x%', got {raw!r}") from None
+            raise MeasurementError(
+                f"{where}: noise of {name!r} must be a number or 'x%', got {raw!r}"
+            ) from None
     if isinstance(raw, bool) or not isinstance(raw, int | float):
         raise MeasurementError(f"{where}: noise of {name!r} must be a number or 'x%', got {raw!r}")
     return float(raw) * factor
 
 
-def read_measurement(path: str | Path, *, units_file: str | Path | None = None,
-                     t1: float | None = None) -> Measurement:
+def read_measurement(
+    path: str | Path, *, units_file: str | Path | None = None, t1: float | None = None
+) -> Measurement:
     """Read and validate a measurement CSV (and its JSON side file `NAME.json` if present).
 
     **Arguments**
@@ -308,7 +345,11 @@ def read_measurement(path: str | Path, *, units_file: str | Path | None = None,
     side, side_src = _side_json(path, units_file)
     with path.open(newline="") as fh:
         rows = [(i + 1, r) for i, r in enumerate(csv.reader(fh))]
-    rows = [(n, r) for n, r in rows if r and not (len(r) == 1 and not r[0].strip()) and not r[0].lstrip().startswith("#")]
+    rows = [
+        (n, r)
+        for n, r in rows
+        if r and not (len(r) == 1 and not r[0].strip()) and not r[0].lstrip().startswith("#")
+    ]
     if not rows:
         raise MeasurementError(f"{src}: the file is empty")
     header_line, header = rows[0]
@@ -316,7 +357,9 @@ def read_measurement(path: str | Path, *, units_file: str | Path | None = None,
     for cell in header:
         m = _HEADER.match(cell)
         if m is None or not m.group(1):
-            raise MeasurementError(f"{src}: header cell {cell!r} is not of the form 'name [unit]' (line {header_line})")
+            raise MeasurementError(
+                f"{src}: header cell {cell!r} is not of the form 'name [unit]' (line {header_line})"
+            )
         names.append(m.group(1))
         header_units.append(m.group(2))
     seen = set()
@@ -325,26 +368,33 @@ def read_measurement(path: str | Path, *, units_file: str | Path | None = None,
             raise MeasurementError(f"{src}: column {n!r} appears twice in the header")
         seen.add(n)
     if "t" not in names:
-        raise MeasurementError(f"{src}: no time column 't' in the header {names}{_hint('t', [n for n in names if n])}"
-                               f"; the first column should read 't [s]'")
+        raise MeasurementError(
+            f"{src}: no time column 't' in the header {names}{_hint('t', [n for n in names if n])}"
+            f"; the first column should read 't [s]'"
+        )
     check_signal_names([n for n in names if n != "t"], src)
     side_units = side.get("units", {})
     for key in side_units:
         if key not in names:
-            raise MeasurementError(f"{side_src}: units given for {key!r}, which is not a column of {src} "
-                                   f"{_hint(key, names)}")
+            raise MeasurementError(
+                f"{side_src}: units given for {key!r}, which is not a column of {src} {_hint(key, names)}"
+            )
     factors = {}
     for n, hu in zip(names, header_units, strict=True):
         su = side_units.get(n)
         if su is not None and not isinstance(su, str):
             raise MeasurementError(f"{side_src}: unit of {n!r} must be a string, got {su!r}")
         if hu and su and hu.strip() != su.strip():
-            raise MeasurementError(f"{src}: column {n!r} has unit {hu!r} in the header but {su!r} in {side_src}")
+            raise MeasurementError(
+                f"{src}: column {n!r} has unit {hu!r} in the header but {su!r} in {side_src}"
+            )
         unit = hu or su
         si = "s" if n == "t" else SIGNALS[n].unit
         if not unit:
-            raise MeasurementError(f"{src}: column {n!r} has no unit: write '{n} [{si}]' in the header, or give "
-                                   f"it in the side file {path.with_suffix('.json').name} under 'units'")
+            raise MeasurementError(
+                f"{src}: column {n!r} has no unit: write '{n} [{si}]' in the header, or give "
+                f"it in the side file {path.with_suffix('.json').name} under 'units'"
+            )
         factors[n] = unit_factor(unit, si, f"{src}: column {n!r}")
     body = rows[1:]
     if len(body) < 2:
@@ -353,13 +403,17 @@ def read_measurement(path: str | Path, *, units_file: str | Path | None = None,
     lines = np.array([n for n, _ in body])
     for r, (line, row) in enumerate(body):
         if len(row) != len(names):
-            raise MeasurementError(f"{src}: line {line} has {len(row)} values, the header has {len(names)} columns")
+            raise MeasurementError(
+                f"{src}: line {line} has {len(row)} values, the header has {len(names)} columns"
+            )
         for c, cell in enumerate(row):
             s = cell.strip()
             try:
                 data[r, c] = float(s) if s else np.nan
             except ValueError:
-                raise MeasurementError(f"{src}: line {line}, column {names[c]!r}: {cell!r} is not a number") from None
+                raise MeasurementError(
+                    f"{src}: line {line}, column {names[c]!r}: {cell!r} is not a number"
+                ) from None
     cols = {n: data[:, i] * factors[n] for i, n in enumerate(names)}
     for n in names:
         _check_finite(src, n, data[:, names.index(n)], lines)
@@ -368,8 +422,10 @@ def read_measurement(path: str | Path, *, units_file: str | Path | None = None,
     noise = {}
     for n, raw in side.get("noise", {}).items():
         if n not in cols:
-            raise MeasurementError(f"{side_src}: noise given for {n!r}, which is not a signal column of {src}"
-                                   f"{_hint(n, list(cols))}")
+            raise MeasurementError(
+                f"{side_src}: noise given for {n!r}, which is not a signal column of {src}"
+                f"{_hint(n, list(cols))}"
+            )
         noise[n] = _noise_value(raw, n, factors[n], cols[n], side_src)
         if not (np.isfinite(noise[n]) and noise[n] > 0):
             raise MeasurementError(f"{side_src}: noise of {n!r} must be positive, got {raw!r}")
@@ -382,8 +438,15 @@ def read_measurement(path: str | Path, *, units_file: str | Path | None = None,
 # ------------------------------------------------------------------------------------------ writing
 
 
-def write_measurement(path: str | Path, measurement: Measurement, *, units: Mapping[str, str] | None = None,
-                      side_file: bool = True, description: str | None = None, digits: int = 12) -> Path:
+def write_measurement(
+    path: str | Path,
+    measurement: Measurement,
+    *,
+    units: Mapping[str, str] | None = None,
+    side_file: bool = True,
+    description: str | None = None,
+    digits: int = 12,
+) -> Path:
     """Write a measurement as CSV (units in the header) and, with `side_file`, `NAME.json` holding the
     units and the noise levels (standard deviations in the column units).
 
@@ -412,8 +475,10 @@ def write_measurement(path: str | Path, measurement: Measurement, *, units: Mapp
         for row in table:
             w.writerow([f"{x:.{digits}g}" for x in row])
     if side_file:
-        side = {"units": {n: u for n, (u, _) in used.items()},
-                "noise": {n: s / used[n][1] for n, s in measurement.noise.items()}}
+        side = {
+            "units": {n: u for n, (u, _) in used.items()},
+            "noise": {n: s / used[n][1] for n, s in measurement.noise.items()},
+        }
         if description:
             side["description"] = description
         path.with_suffix(".json").write_text(json.dumps(side, indent=2) + "\n")
