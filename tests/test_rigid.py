@@ -21,13 +21,14 @@ T1 = 1.5
 
 
 def _scenario(*, size=(1.0, 1.0, 1.0), mass=1000.0, mu=0.3, attachment=(0.5, 0.0, 0.5), tip=(0.5, -10.0, 0.5),
-              rope_stiffness=1e5, rope_damping=1e4, speed=0.1) -> jh.Scenario:
-    """A box pulled by a soft rope from a stiff, light boom tip (tip deflection ~ S / 1e9 m)."""
+              rope_stiffness=1e5, rope_damping=1e4, speed=0.1, travel=math.inf) -> jh.Scenario:
+    """A box pulled by a soft rope from a stiff, light boom tip (tip deflection ~ S / 1e9 m); the hoist
+    runs at `speed` from t = 0+ and stops dead after taking in `travel` metres of rope."""
     return jh.Scenario(
         load=jh.Load(list(size), mass),
         foundation=jh.Foundation(1e7, 1e5, mu),  # only μ is used by the rigid model
         rope=jh.Rope(rope_stiffness, rope_damping, list(attachment)),
-        hoist=jh.ConstantSpeedHoist(speed),
+        hoist=jh.RampedHoist(speed, 0.0, travel),
         boom=jh.Boom(list(tip), 10.0, 1e9, 2e5),
         name="rigid-test", t1=T1,
     )
@@ -177,6 +178,29 @@ def test_tipping_about_an_edge_at_the_statics_threshold():
     np.testing.assert_allclose(corners[late, :2, 2], 0.0, atol=1e-9)
     resid = np.abs(np.asarray(tr.energy_residual()))
     assert resid.max() < 1e-6 * float(np.asarray(tr.hoist_work)[-1])
+
+
+def test_rocking_impacts_settle_and_the_energy_balance_closes():
+    """The hoist stops dead (the rope loses its damping force b_l v at once) just after the tall box has
+    started to tip about DE: it falls back, edge FH strikes the ground, the box rocks on alternate edges
+    with plastic impacts (restitution 0) losing energy at each, and settles flat. The energy lost in the
+    impacts closes the balance E(t) - E(0) = W_hoist - D_damping - W_friction - W_impact."""
+    sc = _scenario(size=(1.0, 1.0, 2.0), mu=0.9, attachment=(0.5, 0.0, 2.0), tip=(0.5, -6.0, 10.0),
+                   rope_stiffness=2e5, rope_damping=2e4, speed=0.05, travel=0.018)
+    tr = simulate_rigid(sc, T1, n_save=N_SAVE)
+    ph = tr.phases
+    assert ph[0].end == "rest:tip" and ph[1].contact == ("stick", "stick", "free", "free")
+    impacts = [p for p in ph if "impact" in p.end]
+    assert len(impacts) >= 3
+    assert "impact:FH" in impacts[0].end and "impact:DE" in impacts[1].end  # rocking on alternate edges
+    assert ph[-1].rest and ph[-1].end == "t1" and "settled" in ph[-2].end
+    loss = np.asarray(tr.impact_loss)
+    assert np.all(np.diff(loss) >= 0) and loss[-1] > 0.03  # J; the first impact alone takes 0.038 J
+    resid = np.abs(np.asarray(tr.energy_residual()))
+    assert resid.max() < 1e-4 * loss[-1]
+    # At rest again, flat: all four corners on the ground, the load still.
+    np.testing.assert_allclose(np.asarray(tr.corners)[-1, :, 2], 0.0, atol=1e-8)
+    np.testing.assert_allclose(np.asarray(tr.velocity)[-1], 0.0, atol=1e-12)
 
 
 def test_invalid_restitution_is_refused():

@@ -429,7 +429,9 @@ class _Driver:
             if np.linalg.norm(np.concatenate([v1[k], w1[k]]) - u_best) > 1e-6 * (np.linalg.norm(u_best) + tV):
                 raise RigidContactError(
                     f"t = {t:.9g} s: impact of corner(s) {[rigid.CORNERS[i] for i in striking]} has two "
-                    f"consistent impulses, {_fmt(combos[best])} and {_fmt(combos[k])} (non-unique)")
+                    f"consistent impulses, {_fmt(combos[best])} and {_fmt(combos[k])} (Newton's restitution "
+                    f"law is not unique for simultaneous multi-corner impacts; restitution = 0, or a larger "
+                    f"Settings.rest_velocity to let a rocking load settle, avoids this)")
         y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
                          (jnp.asarray(v1[best]), jnp.asarray(w1[best])))
         _, _, ke1 = self.kin(t, y1)
@@ -677,6 +679,13 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
             y_end, loss = drv.impact(t_end, y_end, hard)
             impact_total += loss
             end += f" impact:{''.join(rigid.CORNERS[i] for i in hard)} ({loss:.4g} J)"
+            corners1, cv1, ke1 = drv.kin(t_end, y_end)
+            flat = np.all(corners1[:, 2] < drv.tol["z"] * drv.L)
+            if flat and np.max(np.linalg.norm(cv1, axis=1)) < float(settings.rest_velocity):
+                y_end = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y_end,
+                                    (jnp.zeros(3), jnp.zeros(3)))
+                impact_total += ke1
+                end += " settled"
             records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before))
             new = drv.select(t_end, y_end, "after impact")
         else:

@@ -95,18 +95,23 @@ class Settings(eqx.Module):
       sticks or slides on): Coulomb friction's direction is singular at zero slip, and following it down to
       zero would cost ever smaller steps. Sticking then removes the remaining slip (<= 2 v_stop) by a tiny
       velocity projection whose energy is booked with the impact losses.
+    - `rest_velocity`: [m/s]; when an impact leaves the load flat on the ground with every corner slower
+      than this, it is brought to rest (plastic impact of the whole bottom face). Without it a rocking load
+      would need infinitely many ever smaller impacts (a Zeno sequence) to settle.
     """
 
     baumgarte: Scalar
     slip_velocity: Scalar
     rcond: Scalar
     stop_velocity: Scalar
+    rest_velocity: Scalar
 
-    def __init__(self, baumgarte=20.0, slip_velocity=1e-6, rcond=1e-9, stop_velocity=1e-4):
+    def __init__(self, baumgarte=20.0, slip_velocity=1e-6, rcond=1e-9, stop_velocity=1e-4, rest_velocity=1e-3):
         self.baumgarte = jnp.asarray(baumgarte, dtype=jnp.float64)
         self.slip_velocity = jnp.asarray(slip_velocity, dtype=jnp.float64)
         self.rcond = jnp.asarray(rcond, dtype=jnp.float64)
         self.stop_velocity = jnp.asarray(stop_velocity, dtype=jnp.float64)
+        self.rest_velocity = jnp.asarray(rest_velocity, dtype=jnp.float64)
 
 
 class Scales(eqx.Module):
