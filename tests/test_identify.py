@@ -1,8 +1,8 @@
 """Parameter identification (`jaxhoist.apps.identify`) and measurement files (`jaxhoist.io.measurement`).
 
 One compiled problem serves every fit here: μ of paper-4.2 from the mass-centre path on 21 samples over
-0.4 s (before the first corner touches down again, where the ground damper force jumps and no derivative
-of the flow exists). The tests change data values only, so the cached core is reused.
+0.4 s (before the first corner touches down again: there the ground damper force jumps and the flow is not
+differentiable, see docs/identification.md). The tests change data values only, so the cached core is reused.
 """
 
 import json
