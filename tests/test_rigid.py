@@ -107,7 +107,7 @@ def _reference_slide(ts, m, mu, g, c_l, b_l, v, m0, k, c):
     onset = lambda t, y, sliding: tension(t, *y) - mu * m * g  # noqa: E731
     onset.terminal, onset.direction = True, 1
     kw = dict(method="DOP853", rtol=1e-12, atol=1e-14)
-    a = solve_ivp(rhs, (0.0, ts[-1]), [0.0, 0.0, 0.0, 0.0], args=(False,), events=onset, dense_output=True, **kw)
+    a = solve_ivp(rhs, (0.0, ts[-1]), [0.0] * 4, args=(False,), events=onset, dense_output=True, **kw)
     t_s = float(a.t_events[0][0])
     b = solve_ivp(rhs, (t_s, ts[-1]), a.y_events[0][0], args=(True,), dense_output=True, **kw)
     assert np.all(b.y[1] >= 0.0)  # it keeps sliding

@@ -57,7 +57,8 @@ def test_corner_loads_match_paper_eq_2_8_and_balance(paper42):
     assert float(r.friction) == pytest.approx(math.hypot(S[0], S[1]), rel=1e-12)
     # Full moment balance about the vertical through R: rope horizontal force at B plus M_T vanish.
     xR, yR = np.asarray(r.reaction_point)
-    assert float(r.friction_moment) + (B[0] - xR) * S[1] - (B[1] - yR) * S[0] == pytest.approx(0.0, abs=1e-9 * G)
+    moment = float(r.friction_moment) + (B[0] - xR) * S[1] - (B[1] - yR) * S[0]
+    assert moment == pytest.approx(0.0, abs=1e-9 * G)
     assert r.holds() == {"lift": True, "slide": True, "twist": True, "tip": True}
 
 
@@ -129,7 +130,8 @@ def test_twist_threshold_closed_form(paper42, p41):
     r = statics.rest_statics_jit(paper42, jnp.asarray(s * e), attachment=jnp.asarray(B))
     assert float(r.reaction_point[0]) == pytest.approx(1.1, rel=1e-9)
     assert abs(float(r.friction_moment)) == pytest.approx(float(r.twist_limit), rel=1e-9)
-    assert statics.rest_statics_jit(paper42, jnp.asarray(0.99 * s * e), attachment=jnp.asarray(B)).holds()["twist"]
+    assert statics.rest_statics_jit(paper42, jnp.asarray(0.99 * s * e),
+                                    attachment=jnp.asarray(B)).holds()["twist"]
     assert not statics.rest_statics_jit(paper42, jnp.asarray(1.01 * s * e),
                                     attachment=jnp.asarray(B)).holds()["twist"]
     # A rope point on the box keeps the friction line inside the rectangle: twist never fails.

@@ -177,12 +177,6 @@ def _forces(t, y, scenario, c, phase, settings):
 
 
 @eqx.filter_jit
-def _kin(t, y, scenario, c):
-    ld = rigid.loads(t, y, scenario, c)
-    return ld.corners, ld.corner_velocity, rigid.kinetic_energy(y, scenario, c)
-
-
-@eqx.filter_jit
 def _outputs(ts, ys, scenario, c, phases, settings):
     return jax.vmap(lambda t, y, ph: rigid.output(t, y, scenario, c, ph, settings))(ts, ys, phases)
 
@@ -217,9 +211,15 @@ class _Driver:
     def guards(self, t, y, phase) -> np.ndarray:
         return _np(_raw_guards_jit(jnp.asarray(t), y, self.sc, self.c, phase, self.settings))
 
+    def matrices(self, t, y):
+        m = _contact_matrices(jnp.asarray(t), y, self.sc, self.c, self.settings)
+        return jax.tree_util.tree_map(_np, m)
+
     def kin(self, t, y):
-        corners, cv, ke = _kin(jnp.asarray(t), y, self.sc, self.c)
-        return _np(corners), _np(cv), float(ke)
+        """Corners [m], corner velocities [m/s] and the load's kinetic energy [J]."""
+        m = self.matrices(t, y)
+        u = np.concatenate([_np(y.velocity), _np(y.angular_velocity)])
+        return m.corners, m.corner_velocity, float(0.5 * u @ m.mass @ u)
 
     def with_offsets(self, t, y, phase: Phase) -> Phase:
         raw = self.guards(t, y, phase)
@@ -242,18 +242,12 @@ class _Driver:
         resting = near & (np.linalg.norm(cv[:, :2], axis=1) < 1.5 * self.v_stop)
         return near, resting, corners, cv
 
-    def project(self, t, y, phase: Phase):
-        """Remove the velocity components that the phase's constraints forbid (sticking corners' slip,
-        contacts' normal velocity): the M-orthogonal projection, a tiny impulse whose kinetic energy
-        [J] is returned."""
-        if phase.rest:
-            _, _, ke = self.kin(t, y)
-            return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
-                               (jnp.zeros(3), jnp.zeros(3))), ke
-        mats = jax.tree_util.tree_map(_np, _contact_matrices(jnp.asarray(t), y, self.sc, self.c, self.settings))
-        contact = _np(phase.contact)
-        rows = [mats.jacobians[i] for i in range(4) if contact[i] == STICK]
-        rows += [mats.jacobians[i, 2:3] for i in range(4) if contact[i] == SLIDE]
+    def _project(self, t, y, full: np.ndarray, normal: np.ndarray):
+        """M-orthogonal projection of the velocities onto: corners `full` at rest, corners `normal` with
+        zero normal velocity. Returns (y, kinetic energy removed [J])."""
+        mats = self.matrices(t, y)
+        rows = [mats.jacobians[i] for i in range(4) if full[i]]
+        rows += [mats.jacobians[i, 2:3] for i in range(4) if normal[i] and not full[i]]
         if not rows:
             return y, 0.0
         J = np.concatenate(rows, axis=0)
@@ -265,10 +259,24 @@ class _Driver:
         return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
                            (jnp.asarray(u1[:3]), jnp.asarray(u1[3:]))), float(loss)
 
+    def project(self, t, y, phase: Phase):
+        """Remove the velocity components that the phase's constraints forbid: the slip of sticking corners
+        and of corners that start sliding from rest (their slip died out below the stop velocity; they
+        restart along the direction chosen by Coulomb's law), and the normal velocity of contacts. A tiny
+        impulse; the kinetic energy it removes [J] is returned."""
+        if phase.rest:
+            _, _, ke = self.kin(t, y)
+            return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
+                               (jnp.zeros(3), jnp.zeros(3))), ke
+        contact, starting = _np(phase.contact), _np(phase.starting)
+        return self._project(t, y, (contact == STICK) | ((contact == SLIDE) & starting), contact != FREE)
+
     def select(self, t, y, where: str, previous: Phase | None = None) -> Phase:
         """Choose the contact configuration at (t, y) (see the module docstring)."""
         near, resting, corners, cv = self.near_ground(t, y)
         body_at_rest = bool(np.all(near) and np.all(resting))
+        # Evaluate as the chosen phase will start: resting corners still, contacts not moving normally.
+        y, _ = self._project(t, y, resting, near)
 
         # The load resting flat on all four corners: the rest conditions decide.
         rest_phase = rigid.make_phase([STICK] * 4, rest=True)
@@ -277,7 +285,7 @@ class _Driver:
             if g[8] >= -self.tol["rest"] and g[9] >= -self.tol["rest"]:
                 return rest_phase
 
-        mats = jax.tree_util.tree_map(_np, _contact_matrices(jnp.asarray(t), y, self.sc, self.c, self.settings))
+        mats = self.matrices(t, y)
         near_idx = [i for i in range(4) if near[i]]
         combos, hints_list = [], []
         for r in range(len(near_idx), -1, -1):
@@ -320,8 +328,8 @@ class _Driver:
                     along = float(ah @ h)
                     perp = float(np.linalg.norm(ah - along * h))
                     if along < -tA or perp > tA + self.tol["align"] * np.linalg.norm(ah):
-                        ok, reason = False, (f"{rigid.CORNERS[i]} would not slide along its friction direction "
-                                             f"(a_h = {ah}, t = {h})")
+                        ok, reason = False, (f"{rigid.CORNERS[i]} would not slide along its friction "
+                                             f"direction (a_h = {ah}, t = {h})")
                 if not ok:
                     break
             (consistent if ok else why).append(k if ok else (combo, reason))
@@ -345,7 +353,8 @@ class _Driver:
         n_contacts = lambda k: int(np.sum(combos[k] != FREE))  # noqa: E731
         top = max(n_contacts(k) for k in consistent)
         group = sorted([k for k in consistent if n_contacts(k) == top],
-                       key=lambda k: (round(jump(k) / (self.tol["jump"] * self.G)), -int(np.sum(combos[k] == STICK))))
+                       key=lambda k: (round(jump(k) / (self.tol["jump"] * self.G)),
+                                      -int(np.sum(combos[k] == STICK))))
         best = group[0]
         a_scale = np.linalg.norm(accel[best]) + tA
         for k in group[1:]:
@@ -417,8 +426,8 @@ class _Driver:
                 consistent.append(k)
         if not consistent:
             raise RigidContactError(
-                f"t = {t:.9g} s: impact of corner(s) {[rigid.CORNERS[i] for i in striking]} has no consistent "
-                f"impulse (Painlevé-type impact inconsistency)")
+                f"t = {t:.9g} s: impact of corner(s) {[rigid.CORNERS[i] for i in striking]} has no "
+                f"consistent impulse (Painlevé-type impact inconsistency)")
         consistent.sort(key=lambda k: (-int(np.sum(combos[k] != FREE)), -int(np.sum(combos[k] == STICK))))
         best = consistent[0]
         u_best = np.concatenate([v1[best], w1[best]])
@@ -575,8 +584,8 @@ _DEFAULT_TOL = dict(
     guard_start=1e-9,  # every guard starts at least this positive (offsets)
     trigger=1e-6,      # guards within this of zero at an event count as fired
     lookahead=1e-5,    # the look-ahead runs until the fired guards are below -lookahead
-    align=1e-2,
-    jump=1e-3,         # normal-force jumps closer than this [G] count as equally continuous        # a corner sliding from rest must accelerate along its sliding direction (relative)
+    align=1e-2,        # a corner sliding from rest must accelerate along its sliding direction (relative)
+    jump=1e-3,         # normal-force jumps closer than this [G] count as equally continuous
     bounce=1e-4,       # impacts slower than bounce V are plastic (no restitution): avoids Zeno bouncing
 )
 
@@ -644,6 +653,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         y, loss = drv.project(t, y, phase)
         impact_total += loss
         phase = drv.with_offsets(t, y, phase)
+        g_start = drv.guards(t, y, phase) + _np(phase.guard_offset)
         sts, sys_, result = drv.solve(y, phase, t, t1, ts)
         last = int(np.nonzero(np.isfinite(sts))[0][-1])  # the final state is saved after the last ts kept
         t_end = float(sts[last])
@@ -666,9 +676,13 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
             records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), "t1", y_end))
             break
         g = drv.guards(t_end, y_end, phase) + _np(phase.guard_offset)
-        fired = [k for k in range(rigid.N_GUARDS) if g[k] <= drv.tol["trigger"]]
+        # Fired: near zero now, and well below where the guard started (a guard that started at its small
+        # offset and stayed there has not fired).
+        fired = [k for k in range(rigid.N_GUARDS) if g[k] <= drv.tol["trigger"] and g[k] <= 0.5 * g_start[k]]
         if not fired:
             fired = [int(np.argmin(g))]
+        if drv.debug:
+            print(f"  guards at start {g_start}\n  guards at end   {g}")
         end = ",".join(rigid.GUARD_NAMES[k] for k in fired)
         contact = _np(phase.contact)
         corners, cv, _ = drv.kin(t_end, y_end)
@@ -679,12 +693,19 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
             y_end, loss = drv.impact(t_end, y_end, hard)
             impact_total += loss
             end += f" impact:{''.join(rigid.CORNERS[i] for i in hard)} ({loss:.4g} J)"
+            # Settling: if every corner on the ground leaves the impact slower than rest_velocity, the
+            # impact is plastic for all of them (their normal velocities are removed; flat on the ground,
+            # the load stops). This ends the otherwise endless sequence of ever smaller rocking impacts.
             corners1, cv1, ke1 = drv.kin(t_end, y_end)
-            flat = np.all(corners1[:, 2] < drv.tol["z"] * drv.L)
-            if flat and np.max(np.linalg.norm(cv1, axis=1)) < float(settings.rest_velocity):
-                y_end = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y_end,
-                                    (jnp.zeros(3), jnp.zeros(3)))
-                impact_total += ke1
+            near = corners1[:, 2] < drv.tol["z"] * drv.L
+            if np.max(np.linalg.norm(cv1[near], axis=1)) < float(settings.rest_velocity):
+                if np.all(near):
+                    y_end = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y_end,
+                                        (jnp.zeros(3), jnp.zeros(3)))
+                    impact_total += ke1
+                else:
+                    y_end, loss = drv._project(t_end, y_end, np.zeros(4, dtype=bool), near)
+                    impact_total += loss
                 end += " settled"
             records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before))
             new = drv.select(t_end, y_end, "after impact")
@@ -730,15 +751,20 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
     _, cv, _ = drv.kin(t_e, y_e)
     speed = np.linalg.norm(cv[:, :2], axis=1)
     tangential = [k - 4 for k in fired if 4 <= k < 8 and contact[k - 4] == SLIDE and not phase.rest]
-    # A slip started from rest has reached 2 v_stop: the same configuration, now an ordinary slide.
+    # Bookkeeping events of slips that started from rest: the speed has reached 2 v_stop (now an ordinary
+    # slide), or the slip has turned by 90° while still moving (new reference direction; the friction
+    # already follows the velocity). Nothing changes physically: same configuration.
     grown = [i for i in tangential if starting[i] and speed[i] >= 1.5 * drv.v_stop]
-    if grown and len(grown) == len(fired):
+    turned = [i for i in tangential if starting[i] and 0.05 * drv.v_stop <= speed[i] < 1.5 * drv.v_stop]
+    if (grown or turned) and len(grown) + len(turned) == len(fired):
         hint, start = _np(phase.slip_hint).copy(), starting.copy()
+        for i in grown + turned:
+            hint[i] = cv[i, :2] / speed[i]
         for i in grown:
-            hint[i], start[i] = cv[i, :2] / speed[i], False
+            start[i] = False
         return rigid.make_phase(contact, rest=False, slip_hint=hint, starting=start)
     where = f"after {','.join(rigid.GUARD_NAMES[k] for k in fired)}"
-    # A slip that died out (or turned back): choose at the event itself (the corner is now resting).
+    # A slip that died out: choose at the event itself (the corner is now resting).
     if any(speed[i] < 1.5 * drv.v_stop for i in tangential):
         return drv.select(t_e, y_e, where, phase)
     # Otherwise look ahead: continue the old phase (guards disabled) until the fired guards are clearly

@@ -106,7 +106,8 @@ class Settings(eqx.Module):
     stop_velocity: Scalar
     rest_velocity: Scalar
 
-    def __init__(self, baumgarte=20.0, slip_velocity=1e-6, rcond=1e-9, stop_velocity=1e-4, rest_velocity=1e-3):
+    def __init__(self, baumgarte=20.0, slip_velocity=1e-6, rcond=1e-9, stop_velocity=1e-4,
+                 rest_velocity=1e-3):
         self.baumgarte = jnp.asarray(baumgarte, dtype=jnp.float64)
         self.slip_velocity = jnp.asarray(slip_velocity, dtype=jnp.float64)
         self.rcond = jnp.asarray(rcond, dtype=jnp.float64)
@@ -185,14 +186,14 @@ def loads(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Loads:
     R = kinematics.quat_to_matrix(y.quaternion)
     omega = y.angular_velocity
     corners = kinematics.points_world(y.position, R, c.corners_rel)
-    corner_vel = kinematics.points_velocity(y.velocity, R, omega, c.corners_rel)
+    corner_vel = y.velocity + jnp.cross(omega, c.corners_rel) @ R.T  # v_C + R (ω × ρ_i), cf. (2.17)
     jac = jax.vmap(lambda rho: jnp.concatenate([jnp.eye(3), -R @ kinematics.skew(rho)], axis=1))(
         c.corners_rel)
     bias = jnp.cross(omega, jnp.cross(omega, c.corners_rel)) @ R.T
 
     # Rope (2.14) with l(t) = l0 - s(t), as in the elastic model.
-    B = kinematics.points_world(y.position, R, c.attachment_rel[None])[0]
-    v_B = kinematics.points_velocity(y.velocity, R, omega, c.attachment_rel[None])[0]
+    B = y.position + R @ c.attachment_rel
+    v_B = y.velocity + R @ jnp.cross(omega, c.attachment_rel)
     AB = y.tip_position - B
     L = forces.safe_norm(AB)
     e = AB / jnp.maximum(L, 1e-12)
@@ -287,7 +288,8 @@ class ContactMatrices(eqx.Module):
     target: CornerVecs
 
 
-def contact_matrices(t: Scalar, y: State, scenario: Scenario, c: Constants, settings: Settings) -> ContactMatrices:
+def contact_matrices(t: Scalar, y: State, scenario: Scenario, c: Constants,
+                     settings: Settings) -> ContactMatrices:
     ld = loads(t, y, scenario, c)
     m = scenario.load.mass
     z = jnp.zeros((3, 3))
@@ -408,10 +410,13 @@ def raw_guards(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Pha
     vh = ld.corner_velocity[:, :2]
     speed = jnp.sqrt(jnp.sum(vh**2, axis=1))
     v_stop = settings.stop_velocity
-    # A slip that started from rest: it must not turn back, and once its speed reaches 2 v_stop the phase
-    # is restarted as an ordinary slide (a bookkeeping event). An ordinary slide ends when the speed falls
-    # to v_stop.
-    g_start = jnp.minimum(jnp.sum(vh * phase.slip_hint, axis=1), 2.0 * v_stop - speed) / sc.velocity
+    # A slip that started from rest: once its speed reaches 2 v_stop the phase is restarted as an ordinary
+    # slide, and if it turns back by more than v_stop / 20 against its starting direction its direction is
+    # re-anchored (bookkeeping events: nothing changes physically; a corner near the instantaneous centre of
+    # rotation may creep back and forth through zero slip without events). An ordinary slide ends when
+    # its speed falls to v_stop.
+    g_start = jnp.minimum(jnp.sum(vh * phase.slip_hint, axis=1) + 0.05 * v_stop,
+                          2.0 * v_stop - speed) / sc.velocity
     g_slide = jnp.where(phase.starting, g_start, (speed - v_stop) / sc.velocity)
     g_tan = jnp.where(contact == STICK, (mu * N - T) / sc.force, jnp.where(contact == SLIDE, g_slide, 1.0))
     return jnp.concatenate([g_normal, g_tan, jnp.ones(2)])

@@ -71,8 +71,8 @@ def nonnegative_corner_loads(loads: PerCorner) -> tuple[PerCorner, Scalar]:
     law gives a negative corner load although the load can still rest; the nonnegative loads of least norm
     move t to the nearest end of the interval where N + t w >= 0.
 
-    **Returns** `(loads >= 0, margin)`, margin = (min(N_D, N_F) + min(N_E, N_H)) / 2 = N/4 (1 - 2 max(|u|,|v|))
-    with u = x_R/a - ½, v = y_R/b - ½: >= 0 iff R lies in the rectangle (no tipping).
+    **Returns** `(loads >= 0, margin)`, margin = (min(N_D, N_F) + min(N_E, N_H)) / 2
+    = N/4 (1 - 2 max(|u|, |v|)) with u = x_R/a - ½, v = y_R/b - ½: >= 0 iff R lies in the rectangle.
     """
     lo = jnp.maximum(-loads[0], -loads[2])
     hi = jnp.minimum(loads[1], loads[3])
@@ -189,7 +189,8 @@ class RestStatics(eqx.Module):
     - `nonnegative_loads`: the least-norm corner loads >= 0 with the same resultant (equal to
       `corner_loads` when those are >= 0).
     - `normal`: N = G - S_z; `reaction_point`: R = (x_R, y_R) from D, where N acts.
-    - `friction_vector`: (T_x, T_y) = -(S_x, S_y), the resultant ground friction; `friction`: T = |(T_x, T_y)|.
+    - `friction_vector`: (T_x, T_y) = -(S_x, S_y), the resultant ground friction;
+      `friction`: T = |(T_x, T_y)|.
     - `friction_moment`: M_T, moment of the corner friction forces about the vertical through R [N m]
       (counter-clockwise positive seen from above), eq. (2.6).
     - `twist_limit`: max_i |T_x (y_i - y_R) - T_y (x_i - x_R)| [N m], the bound in (2.9).
@@ -384,7 +385,8 @@ def twist_threshold(scenario: Scenario, direction, *, attachment=None, mass_cent
 
 def slip_threshold(scenario: Scenario, direction, *, attachment=None, mass_centre=None) -> float:
     """|S| [N] at which the exact corner friction utilisation ρ* reaches 1 (root finding; inf if never
-    before the load lifts). Not one of the paper's conditions: the exact form of (2.4) with the loads (2.3)."""
+    before the load lifts). Not one of the paper's conditions: the exact form of (2.4) with the loads
+    (2.3)."""
     e = _unit(direction)
     _, _, _, G, _ = _host(scenario, attachment, mass_centre)
     e_j = jnp.asarray(e)
@@ -392,7 +394,8 @@ def slip_threshold(scenario: Scenario, direction, *, attachment=None, mass_centr
     C = None if mass_centre is None else jnp.asarray(mass_centre, dtype=jnp.float64)
 
     def margin(s):
-        return 1.0 - float(rest_statics_jit(scenario, s * e_j, attachment=B, mass_centre=C).friction_utilisation)
+        st = rest_statics_jit(scenario, s * e_j, attachment=B, mass_centre=C)
+        return 1.0 - float(st.friction_utilisation)
 
     s_lift = G / e[2] if e[2] > 0 else math.inf
     return _first_root(margin, s_lift)
