@@ -227,9 +227,10 @@ class _Driver:
         return eqx.tree_at(lambda p: p.guard_offset, phase, jnp.asarray(off))
 
     def solve(self, y, phase, t0, t1, ts):
-        ts_c = jnp.clip(jnp.asarray(ts), t0, t1)
-        out = _phase_solve_jit(self.sc, self.c, phase, self.settings, y, jnp.asarray(t0), jnp.asarray(t1),
-                               ts_c, self.options)
+        # Strongly typed float64 everywhere (a weakly typed leaf would compile the solve a second time).
+        t0, t1 = jnp.asarray(t0, dtype=jnp.float64), jnp.asarray(t1, dtype=jnp.float64)
+        ts_c = jnp.clip(jnp.asarray(ts, dtype=jnp.float64), t0, t1)
+        out = _phase_solve_jit(self.sc, self.c, phase, self.settings, y, t0, t1, ts_c, self.options)
         sts, sys_, result, acc, rej = out
         self.accepted += int(acc)
         self.rejected += int(rej)
@@ -769,7 +770,7 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
         return drv.select(t_e, y_e, where, phase)
     # Otherwise look ahead: continue the old phase (guards disabled) until the fired guards are clearly
     # negative, and choose there.
-    blind = eqx.tree_at(lambda p: p.guard_offset, phase, jnp.full(rigid.N_GUARDS, 1e6))
+    blind = eqx.tree_at(lambda p: p.guard_offset, phase, jnp.full(rigid.N_GUARDS, 1e6, dtype=jnp.float64))
     dt = 1e-6
     y_la, t_la = y_e, t_e
     for _ in range(11):
