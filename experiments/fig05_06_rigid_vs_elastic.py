@@ -32,7 +32,9 @@ KEYS = ("ts", "position", "euler", "normal_forces", "ground_reaction", "rope_ten
 
 
 def _arrays(tr) -> dict[str, np.ndarray]:
-    return {k: np.asarray(getattr(tr, k)) for k in KEYS} | {"energy_residual": np.asarray(tr.energy_residual())}
+    d = {k: np.asarray(getattr(tr, k)) for k in KEYS}
+    d["energy_residual"] = np.asarray(tr.energy_residual())
+    return d
 
 
 def _timed(f):
@@ -76,7 +78,7 @@ def plot(rig: dict, ela: dict, phases, out: Path, t1: float) -> None:
             a.axvline(p.t_start, color="0.85", lw=0.6)
         a.grid(alpha=0.3)
     ax[0].legend(fontsize=8)
-    fig.suptitle("paper-4.1: rope tension and ground reaction (Fig. 6); grey lines: rigid-model phase changes")
+    fig.suptitle("paper-4.1: rope tension and ground reaction (Fig. 6); grey: rigid-model phase changes")
     fig.savefig(out / "fig06_forces.png", dpi=110)
 
 
@@ -99,8 +101,10 @@ def main(argv=None) -> int:
           f"energy residual {np.abs(rig['energy_residual']).max():.3g} J")
     print(f"elastic foundation: first call {ela_first:6.1f} s, second call {ela_second:6.2f} s, "
           f"status {jaxhoist.SolveStatus(int(ela_tr.status)).name.lower()}, "
-          f"{int(ela_tr.num_accepted_steps)} steps, energy residual {np.abs(ela['energy_residual']).max():.3g} J")
-    for k, lab, unit, scale in (("position", "mass centre", "m", 1.0), ("rope_tension", "rope tension", "kN", 1e3),
+          f"{int(ela_tr.num_accepted_steps)} steps, "
+          f"energy residual {np.abs(ela['energy_residual']).max():.3g} J")
+    for k, lab, unit, scale in (("position", "mass centre", "m", 1.0),
+                                ("rope_tension", "rope tension", "kN", 1e3),
                                 ("ground_reaction", "ground reaction", "kN", 1e3)):
         diff = np.abs(rig[k] - ela[k]).max() / scale
         print(f"  max |rigid - elastic| {lab}: {diff:.4g} {unit}")

@@ -2,7 +2,7 @@
 on a horizontal grid, what happens first to the resting load as the rope force grows along A - B (the
 rope direction at the start of the lift), and at which pull.
 
-    python experiments/lift_planning_map.py --out out/lift_map                 # 121 x 121 grid, preset paper-4.1
+    python experiments/lift_planning_map.py --out out/lift_map            # 121 x 121 grid, preset paper-4.1
     python experiments/lift_planning_map.py --out out/lift_map --quick         # 31 x 31 grid
     python experiments/lift_planning_map.py --out out/lift_map --mu 0.6 --slip     # a rougher ground
 
@@ -55,7 +55,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--quick", action="store_true", help="31 x 31 grid instead of 121 x 121")
     p.add_argument("--preset", default="paper-4.1")
-    p.add_argument("--height", type=float, default=None, help="boom-tip height Z_A [m] (default: the preset's)")
+    p.add_argument("--height", type=float, default=None,
+                   help="boom-tip height Z_A [m] (default: the preset's)")
     p.add_argument("--extent", type=float, default=15.0, help="half-width of the grid around the load [m]")
     p.add_argument("--mu", type=float, default=None, help="friction coefficient μ (default: the preset's)")
     p.add_argument("--slip", action="store_true", help="also the exact corner-friction limit (slow)")
@@ -93,7 +94,8 @@ def main(argv=None) -> int:
     elapsed = time.perf_counter() - t0
 
     name0, s0, sl0, sp0 = first(sc, A0, B, True, inside)
-    print(f"{args.preset}: load {size.tolist()} m, G = {G:.6g} N, μ = {float(sc.foundation.friction_coefficient)}, "
+    mu = float(sc.foundation.friction_coefficient)
+    print(f"{args.preset}: load {size.tolist()} m, G = {G:.6g} N, μ = {mu}, "
           f"rope point B = {B.tolist()} m, boom tip height {z:g} m; {n} x {n} grid in {elapsed:.1f} s")
     for k, nm in enumerate(KINDS):
         share = float(np.mean(kind == k))
@@ -103,7 +105,8 @@ def main(argv=None) -> int:
           f"(slide {sl0 / G:.4f} G; exact corner-friction slip {sp0 / G:.4f} G)")
     if args.slip:
         ok = np.isfinite(slip) & np.isfinite(slide)
-        print(f"  exact slip before T = μN on {100 * np.mean(slip[ok] < slide[ok] * (1 - 1e-9)):.1f} % of the "
+        share = 100 * np.mean(slip[ok] < slide[ok] * (1 - 1e-9))
+        print(f"  exact slip before T = μN on {share:.1f} % of the "
               f"sliding points, by up to {100 * np.nanmax(1 - slip[ok] / slide[ok]):.1f} %")
     np.savez(out / "lift_map.npz", xs=xs, ys=ys, z=z, kind=kind, kinds=np.array(KINDS), pull_G=pull,
              slide_G=slide, slip_G=slip, B=B, size=size)
@@ -116,8 +119,8 @@ def main(argv=None) -> int:
     fig = Figure(figsize=(5.2 * ncol, 5.0), layout="constrained")
     ax = fig.subplots(1, ncol)
     ext = (xs[0], xs[-1], ys[0], ys[-1])
-    ax[0].imshow(kind, origin="lower", extent=ext, cmap=ListedColormap(colours), vmin=-0.5, vmax=len(KINDS) - 0.5,
-                 interpolation="nearest")
+    ax[0].imshow(kind, origin="lower", extent=ext, cmap=ListedColormap(colours), vmin=-0.5,
+                 vmax=len(KINDS) - 0.5, interpolation="nearest")
     for k, nm in enumerate(KINDS):
         if np.any(kind == k):
             ax[0].plot([], [], "s", color=colours[k], label=nm)

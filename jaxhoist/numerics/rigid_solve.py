@@ -155,7 +155,7 @@ def _eval_candidates(t, y, scenario, c, settings, contact, hints):
     """Contact forces, corner accelerations and body accelerations for a batch of configurations."""
 
     def one(ct, h):
-        ph = Phase(ct, h, jnp.zeros(rigid.N_GUARDS), jnp.zeros(4, dtype=bool), rest=False)
+        ph = rigid.make_phase(ct, slip_hint=h)
         d = rigid.contact_dynamics(t, y, scenario, c, ph, settings)
         return d.force, d.corner_accel, d.accel
 
@@ -369,7 +369,9 @@ class _Driver:
                     f"Painlevé type)")
         combo = combos[best]
         hint = np.where((combo == SLIDE)[:, None], hints[best], 0.0)
-        return rigid.make_phase(combo, rest=False, slip_hint=hint, starting=(combo == SLIDE) & resting)
+        flat3 = bool(np.all(near)) and int(np.sum(combo != FREE)) == 3
+        return rigid.make_phase(combo, rest=False, slip_hint=hint, starting=(combo == SLIDE) & resting,
+                                free_on_ground=(combo == FREE) & near & flat3)
 
     # ---------------------------------------------------------------------------- impacts
     def impact(self, t, y, striking: list[int]):
@@ -763,7 +765,8 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
             hint[i] = cv[i, :2] / speed[i]
         for i in grown:
             start[i] = False
-        return rigid.make_phase(contact, rest=False, slip_hint=hint, starting=start)
+        return rigid.make_phase(contact, rest=False, slip_hint=hint, starting=start,
+                                free_on_ground=_np(phase.free_on_ground))
     where = f"after {','.join(rigid.GUARD_NAMES[k] for k in fired)}"
     # A slip that died out: choose at the event itself (the corner is now resting).
     if any(speed[i] < 1.5 * drv.v_stop for i in tangential):

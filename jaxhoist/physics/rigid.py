@@ -63,16 +63,21 @@ class Phase(eqx.Module):
       the height of a corner that has just left the ground, must not end the phase at once).
     - `starting`: per corner, sliding started from rest in this phase (its guard watches the speed reach
       2 `Settings.stop_velocity`, or the corner turn back) rather than the slip dying out.
+    - `free_on_ground`: per corner, a free corner lying on the ground while the other three carry the flat
+      load: its guard watches the load the linear law (2.3) would give it (it takes load again when that
+      becomes positive), instead of its height, which the other three keep at zero.
     """
 
-    contact: Int[Array, 4]
+    contact: Int[Array, "4"]
     slip_hint: Float[Array, "4 2"]
-    guard_offset: Float[Array, 10]
-    starting: Bool[Array, 4]
+    guard_offset: Float[Array, "10"]
+    starting: Bool[Array, "4"]
+    free_on_ground: Bool[Array, "4"]
     rest: bool = eqx.field(static=True, default=False)
 
 
-def make_phase(contact, rest=False, slip_hint=None, guard_offset=None, starting=None) -> Phase:
+def make_phase(contact, rest=False, slip_hint=None, guard_offset=None, starting=None,
+               free_on_ground=None) -> Phase:
     """Build a `Phase` from Python values (host side)."""
     return Phase(
         contact=jnp.asarray(contact, dtype=jnp.int32),
@@ -80,6 +85,8 @@ def make_phase(contact, rest=False, slip_hint=None, guard_offset=None, starting=
         slip_hint=jnp.zeros((4, 2)) if slip_hint is None else jnp.asarray(slip_hint, dtype=jnp.float64),
         guard_offset=jnp.zeros(N_GUARDS) if guard_offset is None else jnp.asarray(guard_offset, jnp.float64),
         starting=jnp.zeros(4, dtype=bool) if starting is None else jnp.asarray(starting, dtype=bool),
+        free_on_ground=(jnp.zeros(4, dtype=bool) if free_on_ground is None
+                        else jnp.asarray(free_on_ground, dtype=bool)),
     )
 
 
@@ -169,7 +176,7 @@ class Loads(eqx.Module):
     corner_velocity: CornerVecs
     jacobians: Float[Array, "4 3 6"]
     bias: CornerVecs
-    generalised_force: Float[Array, 6]
+    generalised_force: Float[Array, "6"]
     rope_point: Vec3
     rope_tension: Scalar
     rope_direction: Vec3
@@ -229,7 +236,7 @@ def slip_directions(corner_velocity: CornerVecs, slip_hint: Float[Array, "4 2"],
     return jnp.where(pos[:, None], w / n[:, None], 0.0)
 
 
-def _maps(contact: Int[Array, 4], tdir: Float[Array, "4 2"], mu: Scalar):
+def _maps(contact: Int[Array, "4"], tdir: Float[Array, "4 2"], mu: Scalar):
     """Per corner: the force map P_i (world force = P_i λ_i) and the constrained-row selector S_i (3x3)."""
     stick = contact == STICK
     slide = contact == SLIDE
@@ -280,7 +287,7 @@ class ContactMatrices(eqx.Module):
     """
 
     mass: Float[Array, "6 6"]
-    force: Float[Array, 6]
+    force: Float[Array, "6"]
     jacobians: Float[Array, "4 3 6"]
     bias: CornerVecs
     corner_velocity: CornerVecs
@@ -311,7 +318,7 @@ class Contact(eqx.Module):
     - `loads`: the `Loads` of the instant.
     """
 
-    accel: Float[Array, 6]
+    accel: Float[Array, "6"]
     force: CornerVecs
     corner_accel: CornerVecs
     slip_direction: Float[Array, "4 2"]
@@ -393,7 +400,7 @@ def rest_conditions(ld: Loads, scenario: Scenario, c: Constants):
 
 
 def raw_guards(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
-               settings: Settings) -> Float[Array, 10]:
+               settings: Settings) -> Float[Array, "10"]:
     """The guards of `phase` without offsets, dimensionless (forces / G, heights / L, speeds / V); the
     phase is valid while all are > 0. Guards that do not apply (to a corner's mode, or to rest) are +1."""
     if phase.rest:
@@ -406,7 +413,11 @@ def raw_guards(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Pha
     N = ct.force[:, 2]
     T = jnp.sqrt(jnp.sum(ct.force[:, :2] ** 2, axis=1))
     contact = phase.contact
-    g_normal = jnp.where(contact != FREE, N / sc.force, ld.corners[:, 2] / sc.length)
+    # Linear-law (2.3) loads equivalent to the present ones: N + t w with t making them orthogonal to w.
+    w = jnp.asarray(statics._W)
+    N_lin = N - (jnp.dot(w, N) / 4.0) * w
+    g_free = jnp.where(phase.free_on_ground, -N_lin / sc.force, ld.corners[:, 2] / sc.length)
+    g_normal = jnp.where(contact != FREE, N / sc.force, g_free)
     vh = ld.corner_velocity[:, :2]
     speed = jnp.sqrt(jnp.sum(vh**2, axis=1))
     v_stop = settings.stop_velocity
@@ -431,7 +442,7 @@ def event_condition(t, y, args, **kwargs) -> Scalar:
 # ------------------------------------------------------------------------------------------ impacts
 
 
-def impulse_response(y: State, scenario: Scenario, c: Constants, modes: Int[Array, 4],
+def impulse_response(y: State, scenario: Scenario, c: Constants, modes: Int[Array, "4"],
                      slip_dirs: Float[Array, "4 2"], normal_target: PerCorner, rcond) -> tuple:
     """Velocity jump of an impact with the ground: minimum-norm impulses P_i at the corners in `modes`
     (`STICK`: all three post-impact velocity components prescribed, tangential ones 0; `SLIDE`: normal only,
@@ -487,7 +498,7 @@ class Output(eqx.Module):
     friction: CornerVecs
     rope_tension: Scalar
     energy: Energy
-    euler: Float[Array, 3]
+    euler: Float[Array, "3"]
 
 
 def output(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Output:

@@ -104,7 +104,7 @@ def _twist_ratio(u, force_h, moment, points, loads, mu, length):
     return num / jnp.maximum(den, 1e-300)
 
 
-def friction_utilisation(force_h: Float[Array, 2], moment: Scalar, points: Float[Array, "4 2"],
+def friction_utilisation(force_h: Float[Array, "2"], moment: Scalar, points: Float[Array, "4 2"],
                          loads: PerCorner, mu: Scalar, length: Scalar | float = 1.0,
                          newton_iterations: int = 25):
     """Exact friction utilisation ρ* of four point contacts with loads N_i >= 0, and the onset twist.
@@ -202,13 +202,13 @@ class RestStatics(eqx.Module):
     corner_loads: PerCorner
     nonnegative_loads: PerCorner
     normal: Scalar
-    reaction_point: Float[Array, 2]
-    friction_vector: Float[Array, 2]
+    reaction_point: Float[Array, "2"]
+    friction_vector: Float[Array, "2"]
     friction: Scalar
     friction_moment: Scalar
     twist_limit: Scalar
     friction_utilisation: Scalar
-    margins: Float[Array, 4]
+    margins: Float[Array, "4"]
 
     def holds(self) -> dict[str, bool]:
         """Condition name -> True where it holds (host side, concrete values)."""
