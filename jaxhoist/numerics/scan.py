@@ -17,9 +17,13 @@ How the work is laid out (and why results do not depend on the chunk size or the
   other (`lax.map`), and the devices (a 1-D mesh over `jax.devices()`, via `shard_map`) run in parallel,
   each with its own loop, so a slow group on one device does not hold up the other;
 - each group is the same compiled computation on the same inputs whatever the chunk size and the number
-  of devices, so the results are bit-for-bit identical. (`lanes` is a numerical setting, like the
-  tolerances: XLA may round differently in a vmap of another width, so changing it can move results by
-  about the solver tolerance.)
+  of devices, so the results are bit-for-bit identical.
+- with `fixed_step=True` every member takes the same constant steps (`numerics.fixed_step`, a lean
+  Runge-Kutta loop for diffrax's explicit tableaus): nothing waits in lock step, so groups can be wide
+  (hundreds of lanes), which spreads the fixed cost of each loop iteration over many members.
+
+(`lanes` is a numerical setting, like the tolerances: XLA may round differently in a vmap of another
+width, so changing it can move results by about the solver tolerance.)
 
 Failures are data: a member whose solve fails (step budget, non-finite state) gets its `ScanStatus` and
 NaN observables, and every other member is computed exactly as in a clean scan. A member whose parameter
@@ -51,6 +55,7 @@ import numpy as np
 
 from .._errors import ScenarioError, SolveStatus, require_x64
 from ..physics.params import Scenario, get_leaf
+from . import fixed_step as fixed_mod
 from .solve import SolverOptions, check_times, solve
 
 FORMAT = "jaxhoist-scan/1"
@@ -276,7 +281,9 @@ def _member(scenario, ts, row, spec: _Spec):
         sc = scenario
         for k, p in enumerate(spec.paths):
             sc = set_param(sc, p, row[k])
-        traj = solve(sc, ts, spec.options)
+        o = spec.options
+        lean = o.fixed_step and fixed_mod.supports(o.solver)
+        traj = fixed_mod.solve_fixed(sc, ts, o) if lean else solve(sc, ts, o)
         obs = {o.name: o(traj, sc) for o in spec.observables}
         return obs, (obs, traj)
 
@@ -629,6 +636,7 @@ def _fingerprint(scenario, spec: _Spec, members, ts, sort) -> str:
                 o.max_steps,
                 spec.derivatives,
             )
+            + ((("fixed_step", o.fixed_step),) if o.fixed_step else ())
         ).encode()
     )
     for ob in spec.observables:
@@ -680,7 +688,8 @@ def scan(
     atol: float = 1e-8,
     dt0: float | None = None,
     max_steps: int = 200_000,
-    lanes: int = 16,
+    fixed_step: bool = False,
+    lanes: int | None = None,
     chunk_size: int | None = None,
     max_memory: float = 1e9,
     devices: Sequence | None = None,
@@ -705,8 +714,14 @@ def scan(
       `fn(traj[, scenario])`, `Observable`s, or a dict name -> any of these.
     - `histories`: `Trajectory` fields to keep at every saved time, e.g. `("position", "euler")`.
     - `solver`, `rtol`, `atol`, `dt0`, `max_steps`: as in `simulate` (one budget for every member).
+    - `fixed_step`: constant steps of at most `dt0` (no error control) with an explicit Runge-Kutta
+      `solver` (e.g. `diffrax.Bosh3()`), integrated by the lean loop of `numerics.fixed_step` (same numbers
+      as diffrax's `ConstantStepSize` to round-off when the saved times are multiples of `dt0`); other
+      solvers fall back to diffrax's `ConstantStepSize`. Every member takes the same steps. Check the
+      accuracy against an adaptive solve (`experiments/benchmark_scan.py` does; see docs/performance.md).
     - `lanes`: members solved together in one vmapped, lock-step solve (a numerical setting: results
       are independent of the chunk size and devices, not of `lanes`); capped at the number of members.
+      Default 16 (adaptive steps: lock-step waste grows with the width) or 512 with `fixed_step`.
     - `chunk_size`: members per compiled call (rounded up to whole groups on every device); default: up
       to 8 groups per device, fewer if the saved histories would exceed `max_memory` bytes.
     - `devices`: the JAX devices to shard over (default all of `jax.devices()`).
@@ -753,6 +768,7 @@ def scan(
         dt0=dt0,
         max_steps=max_steps,
         adjoint="forward" if derivatives else "reverse",
+        fixed_step=bool(fixed_step),
     )
     if t1 is None:
         t1 = scenario.t1 if ts is None else float(np.asarray(ts)[-1])
@@ -761,7 +777,16 @@ def scan(
         if int(n_save) < 2:
             raise ScenarioError(f"n_save must be >= 2, got {n_save}")
         ts = np.linspace(0.0, 1.0, int(n_save)) * float(t1)
+    if fixed_step and fixed_mod.supports(options.solver):
+        need = fixed_mod.steps_needed(ts, dt0)
+        if need > int(max_steps):
+            raise ScenarioError(
+                f"fixed steps of dt0 = {dt0} s to t1 = {float(np.asarray(ts)[-1])} s need {need} steps, more "
+                f"than max_steps = {max_steps}: raise max_steps or dt0"
+            )
     ts = jnp.asarray(ts, dtype=jnp.float64)
+    if lanes is None:
+        lanes = 512 if fixed_step else 16
     if int(lanes) < 1:
         raise ScenarioError(f"lanes must be >= 1, got {lanes}")
     devs = tuple(jax.devices() if devices is None else devices)
@@ -961,6 +986,7 @@ def scan(
             "atol": atol,
             "dt0": dt0,
             "max_steps": max_steps,
+            "fixed_step": bool(fixed_step),
         },
         "lanes": lanes,
         "chunk_size": chunk,
