@@ -7,7 +7,6 @@ Lagrange's method (3.4); Newton-Euler with a quaternion avoids the Euler-angle s
 """
 
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 from jaxtyping import Array, Float
 
@@ -73,14 +72,6 @@ def constants(scenario: Scenario, rope_length: Scalar) -> Constants:
     )
 
 
-def _materialise(x):
-    """`x` unchanged, computed once (`lax.optimization_barrier`). A performance hint only: XLA on CPU would
-    otherwise fuse the producers of R and of the corner forces into each of their many consumers and
-    recompute them per element there (a Bosh3 step of a vmapped scan measured ~1.4x slower without it,
-    `experiments/bench_vector_field.py`)."""
-    return jax.lax.optimization_barrier(x)
-
-
 class Snapshot(eqx.Module):
     """Every force and kinematic quantity of the model at one instant (what the vector field and the
     outputs share). World axes unless stated.
@@ -111,7 +102,7 @@ class Snapshot(eqx.Module):
 def snapshot(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Snapshot:
     """Evaluate all contact, rope and boom forces at (t, y)."""
     fnd, rope = scenario.foundation, scenario.rope
-    R = _materialise(kinematics.quat_to_matrix(y.quaternion))
+    R = kinematics.quat_to_matrix(y.quaternion)
     omega = y.angular_velocity
 
     # Corners and the foundation, eqs. (3.1)-(3.3).
@@ -127,8 +118,8 @@ def snapshot(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Snapshot:
     v_B = kinematics.points_velocity(y.velocity, R, omega, c.attachment_rel[None])[0]
     AB = y.tip_position - B
     L = forces.safe_norm(AB)
-    e = AB * (1.0 / jnp.maximum(L, 1e-12))
-    L_dot = kinematics.sum_last((y.tip_velocity - v_B) * e)
+    e = AB / jnp.maximum(L, 1e-12)
+    L_dot = jnp.dot(y.tip_velocity - v_B, e)
     s_dot = scenario.hoist.rate(t)
     stretch = L - (c.rope_length - scenario.hoist.shortening(t))
     S, rope_loss = forces.rope_tension(stretch, L_dot + s_dot, rope.stiffness, rope.damping, rope.damping_onset)
@@ -147,7 +138,7 @@ def snapshot(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Snapshot:
         stretch=stretch,
         hoist_rate=s_dot,
         damping_rate=ground_loss + rope_loss + boom_loss,
-        friction_rate=-kinematics.sum_first(kinematics.sum_last(T_h * corner_vel[:, :2])),
+        friction_rate=-jnp.sum(T_h * corner_vel[:, :2]),
         hoist_power=S * s_dot,
     )
 
@@ -160,23 +151,22 @@ def vector_field(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> State
     R, omega = snap.rotation, y.angular_velocity
     z_hat = jnp.array([0.0, 0.0, 1.0])
 
-    # Forces on the load, eq. (2.11): ground reactions T_i + N_i e_Z at the corners, rope S at B, weight G at C.
-    F_corner = _materialise(jnp.concatenate([snap.friction[:, :2], snap.normal[:, None]], axis=1))
+    # Forces on the load, eq. (2.11): ground reactions at the corners, rope S at B, weight G at C.
+    F_corner = snap.friction + snap.normal[:, None] * z_hat
     F_rope = snap.rope_tension * snap.rope_direction
-    force = kinematics.sum_first(F_corner) + F_rope - load.mass * g * z_hat
+    force = jnp.sum(F_corner, axis=0) + F_rope - load.mass * g * z_hat
     # Moments about C in body axes: ρ x (Rᵀ F).
-    moment = (kinematics.sum_first(kinematics.cross(c.corners_rel, kinematics.rotate_back(R, F_corner)))
-              + kinematics.cross(c.attachment_rel, kinematics.rotate_back(R, F_rope)))
-    omega_dot = kinematics.rotate(c.inertia_inv,
-                                  moment - kinematics.cross(omega, kinematics.rotate(c.inertia, omega)))
+    moment = (jnp.sum(jnp.cross(c.corners_rel, F_corner @ R), axis=0)
+              + jnp.cross(c.attachment_rel, R.T @ F_rope))
+    omega_dot = c.inertia_inv @ (moment - jnp.cross(omega, c.inertia @ omega))
 
     # Boom tip, eq. (2.13).
     F_boom, _ = forces.boom_force(y.tip_position - c.tip_rest, y.tip_velocity, boom.stiffness, boom.damping)
-    tip_acc = (F_boom - F_rope) * (1.0 / boom.tip_mass) - g * z_hat
+    tip_acc = (F_boom - F_rope) / boom.tip_mass - g * z_hat
 
     return State(
         position=y.velocity,
-        velocity=force * (1.0 / load.mass),
+        velocity=force / load.mass,
         quaternion=kinematics.quat_rate(y.quaternion, omega),
         angular_velocity=omega_dot,
         tip_position=y.tip_velocity,

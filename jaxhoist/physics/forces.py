@@ -9,18 +9,6 @@ import jax.numpy as jnp
 from .._typing import PerCorner, Scalar, Vec3
 
 
-def _total(x):
-    """Σ of every element of a small array, written out as additions (XLA fuses them with their neighbours;
-    a `reduce` per vmapped lane is a separate kernel on CPU); `jnp.sum` for larger arrays."""
-    if jnp.size(x) > 16:
-        return jnp.sum(x)
-    flat = jnp.ravel(x)
-    out = flat[0]
-    for i in range(1, flat.shape[0]):
-        out = out + flat[i]
-    return out
-
-
 def onset_ramp(depth, onset):
     """min(depth / onset, 1) clipped at 0 [-]; a step at depth 0 when onset = 0.
 
@@ -30,7 +18,7 @@ def onset_ramp(depth, onset):
     derivatives (forward and reverse mode) miss the jump of the sensitivities at that instant.
     """
     pos = onset > 0.0
-    return jnp.where(pos, jnp.clip(depth * (1.0 / jnp.where(pos, onset, 1.0)), 0.0, 1.0),
+    return jnp.where(pos, jnp.clip(depth / jnp.where(pos, onset, 1.0), 0.0, 1.0),
                      jnp.where(depth > 0.0, 1.0, 0.0))
 
 
@@ -48,7 +36,7 @@ def ground_normal(penetration: PerCorner, penetration_rate: PerCorner, k: Scalar
     elastic = k * jnp.where(in_contact, penetration, 0.0)
     damper = h * onset_ramp(penetration, onset) * penetration_rate
     normal = jnp.where(in_contact, jnp.maximum(elastic + damper, 0.0), 0.0)
-    return normal, _total((normal - elastic) * penetration_rate)
+    return normal, jnp.sum((normal - elastic) * penetration_rate)
 
 
 def rope_tension(stretch: Scalar, stretch_rate: Scalar, c_l: Scalar, b_l: Scalar, onset: Scalar | float = 0.0):
@@ -68,11 +56,11 @@ def boom_force(displacement: Vec3, velocity: Vec3, k: Vec3, c: Vec3):
 
     **Returns** `(force, dissipation_rate)`.
     """
-    return -k * displacement - c * velocity, _total(c * velocity**2)
+    return -k * displacement - c * velocity, jnp.sum(c * velocity**2)
 
 
 def safe_norm(v: Vec3) -> Scalar:
     """|v| with a finite gradient at v = 0 (the two-`where` guard)."""
-    sq = _total(v**2)
+    sq = jnp.sum(v**2)
     pos = sq > 0.0
     return jnp.where(pos, jnp.sqrt(jnp.where(pos, sq, 1.0)), 0.0)

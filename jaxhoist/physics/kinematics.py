@@ -14,25 +14,21 @@ from .._typing import CornerVecs, Quat, Rot33, Vec3
 
 
 def quat_to_matrix(q: Quat) -> Rot33:
-    """Rotation matrix (body -> world) of a quaternion; q need not be normalised.
-
-    The normalisation enters as the factor s = 2/|q|² of the quadratic terms (no square root): the same R as
-    normalising q first, to round-off.
-    """
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    s = 2.0 / (w * w + x * x + y * y + z * z)
+    """Rotation matrix (body -> world) of a quaternion; q need not be normalised."""
+    q = q / jnp.sqrt(jnp.sum(q**2))
+    w, x, y, z = q
     return jnp.array([
-        [1 - s * (y * y + z * z), s * (x * y - w * z), s * (x * z + w * y)],
-        [s * (x * y + w * z), 1 - s * (x * x + z * z), s * (y * z - w * x)],
-        [s * (x * z - w * y), s * (y * z + w * x), 1 - s * (x * x + y * y)],
+        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
     ])
 
 
 def quat_rate(q: Quat, omega_body: Vec3) -> Quat:
     """dq/dt = ½ q ⊗ (0, ω) for the angular velocity ω in body axes [rad/s]."""
-    w, x, y, z = q[0], q[1], q[2], q[3]
-    p, r, s = omega_body[0], omega_body[1], omega_body[2]
-    return 0.5 * jnp.stack([
+    w, x, y, z = q
+    p, r, s = omega_body
+    return 0.5 * jnp.array([
         -x * p - y * r - z * s,
         w * p + y * s - z * r,
         w * r + z * p - x * s,
@@ -83,49 +79,11 @@ def skew(v: Vec3) -> Rot33:
     return jnp.array([[0.0, -v[2], v[1]], [v[2], 0.0, -v[0]], [-v[1], v[0], 0.0]])
 
 
-def sum_last(x: Float[Array, "... k"]) -> Float[Array, "..."]:
-    """Σ_i x[..., i] over a short last axis, written out as additions: XLA fuses them with their neighbours,
-    where a `reduce` per vmapped lane is a separate kernel on CPU."""
-    out = x[..., 0]
-    for i in range(1, x.shape[-1]):
-        out = out + x[..., i]
-    return out
-
-
-def sum_first(x: Float[Array, "k ..."]) -> Float[Array, "..."]:
-    """Σ_i x[i] over a short first axis (e.g. over the four corners), written out like `sum_last`."""
-    out = x[0]
-    for i in range(1, x.shape[0]):
-        out = out + x[i]
-    return out
-
-
-def rotate(R: Rot33, v: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
-    """R v (any 3x3 matrix R) for one vector or a stack of vectors v (last axis), written out as sums of
-    products so that XLA fuses it with its neighbours (a 3x3 `dot` per vmapped lane is a separate, slow
-    kernel on CPU)."""
-    return jnp.stack([R[i, 0] * v[..., 0] + R[i, 1] * v[..., 1] + R[i, 2] * v[..., 2] for i in range(3)],
-                     axis=-1)
-
-
-def rotate_back(R: Rot33, v: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
-    """Rᵀ v (world -> body for a rotation R; any 3x3 matrix), written out like `rotate`."""
-    return jnp.stack([R[0, i] * v[..., 0] + R[1, i] * v[..., 1] + R[2, i] * v[..., 2] for i in range(3)],
-                     axis=-1)
-
-
-def cross(a: Float[Array, "... 3"], b: Float[Array, "... 3"]) -> Float[Array, "... 3"]:
-    """a x b over the last axis (broadcasting), component by component."""
-    a0, a1, a2 = a[..., 0], a[..., 1], a[..., 2]
-    b0, b1, b2 = b[..., 0], b[..., 1], b[..., 2]
-    return jnp.stack([a1 * b2 - a2 * b1, a2 * b0 - a0 * b2, a0 * b1 - a1 * b0], axis=-1)
-
-
 def points_world(r_c: Vec3, R: Rot33, rel_body: Float[Array, "n 3"]) -> Float[Array, "n 3"]:
     """World positions r_C + R ρ of points at body offsets ρ from the mass centre [m]."""
-    return r_c + rotate(R, rel_body)
+    return r_c + rel_body @ R.T
 
 
 def points_velocity(v_c: Vec3, R: Rot33, omega_body: Vec3, rel_body: Float[Array, "n 3"]) -> Float[Array, "n 3"]:
     """World velocities v_C + R (ω x ρ) of points at body offsets ρ from the mass centre [m/s] (cf. 2.17)."""
-    return v_c + rotate(R, cross(omega_body, rel_body))
+    return v_c + jnp.cross(omega_body, rel_body) @ R.T
