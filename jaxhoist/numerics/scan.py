@@ -721,7 +721,7 @@ def scan(
       accuracy against an adaptive solve (`experiments/benchmark_scan.py` does; see docs/performance.md).
     - `lanes`: members solved together in one vmapped, lock-step solve (a numerical setting: results
       are independent of the chunk size and devices, not of `lanes`); capped at the number of members.
-      Default 16 (adaptive steps: lock-step waste grows with the width) or 512 with `fixed_step`.
+      Default 16 (adaptive steps: lock-step waste grows with the width) or 256 with `fixed_step`.
     - `chunk_size`: members per compiled call (rounded up to whole groups on every device); default: up
       to 8 groups per device, fewer if the saved histories would exceed `max_memory` bytes.
     - `devices`: the JAX devices to shard over (default all of `jax.devices()`).
@@ -786,7 +786,7 @@ def scan(
             )
     ts = jnp.asarray(ts, dtype=jnp.float64)
     if lanes is None:
-        lanes = 512 if fixed_step else 16
+        lanes = 256 if fixed_step else 16
     if int(lanes) < 1:
         raise ScenarioError(f"lanes must be >= 1, got {lanes}")
     devs = tuple(jax.devices() if devices is None else devices)
