@@ -1,13 +1,27 @@
-"""Cost of a large μ-scan of paper-4.2: compile time, wall time per trajectory after compilation, solver
-steps, lock-step efficiency, peak memory; accuracy against a tight reference; scipy's solve_ivp (LSODA,
-RK45) on the same vector field for a few μ in the same process; forward sensitivities vs the plain scan.
+"""Cost of a large μ-scan of paper-4.2 (issue 3's targets): wall time per trajectory after compilation,
+accuracy against a tight adaptive solve, scipy LSODA on the same vector field in the same process, and
+forward-mode sensitivities against the plain scan.
 
-    python experiments/benchmark_scan.py --out out/bench-scan            # 4096 μ in [0.1, 0.6], 25 s
-    python experiments/benchmark_scan.py --out out/bench-scan --quick    # 64 μ, 3 s: a smoke run
+    python experiments/benchmark_scan.py --out out/bench-scan --devices 2           # 4096 μ, 25 s
+    python experiments/benchmark_scan.py --out out/bench-scan --devices 2 --quick   # 64 μ, 3 s: a smoke run
 
-Options: --lanes 8,16,32 compares lane widths (one compile each); --rtol sets the benchmark tolerance
-(the accuracy block says how far that is from rtol 1e-9 in cm); --n-save 2 keeps only the final state.
-Everything is written to DIR/benchmark_scan.json.
+What it runs (all in one process, so every ratio is against a baseline measured under the same load):
+
+1. **the scan**: `scan(paper-4.2 with the regularised Coulomb law at ε = --eps, {μ: linspace(0.1, 0.6, n)},
+   t1, solver=Bosh3, fixed_step=True, dt0=--dt, lanes=--lanes, n_save=2)`: compile time, wall time per
+   trajectory (compute / n), µs per step per trajectory, peak RSS;
+2. **accuracy**: the final mass-centre position against adaptive Tsit5 at rtol --ref-rtol (atol 1e-2 rtol)
+   on --ref-n members evenly spaced through the scan: the fraction within 1 cm, median, 95th percentile and
+   max of the error, and for every member off by more than 1 cm how much its scan neighbours (Δμ = 0.5/(n-1))
+   differ from it: a large spread means the outcome changes abruptly there (a bifurcation), so solver-error
+   differences legitimately change it;
+3. **scipy LSODA** (`solve_ivp`) on the same vector field, jitted and called on the flattened state, for
+   --scipy-n of the reference members, at each tolerance of --scipy-rtol (atol = rtol/100): wall time,
+   function evaluations and error against the same reference; ratio of its time per trajectory to the scan's;
+4. **forward sensitivities**: `scan(..., derivatives=True)` (d final position / dμ and d final Euler angles /
+   dμ by forward mode through the same fixed steps) against the plain scan of the same --deriv-n members.
+
+Everything goes to DIR/benchmark_scan.json; docs/performance.md records a run.
 """
 
 from __future__ import annotations
@@ -31,6 +45,7 @@ import jax  # noqa: E402
 
 jax.config.update("jax_enable_x64", True)
 
+import diffrax  # noqa: E402
 import numpy as np  # noqa: E402
 from jax.flatten_util import ravel_pytree  # noqa: E402
 
@@ -40,231 +55,232 @@ from jaxhoist.physics.elastic import vector_field  # noqa: E402
 from jaxhoist.physics.equilibrium import initial_state  # noqa: E402
 
 MU = "foundation.friction_coefficient"
+EPS = "foundation.friction.regularisation_velocity"
 OBS = ["final_position", "final_euler"]
+SOLVERS = {"bosh3": diffrax.Bosh3, "tsit5": diffrax.Tsit5, "dopri5": diffrax.Dopri5, "heun": diffrax.Heun}
 
 
 def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def lockstep_efficiency(steps: np.ndarray, mus: np.ndarray, lanes: int) -> float:
-    """Useful steps / steps paid for, when members sorted by μ run in groups of `lanes` in lock step."""
-    s = steps[np.argsort(mus, kind="stable")]
-    pad = (-s.size) % lanes
-    s = np.concatenate([s, np.repeat(s[-1:], pad)]) if pad else s
-    g = s.reshape(-1, lanes)
-    return float(g.sum() / (g.max(axis=1).sum() * lanes))
-
-
-def scipy_run(sc, t1, method, rtol, atol):
+def scipy_lsoda(sc, t1, rtol, atol):
+    """LSODA on the flattened state with a jitted right-hand side; (wall s, f-evals, final position, ok)."""
     from scipy.integrate import solve_ivp
 
     y0, c = initial_state(sc)
     flat0, unravel = ravel_pytree(y0)
     rhs = jax.jit(lambda t, y: ravel_pytree(vector_field(t, unravel(y), (sc, c)))[0])
-    rhs(0.0, flat0).block_until_ready()
+    rhs(0.0, flat0).block_until_ready()  # compile outside the timing
     t0 = time.perf_counter()
     sol = solve_ivp(
-        lambda t, y: np.asarray(rhs(t, y)), (0.0, t1), np.asarray(flat0), method=method, rtol=rtol, atol=atol
+        lambda t, y: np.asarray(rhs(t, y)), (0.0, t1), np.asarray(flat0), method="LSODA", rtol=rtol, atol=atol
     )
-    return (
-        time.perf_counter() - t0,
-        int(sol.nfev),
-        np.asarray(unravel(sol.y[:, -1]).position),
-        bool(sol.success),
-    )
+    wall = time.perf_counter() - t0
+    return wall, int(sol.nfev), np.asarray(unravel(sol.y[:, -1]).position), bool(sol.success)
 
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--quick", action="store_true", help="64 μ over 3 s: a smoke run")
-    p.add_argument("--n", type=int, default=None, help="number of μ (default 4096; quick 64)")
-    p.add_argument("--t1", type=float, default=None, help="horizon [s] (default 25; quick 3)")
-    p.add_argument("--lanes", default="16", help="comma-separated lane widths to compare (default 16)")
-    p.add_argument("--rtol", type=float, default=1e-6)
-    p.add_argument("--atol", type=float, default=1e-8)
-    p.add_argument("--n-save", type=int, default=2, help="saved times (2: the final state only)")
+    p.add_argument("--quick", action="store_true", help="64 μ over 3 s, small reference: a smoke run")
+    p.add_argument("--n", type=int, default=None, help="number of μ in [0.1, 0.6] (default 4096; quick 64)")
     p.add_argument(
-        "--scipy-n", type=int, default=None, help="μ values for the scipy baseline (default 3; quick 1)"
+        "--t1", type=float, default=None, help="horizon [s] (default 25, paper-4.2's span; quick 3)"
     )
+    p.add_argument("--eps", type=float, default=1e-2, help="regularisation velocity ε [m/s] (default 1e-2)")
+    p.add_argument("--solver", choices=sorted(SOLVERS), default="bosh3")
+    p.add_argument("--dt", type=float, default=1.5e-3, help="fixed step [s] (default 1.5e-3)")
+    p.add_argument("--lanes", type=int, default=256, help="members per vmapped group (default 256)")
     p.add_argument("--devices", type=int, default=None, help="host CPU devices to shard over (XLA flag)")
-    p.add_argument("--no-derivatives", action="store_true")
-    p.add_argument("--no-reference", action="store_true")
+    p.add_argument(
+        "--ref-n", type=int, default=None, help="members checked against the reference (512; quick 8)"
+    )
+    p.add_argument("--ref-rtol", type=float, default=1e-10, help="rtol of the adaptive Tsit5 reference")
+    p.add_argument("--scipy-n", type=int, default=None, help="members for scipy LSODA (default 3; quick 1)")
+    p.add_argument(
+        "--scipy-rtol", default="1e-6,1e-4", help="LSODA tolerances (comma-separated; atol = rtol/100)"
+    )
+    p.add_argument("--deriv-n", type=int, default=None, help="members for the sensitivities (512; quick 64)")
     args = p.parse_args(argv)
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     n = args.n or (64 if args.quick else 4096)
     t1 = args.t1 or (3.0 if args.quick else 25.0)
+    ref_n = min(n, args.ref_n or (8 if args.quick else 512))
     scipy_n = args.scipy_n if args.scipy_n is not None else (1 if args.quick else 3)
-    lanes_list = [int(x) for x in args.lanes.split(",")]
-    sc = jh.load_scenario("paper-4.2")
+    deriv_n = min(n, args.deriv_n or (64 if args.quick else 512))
+    sc = jh.load_scenario("paper-4.2").replace(**{EPS: args.eps})
     mus = np.linspace(0.1, 0.6, n)
+    solver = SOLVERS[args.solver]()
+    kw = dict(
+        observables=OBS,
+        n_save=2,
+        solver=solver,
+        dt0=args.dt,
+        fixed_step=True,
+        lanes=args.lanes,
+        max_steps=10**7,
+    )
     rec = {
         "scenario": sc.name,
-        "friction_law": type(sc.foundation.friction).__name__,
+        "friction_law": f"RegularisedCoulomb, eps = {args.eps} m/s",
         "n": n,
         "t1": t1,
-        "rtol": args.rtol,
-        "atol": args.atol,
-        "n_save": args.n_save,
+        "solver": f"{args.solver}, fixed step {args.dt} s",
+        "lanes": args.lanes,
         "devices": [str(d) for d in jax.devices()],
-        "quick": args.quick,
+        "load_average_at_start": os.getloadavg(),
         "command": [sys.executable, *sys.argv],
-        "runs": [],
     }
     print(
-        f"benchmark: {n} μ in [0.1, 0.6] of {sc.name}, t1 = {t1:g} s, rtol {args.rtol:g}, "
-        f"{len(jax.devices())} device(s)",
+        f"benchmark: {n} μ in [0.1, 0.6] of {sc.name} (ε = {args.eps} m/s), t1 = {t1:g} s, {args.solver} at "
+        f"fixed dt = {args.dt * 1e3:g} ms, {args.lanes} lanes, {len(jax.devices())} device(s), load average "
+        f"{os.getloadavg()[0]:.1f}",
         flush=True,
     )
-    rss0 = peak_rss_mb()
-    main_res = None
-    for lanes in lanes_list:
-        r = scan(
-            sc,
-            {MU: mus},
-            t1,
-            observables=OBS,
-            n_save=args.n_save,
-            rtol=args.rtol,
-            atol=args.atol,
-            lanes=lanes,
-            progress=True,
-        )
-        t = r.attrs["timings_s"]
-        steps = (r.num_accepted_steps + r.num_rejected_steps).astype(np.int64)
-        run = {
-            "lanes": r.attrs["lanes"],
-            "chunk_size": r.attrs["chunk_size"],
-            "compile_s": t["compile"],
-            "compute_s": t["compute"],
-            "ms_per_trajectory": 1e3 * t["compute"] / n,
-            "steps_median": int(np.median(steps)),
-            "steps_max": int(steps.max()),
-            "steps_total": int(steps.sum()),
-            "us_per_step_per_trajectory": 1e6 * t["compute"] / float(steps.sum()),
-            "lockstep_efficiency": lockstep_efficiency(steps, mus, r.attrs["lanes"]),
-            "failed": int(np.sum(~r.ok)),
-            "peak_rss_mb": peak_rss_mb(),
-        }
-        rec["runs"].append(run)
+
+    # 1. The scan.
+    r = scan(sc, {MU: mus}, t1, progress=True, **kw)
+    t = r.attrs["timings_s"]
+    steps = int(np.median(r.num_accepted_steps))
+    run = {
+        "compile_s": t["compile"],
+        "compute_s": t["compute"],
+        "ms_per_trajectory": 1e3 * t["compute"] / n,
+        "steps_per_trajectory": steps,
+        "us_per_step_per_trajectory": 1e6 * t["compute"] / n / steps,
+        "failed": int(np.sum(~r.ok)),
+        "peak_rss_mb": peak_rss_mb(),
+    }
+    rec["scan"] = run
+    print(
+        f"  scan: compile {run['compile_s']:.1f} s, {run['ms_per_trajectory']:.2f} ms per trajectory "
+        f"({steps} steps, {run['us_per_step_per_trajectory']:.3f} us per step per trajectory), failed "
+        f"{run['failed']}, peak RSS {run['peak_rss_mb']:.0f} MB",
+        flush=True,
+    )
+    pos = r["final_position"]
+
+    # 2. Accuracy against the adaptive reference on evenly spaced members.
+    idx = np.unique(np.linspace(0, n - 1, ref_n).round().astype(int))
+    t0 = time.perf_counter()
+    ref = scan(
+        sc,
+        {MU: mus[idx]},
+        t1,
+        observables=OBS,
+        n_save=2,
+        rtol=args.ref_rtol,
+        atol=1e-2 * args.ref_rtol,
+        lanes=8,
+        max_steps=5_000_000,
+    )
+    ref_wall = time.perf_counter() - t0
+    err = np.linalg.norm(pos[idx] - ref["final_position"], axis=-1)
+    within = err < 0.01
+    spread = []
+    for i in idx:  # how far the scan's neighbours land from member i [m]
+        nb = [j for j in (i - 1, i + 1) if 0 <= j < n]
+        spread.append(max(float(np.linalg.norm(pos[j] - pos[i])) for j in nb))
+    spread = np.asarray(spread)
+    outliers = [
+        {"mu": float(mus[i]), "error_cm": float(100 * e), "neighbour_spread_cm": float(100 * s)}
+        for i, e, s in zip(idx, err, spread, strict=True)
+        if e >= 0.01
+    ]
+    rec["accuracy"] = {
+        "reference": f"Tsit5 adaptive, rtol {args.ref_rtol:g}, atol {1e-2 * args.ref_rtol:g}",
+        "members": int(idx.size),
+        "reference_wall_s": ref_wall,
+        "reference_steps_median": int(np.median(ref.num_accepted_steps)),
+        "reference_failed": int(np.sum(~ref.ok)),
+        "fraction_within_1cm": float(np.mean(within)),
+        "median_cm": float(100 * np.median(err)),
+        "p95_cm": float(100 * np.quantile(err, 0.95)),
+        "max_cm": float(100 * np.max(err)),
+        "median_neighbour_spread_cm": float(100 * np.median(spread)),
+        "outliers": outliers,
+    }
+    a = rec["accuracy"]
+    print(
+        f"  accuracy vs {a['reference']} on {a['members']} members: "
+        f"{100 * a['fraction_within_1cm']:.1f} % within "
+        f"1 cm, error median {a['median_cm']:.3g} cm, 95 % {a['p95_cm']:.3g} cm, max {a['max_cm']:.3g} cm "
+        f"(reference {ref_wall:.0f} s, {a['reference_steps_median']} steps median)",
+        flush=True,
+    )
+    for o in outliers:
         print(
-            f"  lanes {run['lanes']:3d}: compile {run['compile_s']:.1f} s, "
-            f"{run['ms_per_trajectory']:.2f} ms per "
-            f"trajectory, {run['us_per_step_per_trajectory']:.2f} us per step, steps median "
-            f"{run['steps_median']} max {run['steps_max']}, lock-step efficiency "
-            f"{run['lockstep_efficiency']:.2f}, failed {run['failed']}, peak RSS {run['peak_rss_mb']:.0f} MB",
+            f"    μ = {o['mu']:.6f}: error {o['error_cm']:.2f} cm; scan neighbours "
+            f"{o['neighbour_spread_cm']:.2f} cm "
+            f"away (median over members {a['median_neighbour_spread_cm']:.3f} cm)",
             flush=True,
         )
-        main_res = r if main_res is None or lanes == 16 else main_res
-    best = min(rec["runs"], key=lambda x: x["ms_per_trajectory"])
-    rec["best"] = best
-    rec["peak_rss_before_mb"] = rss0
 
-    # Accuracy of the benchmark tolerance against a tight reference, on a few μ.
-    if not args.no_reference:
-        k = 4 if args.quick else 16
-        idx = np.linspace(0, n - 1, k).round().astype(int)
-        ref = scan(
-            sc,
-            {MU: mus[idx]},
-            t1,
-            observables=OBS,
-            n_save=args.n_save,
-            rtol=1e-9,
-            atol=1e-11,
-            lanes=k,
-            max_steps=2_000_000,
-        )
-        err = np.linalg.norm(main_res["final_position"][idx] - ref["final_position"], axis=-1)
-        rec["accuracy"] = {
-            "mu": mus[idx].tolist(),
-            "final_position_error_cm": (100 * err).tolist(),
-            "median_cm": float(100 * np.median(err)),
-            "max_cm": float(100 * np.max(err)),
-            "reference": "rtol 1e-9, atol 1e-11",
-        }
-        print(
-            f"  accuracy vs rtol 1e-9: final C error median {100 * np.median(err):.3g} cm, "
-            f"max {100 * np.max(err):.3g} cm over {k} μ",
-            flush=True,
-        )
-
-    # scipy on the same vector field (jitted right-hand side), same tolerances and horizon.
+    # 3. scipy LSODA on the same vector field, for a few of the reference members.
     if scipy_n:
-        base = []
-        for mu in np.linspace(0.2, 0.5, scipy_n):
-            s_mu = sc.replace(**{MU: float(mu)})
-            row = {"mu": float(mu)}
-            for method in ("LSODA", "RK45"):
-                wall, nfev, pos, ok = scipy_run(s_mu, t1, method, args.rtol, args.atol)
-                row[method] = {"wall_s": wall, "nfev": nfev, "success": ok, "final_position": pos.tolist()}
-            base.append(row)
-            print(
-                f"  scipy μ = {mu:.3f}: LSODA {row['LSODA']['wall_s']:.2f} s "
-                f"({row['LSODA']['nfev']} f-evals), "
-                f"RK45 {row['RK45']['wall_s']:.2f} s ({row['RK45']['nfev']} f-evals)",
-                flush=True,
-            )
-        per = best["ms_per_trajectory"] / 1e3
-        rec["scipy"] = {
-            "runs": base,
-            "lsoda_mean_s": float(np.mean([b["LSODA"]["wall_s"] for b in base])),
-            "rk45_mean_s": float(np.mean([b["RK45"]["wall_s"] for b in base])),
+        per = t["compute"] / n
+        k_idx = np.unique(np.linspace(0, idx.size - 1, scipy_n + 2)[1:-1].round().astype(int))
+        rows = []
+        for tol in (float(x) for x in args.scipy_rtol.split(",")):
+            for k in k_idx:
+                mu = float(mus[idx[k]])
+                wall, nfev, p_end, ok = scipy_lsoda(sc.replace(**{MU: mu}), t1, tol, 1e-2 * tol)
+                e = float(np.linalg.norm(p_end - ref["final_position"][k]))
+                rows.append(
+                    {
+                        "rtol": tol,
+                        "mu": mu,
+                        "wall_s": wall,
+                        "nfev": nfev,
+                        "success": ok,
+                        "error_cm": 100 * e,
+                        "scan_error_cm": float(100 * err[k]),
+                        "ratio_to_scan": wall / per,
+                    }
+                )
+                print(
+                    f"  LSODA rtol {tol:g}, μ = {mu:.4f}: {wall:.2f} s, {nfev} f-evals, "
+                    f"error {100 * e:.3g} cm "
+                    f"(scan {100 * err[k]:.3g} cm); {wall / per:.0f}x the scan's time per trajectory",
+                    flush=True,
+                )
+        rec["scipy_lsoda"] = {
+            "runs": rows,
+            "mean_ratio_by_rtol": {
+                str(tol): float(np.mean([x["ratio_to_scan"] for x in rows if x["rtol"] == tol]))
+                for tol in sorted({x["rtol"] for x in rows})
+            },
         }
-        rec["scipy"]["ratio_lsoda_over_scan"] = rec["scipy"]["lsoda_mean_s"] / per
-        rec["scipy"]["ratio_rk45_over_scan"] = rec["scipy"]["rk45_mean_s"] / per
-        print(
-            f"  ratio per trajectory: LSODA / scan = {rec['scipy']['ratio_lsoda_over_scan']:.0f}x, "
-            f"RK45 / scan = {rec['scipy']['ratio_rk45_over_scan']:.0f}x",
-            flush=True,
-        )
 
-    # Forward sensitivities d(final state)/dμ across (part of) the scan vs the plain scan of the same members.
-    if not args.no_derivatives:
-        m = min(n, 64 if args.quick else 512)
-        sub = mus[np.linspace(0, n - 1, m).round().astype(int)]
-        lanes = best["lanes"]
-        plain = scan(
-            sc,
-            {MU: sub},
-            t1,
-            observables=OBS,
-            n_save=args.n_save,
-            rtol=args.rtol,
-            atol=args.atol,
-            lanes=lanes,
-        )
-        der = scan(
-            sc,
-            {MU: sub},
-            t1,
-            observables=OBS,
-            n_save=args.n_save,
-            rtol=args.rtol,
-            atol=args.atol,
-            lanes=lanes,
-            derivatives=True,
-        )
+    # 4. Forward sensitivities vs the plain scan of the same members.
+    if deriv_n:
+        sub = mus[np.linspace(0, n - 1, deriv_n).round().astype(int)]
+        plain = scan(sc, {MU: sub}, t1, **kw)
+        der = scan(sc, {MU: sub}, t1, derivatives=True, **kw)
         tp, td = plain.attrs["timings_s"], der.attrs["timings_s"]
+        same = float(np.max(np.abs(der["final_position"] - plain["final_position"])))
         rec["derivatives"] = {
-            "members": m,
-            "plain_ms_per_trajectory": 1e3 * tp["compute"] / m,
-            "forward_ms_per_trajectory": 1e3 * td["compute"] / m,
+            "members": deriv_n,
+            "plain_ms_per_trajectory": 1e3 * tp["compute"] / deriv_n,
+            "forward_ms_per_trajectory": 1e3 * td["compute"] / deriv_n,
             "ratio": td["compute"] / tp["compute"],
             "compile_plain_s": tp["compile"],
             "compile_forward_s": td["compile"],
             "failed": int(np.sum(~der.ok)),
+            "max_difference_of_values_m": same,
         }
+        d = rec["derivatives"]
         print(
-            f"  forward sensitivities: {rec['derivatives']['forward_ms_per_trajectory']:.2f} ms vs plain "
-            f"{rec['derivatives']['plain_ms_per_trajectory']:.2f} ms per trajectory "
-            f"({rec['derivatives']['ratio']:.2f}x), compile {td['compile']:.1f} s",
+            f"  forward sensitivities: {d['forward_ms_per_trajectory']:.2f} vs plain "
+            f"{d['plain_ms_per_trajectory']:.2f}"
+            f" ms per trajectory ({d['ratio']:.2f}x), compile {d['compile_forward_s']:.1f} s",
             flush=True,
         )
 
+    rec["load_average_at_end"] = os.getloadavg()
     rec["peak_rss_mb"] = peak_rss_mb()
     path = out / "benchmark_scan.json"
     path.write_text(json.dumps(rec, indent=1) + "\n")
