@@ -1046,6 +1046,15 @@ def _hist_shape(name: str) -> tuple[int, ...]:
 # ---------------------------------------------------------------------------------------------- CLI
 
 
+_CLI_SOLVERS = {
+    "tsit5": diffrax.Tsit5,
+    "bosh3": diffrax.Bosh3,
+    "dopri5": diffrax.Dopri5,
+    "dopri8": diffrax.Dopri8,
+    "heun": diffrax.Heun,
+}
+
+
 def configure_parser(subparsers) -> None:
     """Add `jaxhoist scan SCENARIO --param PATH --values a:b:n [...] --t1 T --out DIR`."""
     p = subparsers.add_parser(
@@ -1098,7 +1107,26 @@ def configure_parser(subparsers) -> None:
     p.add_argument("--rtol", type=float, default=1e-6)
     p.add_argument("--atol", type=float, default=1e-8)
     p.add_argument("--max-steps", type=int, default=200_000)
-    p.add_argument("--lanes", type=int, default=16, help="members per vmapped lock-step solve (default 16)")
+    p.add_argument(
+        "--solver",
+        choices=sorted(_CLI_SOLVERS),
+        default="tsit5",
+        help="diffrax Runge-Kutta method (default tsit5; bosh3 is the accurate choice at fixed steps)",
+    )
+    p.add_argument(
+        "--fixed-step",
+        type=float,
+        default=None,
+        metavar="DT",
+        help="constant steps of DT seconds, every member the same steps (lean fixed-step loop; no error "
+        "control: check the accuracy, see docs/performance.md), e.g. --solver bosh3 --fixed-step 1.5e-3",
+    )
+    p.add_argument(
+        "--lanes",
+        type=int,
+        default=None,
+        help="members per vmapped lock-step solve (default 16, or 256 with --fixed-step)",
+    )
     p.add_argument(
         "--chunk-size", type=int, default=None, help="members per compiled call (default: automatic)"
     )
@@ -1144,6 +1172,9 @@ def run_cli(args) -> int:
         rtol=args.rtol,
         atol=args.atol,
         max_steps=args.max_steps,
+        solver=_CLI_SOLVERS[args.solver](),
+        dt0=args.fixed_step,
+        fixed_step=args.fixed_step is not None,
         lanes=args.lanes,
         chunk_size=args.chunk_size,
         out_dir=out,
