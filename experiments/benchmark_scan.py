@@ -21,6 +21,9 @@ What it runs (all in one process, so every ratio is against a baseline measured 
 4. **forward sensitivities**: `scan(..., derivatives=True)` (d final position / dμ and d final Euler angles /
    dμ by forward mode through the same fixed steps) against the plain scan of the same --deriv-n members.
 
+With `--sweep-lanes 64,128,...` it first times the same scan over a short horizon (--sweep-t1) for each
+lane width (µs per step per trajectory), on the devices given by --devices; `--only-sweep` stops there.
+
 Everything goes to DIR/benchmark_scan.json; docs/performance.md records a run.
 """
 
@@ -102,6 +105,9 @@ def main(argv=None):
         "--scipy-rtol", default="1e-6,1e-4", help="LSODA tolerances (comma-separated; atol = rtol/100)"
     )
     p.add_argument("--deriv-n", type=int, default=None, help="members for the sensitivities (512; quick 64)")
+    p.add_argument("--sweep-lanes", default=None, help="lane widths to time first, e.g. 64,128,256,512,1024")
+    p.add_argument("--sweep-t1", type=float, default=0.5, help="horizon of the lane sweep [s] (default 0.5)")
+    p.add_argument("--only-sweep", action="store_true", help="stop after the lane sweep")
     args = p.parse_args(argv)
 
     out = Path(args.out)
@@ -140,6 +146,34 @@ def main(argv=None):
         f"{os.getloadavg()[0]:.1f}",
         flush=True,
     )
+
+    # 0. Lane widths, over a short horizon (every member takes the same steps, so the horizon only scales).
+    if args.sweep_lanes:
+        sweep = []
+        for rep_ in range(2):  # a second pass: the first may still warm up caches; keep the best of both
+            for lanes in (int(x) for x in args.sweep_lanes.split(",")):
+                rs = scan(sc, {MU: mus}, args.sweep_t1, **{**kw, "lanes": lanes})
+                ts_ = rs.attrs["timings_s"]
+                us = 1e6 * ts_["compute"] / n / int(np.median(rs.num_accepted_steps))
+                sweep.append(
+                    {
+                        "lanes": lanes,
+                        "pass": rep_,
+                        "us_per_step_per_trajectory": us,
+                        "compile_s": ts_["compile"],
+                    }
+                )
+        best = {}
+        for x in sweep:
+            best[x["lanes"]] = min(best.get(x["lanes"], np.inf), x["us_per_step_per_trajectory"])
+        for lanes, us in best.items():
+            print(f"  lanes {lanes:5d}: {us:.3f} us per step per trajectory (best of 2)", flush=True)
+        rec["lane_sweep"] = {"t1": args.sweep_t1, "runs": sweep, "best_us_per_step_per_trajectory": best}
+        if args.only_sweep:
+            path = out / "benchmark_scan.json"
+            path.write_text(json.dumps(rec, indent=1) + "\n")
+            print(f"wrote {path}")
+            return
 
     # 1. The scan.
     r = scan(sc, {MU: mus}, t1, progress=True, **kw)
