@@ -21,6 +21,9 @@ What it runs (all in one process, so every ratio is against a baseline measured 
 4. **forward sensitivities**: `scan(..., derivatives=True)` (d final position / dμ and d final Euler angles /
    dμ by forward mode through the same fixed steps) against the plain scan of the same --deriv-n members.
 
+With `--adaptive-n N` it also runs the previous default, adaptive Tsit5 at rtol 1e-6 / atol 1e-8 in groups
+of 16 lanes, on N evenly spaced members over the same horizon, for the ratio of the two.
+
 With `--sweep-lanes 64,128,...` it first times the same scan over a short horizon (--sweep-t1) for each
 lane width (µs per step per trajectory), on the devices given by --devices; `--only-sweep` stops there.
 
@@ -108,15 +111,20 @@ def main(argv=None):
     p.add_argument("--sweep-lanes", default=None, help="lane widths to time first, e.g. 64,128,256,512,1024")
     p.add_argument("--sweep-t1", type=float, default=0.5, help="horizon of the lane sweep [s] (default 0.5)")
     p.add_argument("--only-sweep", action="store_true", help="stop after the lane sweep")
+    p.add_argument(
+        "--adaptive-n", type=int, default=0, help="members for the adaptive Tsit5 comparison (0: none)"
+    )
     args = p.parse_args(argv)
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     n = args.n or (64 if args.quick else 4096)
     t1 = args.t1 or (3.0 if args.quick else 25.0)
-    ref_n = min(n, args.ref_n or (8 if args.quick else 512))
+    ref_n = min(n, args.ref_n if args.ref_n is not None else (8 if args.quick else 512))
     scipy_n = args.scipy_n if args.scipy_n is not None else (1 if args.quick else 3)
-    deriv_n = min(n, args.deriv_n or (64 if args.quick else 512))
+    deriv_n = min(n, args.deriv_n if args.deriv_n is not None else (64 if args.quick else 512))
+    if ref_n < 1:
+        p.error("--ref-n must be >= 1 (the accuracy check and the LSODA errors use the reference)")
     sc = jh.load_scenario("paper-4.2").replace(**{EPS: args.eps})
     mus = np.linspace(0.1, 0.6, n)
     solver = SOLVERS[args.solver]()
@@ -196,6 +204,28 @@ def main(argv=None):
         flush=True,
     )
     pos = r["final_position"]
+
+    # 1b. The previous default (adaptive Tsit5, lock-step groups of 16) on some of the members.
+    if args.adaptive_n:
+        sub = mus[np.linspace(0, n - 1, args.adaptive_n).round().astype(int)]
+        ra = scan(
+            sc, {MU: sub}, t1, observables=OBS, n_save=2, rtol=1e-6, atol=1e-8, lanes=16, max_steps=10**6
+        )
+        ta = ra.attrs["timings_s"]
+        rec["adaptive_tsit5"] = {
+            "members": int(sub.size),
+            "ms_per_trajectory": 1e3 * ta["compute"] / sub.size,
+            "steps_median": int(np.median(ra.num_accepted_steps)),
+            "compile_s": ta["compile"],
+            "ratio_to_fixed_step_scan": (ta["compute"] / sub.size) / (t["compute"] / n),
+        }
+        x = rec["adaptive_tsit5"]
+        print(
+            f"  adaptive Tsit5 rtol 1e-6, 16 lanes, {x['members']} members: {x['ms_per_trajectory']:.1f} ms "
+            f"per trajectory ({x['steps_median']} steps median), "
+            f"{x['ratio_to_fixed_step_scan']:.1f}x the fixed-step scan",
+            flush=True,
+        )
 
     # 2. Accuracy against the adaptive reference on evenly spaced members.
     idx = np.unique(np.linspace(0, n - 1, ref_n).round().astype(int))
