@@ -21,6 +21,9 @@ What it runs (all in one process, so every ratio is against a baseline measured 
 4. **forward sensitivities**: `scan(..., derivatives=True)` (d final position / dμ and d final Euler angles /
    dμ by forward mode through the same fixed steps) against the plain scan of the same --deriv-n members.
 
+With `--half-step-check` it also solves every member again at dt/2 and reports how many land within 1 cm
+of that finer solution (a check of all members, where the adaptive reference covers --ref-n of them).
+
 With `--adaptive-n N` it also runs the previous default, adaptive Tsit5 at rtol 1e-6 / atol 1e-8 in groups
 of 16 lanes, on N evenly spaced members over the same horizon, for the ratio of the two.
 
@@ -114,6 +117,7 @@ def main(argv=None):
     p.add_argument(
         "--adaptive-n", type=int, default=0, help="members for the adaptive Tsit5 comparison (0: none)"
     )
+    p.add_argument("--half-step-check", action="store_true", help="also solve every member at dt/2")
     args = p.parse_args(argv)
 
     out = Path(args.out)
@@ -280,6 +284,27 @@ def main(argv=None):
             f"    μ = {o['mu']:.6f}: error {o['error_cm']:.2f} cm; scan neighbours "
             f"{o['neighbour_spread_cm']:.2f} cm "
             f"away (median over members {a['median_neighbour_spread_cm']:.3f} cm)",
+            flush=True,
+        )
+
+    # 2b. Every member against the same scan at half the step.
+    if args.half_step_check:
+        rh = scan(sc, {MU: mus}, t1, **{**kw, "dt0": args.dt / 2})
+        eh = np.linalg.norm(pos - rh["final_position"], axis=-1)
+        bad = np.flatnonzero(eh >= 0.01)
+        rec["half_step_check"] = {
+            "dt_s": args.dt / 2,
+            "fraction_within_1cm": float(np.mean(eh < 0.01)),
+            "median_cm": float(100 * np.median(eh)),
+            "max_cm": float(100 * np.max(eh)),
+            "outliers": [{"mu": float(mus[i]), "difference_cm": float(100 * eh[i])} for i in bad],
+        }
+        h = rec["half_step_check"]
+        print(
+            f"  all {n} members vs the same scan at dt/2: "
+            f"{100 * h['fraction_within_1cm']:.2f} % within 1 cm, "
+            f"median {h['median_cm']:.3g} cm, max {h['max_cm']:.3g} cm"
+            + (f"; off by > 1 cm at μ = {', '.join(f'{mus[i]:.5f}' for i in bad[:12])}" if bad.size else ""),
             flush=True,
         )
 
