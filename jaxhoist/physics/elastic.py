@@ -143,6 +143,13 @@ def snapshot(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Snapshot:
     )
 
 
+def _sum_corners(x: Float[Array, "4 ..."]) -> Float[Array, "..."]:
+    """Σ over the four corners, written out: in a vmapped scan XLA fuses these additions with their
+    neighbours, where `jnp.sum(x, axis=0)` is a separate reduction kernel per evaluation (5-14 % of a
+    fixed step, `experiments/bench_vector_field.py`; docs/performance.md)."""
+    return x[0] + x[1] + x[2] + x[3]
+
+
 def vector_field(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> State:
     """dy/dt of the elastic-foundation model (pure; `args = (scenario, constants)`)."""
     scenario, c = args
@@ -154,9 +161,9 @@ def vector_field(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> State
     # Forces on the load, eq. (2.11): ground reactions at the corners, rope S at B, weight G at C.
     F_corner = snap.friction + snap.normal[:, None] * z_hat
     F_rope = snap.rope_tension * snap.rope_direction
-    force = jnp.sum(F_corner, axis=0) + F_rope - load.mass * g * z_hat
+    force = _sum_corners(F_corner) + F_rope - load.mass * g * z_hat
     # Moments about C in body axes: ρ x (Rᵀ F).
-    moment = (jnp.sum(jnp.cross(c.corners_rel, F_corner @ R), axis=0)
+    moment = (_sum_corners(jnp.cross(c.corners_rel, F_corner @ R))
               + jnp.cross(c.attachment_rel, R.T @ F_rope))
     omega_dot = c.inertia_inv @ (moment - jnp.cross(omega, c.inertia @ omega))
 
