@@ -32,6 +32,7 @@ from .._errors import SolveStatus
 from ..physics.elastic import vector_field
 from ..physics.equilibrium import initial_state
 from ..physics.params import Scenario
+from .solve import outputs
 
 
 def supports(solver) -> bool:
@@ -121,8 +122,6 @@ def solve_fixed(scenario: Scenario, ts: Float[Array, " n_t"], options):
     The status is `MAX_STEPS` if the steps needed exceed `options.max_steps` (the solve still runs; callers
     should refuse such requests on the host), `NONFINITE` if the final state is not finite.
     """
-    from .solve import outputs
-
     y0, c = initial_state(scenario)
     ys, n = integrate(vector_field, options.solver, ts, y0, (scenario, c), options.dt0)
     # Finite motion state at t1 (the energy integrals follow from it): checking only these leaves lets XLA
