@@ -728,9 +728,10 @@ def scan(
     - `sort`: solve members in order of their parameter values (cuts lock-step waste; no effect on results
       beyond the grouping).
     - `derivatives`: also compute forward-mode sensitivities of every observable with respect to the swept
-      parameters (`jax.jacfwd` through `diffrax.ForwardMode`), stored as `d_<name>` with a last axis over
-      the parameters (about 1 + P/2 times the cost of a plain scan for P parameters; measured in
-      `experiments/benchmark_scan.py`).
+      parameters (`jax.jacfwd`, through `diffrax.ForwardMode` or the fixed-step loop), stored as `d_<name>`
+      with a last axis over the parameters. Cost for one parameter, measured in
+      `experiments/benchmark_scan.py`: 1.3-2x a plain scan with adaptive steps, 3.1-3.8x with fixed steps
+      (docs/performance.md).
     - `out_dir`: write each finished chunk there (`chunk_#####.npz` + `manifest.json`) and the final
       `scan.npz` + `scan.json`; with `resume=True` an interrupted scan continues from the chunks on disk.
     - `progress`: True to print a line per chunk on stderr, or a callable receiving a `Progress`.
