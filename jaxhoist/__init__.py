@@ -8,9 +8,13 @@ from .apps.bifurcation import Bifurcation as Bifurcation
 from .apps.bifurcation import find_jumps as find_jumps
 from .apps.bifurcation import locate_bifurcation as locate_bifurcation
 from .apps.bifurcation import trace_boundary as trace_boundary
+from .apps.identify import identify as identify
 from .io.scenario import load_scenario as load_scenario
 from .io.scenario import scenario_from_dict as scenario_from_dict
 from .numerics.observables import Observable as Observable
+from .numerics.rigid_solve import RigidContactError as RigidContactError
+from .numerics.rigid_solve import RigidTrajectory as RigidTrajectory
+from .numerics.rigid_solve import simulate_rigid as simulate_rigid
 from .numerics.scan import ScanResult as ScanResult
 from .numerics.scan import ScanStatus as ScanStatus
 from .numerics.scan import scan as scan
@@ -33,5 +37,6 @@ from .physics.params import RampedHoist as RampedHoist
 from .physics.params import RegularisedCoulomb as RegularisedCoulomb
 from .physics.params import Rope as Rope
 from .physics.params import Scenario as Scenario
+from .physics.statics import rest_statics as rest_statics
 
 __version__ = "0.1.0"

@@ -211,3 +211,52 @@ def test_errors_are_raised_not_guessed():
                    rope_stiffness=2e5, rope_damping=2e4, speed=0.05, travel=0.018)
     with pytest.raises(RigidContactError, match="(?s)max_phases = 3.*impact:FH"):
         simulate_rigid(sc, T1, n_save=N_SAVE, max_phases=3)
+
+
+def test_model_switch_and_cli_reach_the_rigid_driver(slide_run, tmp_path):
+    """`simulate(..., model="rigid")` and `jaxhoist simulate --model rigid` run the same phase driver: the
+    same sliding motion (bit for bit: same solver, same settings), and the CLI's energy residual includes
+    the impact losses."""
+    from jaxhoist.apps.cli import main
+    from jaxhoist.io.results import load_trajectory
+
+    sc, ref = slide_run
+    tr = jh.simulate(sc, T1, n_save=N_SAVE, model="rigid", rtol=1e-8, atol=1e-9)
+    assert isinstance(tr, jh.RigidTrajectory)
+    np.testing.assert_array_equal(np.asarray(tr.position), np.asarray(ref.position))
+    with pytest.raises(jh.ScenarioError, match="model"):
+        jh.simulate(sc, T1, model="rigid", fixed_step=True, dt0=1e-3)
+    with pytest.raises(jh.ScenarioError, match="model"):
+        jh.simulate(sc, T1, model="plastic")
+
+    path = tmp_path / "rigid.toml"
+    a, b, c = (float(x) for x in sc.load.size)
+    path.write_text(f"""
+name = "rigid-cli"
+t1 = {T1}
+[load]
+size = [{a}, {b}, {c}]
+mass = {float(sc.load.mass)}
+[foundation]
+stiffness = {float(sc.foundation.stiffness)}
+damping = {float(sc.foundation.damping)}
+friction_coefficient = {float(sc.foundation.friction_coefficient)}
+[rope]
+stiffness = {float(sc.rope.stiffness)}
+damping = {float(sc.rope.damping)}
+attachment = {np.asarray(sc.rope.attachment).tolist()}
+[hoist]
+law = "ramped"
+speed = {float(sc.hoist.speed)}
+ramp_time = 0.0
+[boom]
+tip_position = {np.asarray(sc.boom.tip_position).tolist()}
+tip_mass = {float(sc.boom.tip_mass)}
+stiffness = {np.asarray(sc.boom.stiffness).tolist()}
+damping = {np.asarray(sc.boom.damping).tolist()}
+""")
+    assert main(["simulate", str(path), "--model", "rigid", "--n-save", str(N_SAVE), "--rtol", "1e-8",
+                 "--atol", "1e-9", "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 0
+    arrays = load_trajectory(tmp_path / "out" / "trajectory")
+    np.testing.assert_allclose(arrays["position"], np.asarray(ref.position), atol=1e-12)
+    np.testing.assert_allclose(arrays["energy_residual"], np.asarray(ref.energy_residual()), atol=1e-9)

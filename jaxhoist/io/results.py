@@ -67,6 +67,8 @@ def trajectory_arrays(traj) -> dict[str, np.ndarray]:
     # are annotated for one solve, and a scan's trajectory carries a batch axis first.
     mech = sum(np.asarray(x) for x in (e.kinetic, e.potential, e.ground_spring, e.rope_spring, e.boom_spring))
     supplied = np.asarray(traj.hoist_work) - np.asarray(traj.damping_loss) - np.asarray(traj.friction_work)
+    if hasattr(traj, "impact_loss"):  # the rigid model loses energy in impacts too
+        supplied = supplied - np.asarray(traj.impact_loss)
     out = {
         "ts": traj.ts,
         "position": traj.position,

@@ -19,6 +19,7 @@ from ..physics.elastic import Constants, State, snapshot, vector_field
 from ..physics.energy import Energy
 from ..physics.equilibrium import initial_state
 from ..physics.params import Scenario
+from .rigid_solve import RigidTrajectory, simulate_rigid
 
 
 class Trajectory(eqx.Module):
@@ -228,7 +229,8 @@ def simulate(
     progress: bool = False,
     fixed_step: bool = False,
     throw: bool = True,
-) -> Trajectory:
+    model: str = "elastic",
+) -> Trajectory | RigidTrajectory:
     """Simulate a lift with the elastic-foundation model (paper §3) from rest at t = 0 to `t1`.
 
     Works under `jax.jit`, `jax.vmap` over any scenario leaf, `jax.grad` (adjoint="reverse") and
@@ -240,6 +242,10 @@ def simulate(
     - `ts`: saved times [s], starting at 0 and ending at t1; default `n_save` equally spaced times.
     - `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`, `progress`, `fixed_step`: see `SolverOptions`.
     - `throw`: raise if the solve fails (max steps, non-finite state); with False, read `Trajectory.status`.
+    - `model`: "elastic" (paper §3, this function's own solver) or "rigid" (paper §2, the event-driven
+      reference `numerics.rigid_solve.simulate_rigid`: host-side phase loop, not differentiable or
+      vmappable; only `t1`, `ts`, `n_save`, `rtol`, `atol`, `max_steps` apply, and it returns a
+      `RigidTrajectory` with the same output names plus `impact_loss` and the phase log).
 
     **Returns** a `Trajectory`.
 
@@ -247,6 +253,12 @@ def simulate(
     and (with `throw=True`) an `EquinoxRuntimeError` naming the failure.
     """
     require_x64()
+    if model not in ("elastic", "rigid"):
+        raise ScenarioError(f"model must be 'elastic' or 'rigid', got {model!r}")
+    if model == "rigid":
+        if solver is not None or fixed_step or dt0 is not None or adjoint != "reverse":
+            raise ScenarioError("model='rigid' takes only t1, ts, n_save, rtol, atol and max_steps")
+        return simulate_rigid(scenario, t1, ts=ts, n_save=n_save, rtol=rtol, atol=atol, max_steps=max_steps)
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()
