@@ -31,8 +31,9 @@ def scipy_baseline(sc, t1, method):
     rhs = jax.jit(lambda t, y: ravel_pytree(vector_field(t, unravel(y), (sc, c)))[0])
     rhs(0.0, flat0).block_until_ready()
     t0 = time.perf_counter()
-    sol = solve_ivp(lambda t, y: np.asarray(rhs(t, y)), (0.0, t1), np.asarray(flat0), method=method,
-                    rtol=1e-6, atol=1e-8)
+    sol = solve_ivp(
+        lambda t, y: np.asarray(rhs(t, y)), (0.0, t1), np.asarray(flat0), method=method, rtol=1e-6, atol=1e-8
+    )
     wall = time.perf_counter() - t0
     return wall, sol.nfev, unravel(sol.y[:, -1]).position
 
@@ -57,22 +58,32 @@ def main(argv=None):
         walls.append(time.perf_counter() - t0)
     law = sc.foundation.friction
     rec = {
-        "scenario": args.scenario, "t1": t1, "friction_law": type(law).__name__,
+        "scenario": args.scenario,
+        "t1": t1,
+        "friction_law": type(law).__name__,
         "friction_params": {k: float(getattr(law, k)) for k in law.__dataclass_fields__ if k != "state_size"},
-        "first_call_s": compile_s, "run_s_median": float(np.median(walls)), "run_s_all": walls,
-        "accepted_steps": int(tr.num_accepted_steps), "rejected_steps": int(tr.num_rejected_steps),
-        "status": int(tr.status), "final_position_m": np.asarray(tr.position[-1]).tolist(),
+        "first_call_s": compile_s,
+        "run_s_median": float(np.median(walls)),
+        "run_s_all": walls,
+        "accepted_steps": int(tr.num_accepted_steps),
+        "rejected_steps": int(tr.num_rejected_steps),
+        "status": int(tr.status),
+        "final_position_m": np.asarray(tr.position[-1]).tolist(),
     }
-    print(f"{args.scenario} t1={t1} s, {rec['friction_law']} {rec['friction_params']}: first call (compile+run) "
-          f"{compile_s:.2f} s, run after compilation {rec['run_s_median'] * 1e3:.0f} ms (median of {args.repeats}), "
-          f"accepted {rec['accepted_steps']} rejected {rec['rejected_steps']} steps, "
-          f"{rec['run_s_median'] / max(rec['accepted_steps'] + rec['rejected_steps'], 1) * 1e6:.1f} us/step")
+    print(
+        f"{args.scenario} t1={t1} s, {rec['friction_law']} {rec['friction_params']}: first call (compile+run) "
+        f"{compile_s:.2f} s, run after compilation {rec['run_s_median'] * 1e3:.0f} ms (median of {args.repeats}), "
+        f"accepted {rec['accepted_steps']} rejected {rec['rejected_steps']} steps, "
+        f"{rec['run_s_median'] / max(rec['accepted_steps'] + rec['rejected_steps'], 1) * 1e6:.1f} us/step"
+    )
     if args.scipy:
         for method in ("LSODA", "RK45"):
             wall, nfev, pos = scipy_baseline(sc, t1, method)
             rec[f"scipy_{method}_s"] = wall
-            print(f"  scipy {method}: {wall:.2f} s, {nfev} RHS evaluations, final C {np.round(np.asarray(pos), 4)} "
-                  f"(jaxhoist {np.round(np.asarray(tr.position[-1]), 4)}); ratio {wall / rec['run_s_median']:.0f}x")
+            print(
+                f"  scipy {method}: {wall:.2f} s, {nfev} RHS evaluations, final C {np.round(np.asarray(pos), 4)} "
+                f"(jaxhoist {np.round(np.asarray(tr.position[-1]), 4)}); ratio {wall / rec['run_s_median']:.0f}x"
+            )
     if args.out:
         out = Path(args.out)
         out.mkdir(parents=True, exist_ok=True)

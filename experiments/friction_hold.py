@@ -27,7 +27,9 @@ def scenario(law, t1):
         foundation=jh.Foundation(1.5e7, 2e5, MU, law),
         rope=jh.Rope(1e6, 1e4, [1.25, 0.0, 1.25]),
         hoist=jh.RampedHoist(0.05, 0.5, 0.066),
-        boom=jh.Boom([1.25, -20.0, 1.244], 500.0, 5e6, 5e3), t1=t1)
+        boom=jh.Boom([1.25, -20.0, 1.244], 500.0, 5e6, 5e3),
+        t1=t1,
+    )
 
 
 def main(argv=None):
@@ -37,11 +39,18 @@ def main(argv=None):
     args = p.parse_args(argv)
     t1 = 6.0 if args.quick else 10.0
     ts = np.linspace(0.0, t1, int(t1 * 20) + 1)
-    lines = [f"Hold of a 37.5 t box at T ~ 0.5 mu m g, t1 = {t1} s (`python experiments/friction_hold.py"
-             f"{' --quick' if args.quick else ''}`)", "",
-             "| law | drift of C, window [2.5,3] s -> [t1-0.5,t1] s [mm] | predicted creep [mm] | accepted steps |"
-             " wall after compile [s] |", "|---|---|---|---|---|"]
-    for name, law in [("RegularisedCoulomb(1e-3)", jh.RegularisedCoulomb(1e-3)), ("BristleFriction()", jh.BristleFriction())]:
+    lines = [
+        f"Hold of a 37.5 t box at T ~ 0.5 mu m g, t1 = {t1} s (`python experiments/friction_hold.py"
+        f"{' --quick' if args.quick else ''}`)",
+        "",
+        "| law | drift of C, window [2.5,3] s -> [t1-0.5,t1] s [mm] | predicted creep [mm] | accepted steps |"
+        " wall after compile [s] |",
+        "|---|---|---|---|---|",
+    ]
+    for name, law in [
+        ("RegularisedCoulomb(1e-3)", jh.RegularisedCoulomb(1e-3)),
+        ("BristleFriction()", jh.BristleFriction()),
+    ]:
         sc = scenario(law, t1)
         jax.block_until_ready(jh.simulate(sc, ts=ts))
         t0 = time.perf_counter()
@@ -53,7 +62,9 @@ def main(argv=None):
         drift = y[w2].mean() - y[w1].mean()
         c = (ts >= 2.75) & (ts <= t1 - 0.25)
         pred = -np.trapezoid(1e-3 * r[c] / np.sqrt(1 - r[c] ** 2), ts[c]) if "Coulomb" in name else 0.0
-        lines.append(f"| {name} | {drift * 1e3:.3g} | {pred * 1e3:.3g} | {int(tr.num_accepted_steps)} | {wall:.2f} |")
+        lines.append(
+            f"| {name} | {drift * 1e3:.3g} | {pred * 1e3:.3g} | {int(tr.num_accepted_steps)} | {wall:.2f} |"
+        )
         print(lines[-1], flush=True)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

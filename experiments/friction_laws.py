@@ -65,10 +65,23 @@ def main(argv=None):
         base = wall if base is None else base
         d5 = float(np.linalg.norm(np.asarray(tr.position[i5] - ref.position[i5])))
         d1 = float(np.linalg.norm(np.asarray(tr.position[-1] - ref.position[-1])))
-        rows.append((name, int(tr.num_accepted_steps), int(tr.num_rejected_steps), wall, wall / base, d5, d1,
-                     float(np.max(np.abs(np.asarray(tr.energy_residual()))))))
-        print(f"{name:24s} steps {rows[-1][1]:7d} rej {rows[-1][2]:6d} wall {wall:6.2f} s "
-              f"({wall / base:4.2f}x) |dC|(t=5) {d5 * 100:7.3f} cm |dC|(t1) {d1 * 100:7.3f} cm", flush=True)
+        rows.append(
+            (
+                name,
+                int(tr.num_accepted_steps),
+                int(tr.num_rejected_steps),
+                wall,
+                wall / base,
+                d5,
+                d1,
+                float(np.max(np.abs(np.asarray(tr.energy_residual())))),
+            )
+        )
+        print(
+            f"{name:24s} steps {rows[-1][1]:7d} rej {rows[-1][2]:6d} wall {wall:6.2f} s "
+            f"({wall / base:4.2f}x) |dC|(t=5) {d5 * 100:7.3f} cm |dC|(t1) {d1 * 100:7.3f} cm",
+            flush=True,
+        )
     lines = [
         f"Friction laws on {args.scenario}, t1 = {t1} s, Tsit5 rtol 1e-6 atol 1e-8; reference: regularised Coulomb "
         f"eps = {ref_eps:g} m/s at rtol 1e-8 ({int(ref.num_accepted_steps)} steps, {t_ref:.1f} s).",
@@ -78,8 +91,10 @@ def main(argv=None):
         "|---|---|---|---|---|---|---|---|",
     ]
     for r in rows:
-        lines.append(f"| {r[0]} | {r[1]} | {r[2]} | {r[3]:.2f} | {r[4]:.2f} | {r[5] * 100:.3f} | {r[6] * 100:.2f} "
-                     f"| {r[7]:.2e} |")
+        lines.append(
+            f"| {r[0]} | {r[1]} | {r[2]} | {r[3]:.2f} | {r[4]:.2f} | {r[5] * 100:.3f} | {r[6] * 100:.2f} "
+            f"| {r[7]:.2e} |"
+        )
     (out / "friction_laws.md").write_text("\n".join(lines) + "\n")
     print("\n".join(lines))
 

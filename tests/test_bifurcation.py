@@ -12,13 +12,13 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.numerics import observables as O  # noqa: E402
 from jaxhoist.apps.bifurcation import (  # noqa: E402
     BifurcationError,
     find_jumps,
     locate_bifurcation,
     trace_boundary,
 )
+from jaxhoist.numerics import observables as O  # noqa: E402
 from jaxhoist.numerics.scan import ScanResult  # noqa: E402
 from jaxhoist.physics import kinematics  # noqa: E402
 

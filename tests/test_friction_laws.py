@@ -5,7 +5,6 @@ Set-up: a uniform 37.5 t box pulled horizontally through a rope at mid-height of
 hoist takes in 66 mm of rope and stops at t ≈ 1.8 s, leaving a steady pull of about half of μmg.
 """
 
-import jax
 import numpy as np
 import pytest
 

@@ -46,10 +46,10 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import ScenarioError, SolveStatus, require_x64
+from ..numerics import observables as obs_mod
 from ..numerics.scan import ScanResult, check_path, param_unit, scan, set_param
 from ..numerics.solve import SolverOptions, check_times, solve
 from ..physics.params import Scenario
-from ..numerics import observables as obs_mod
 
 
 class BifurcationError(RuntimeError):
@@ -804,21 +804,9 @@ def _cli_observable(name: str):
 
 def run_cli(args) -> int:
     jax.config.update("jax_enable_x64", True)
-    from ..io.scenario import load_scenario
-    from ..physics.params import get_leaf
+    from ..io.scenario import apply_overrides, load_scenario
 
-    scenario = load_scenario(args.scenario)
-    overrides = {}
-    for item in args.set:
-        path, _, value = item.partition("=")
-        try:
-            overrides[path.strip()] = float(value)
-        except ValueError:
-            raise ScenarioError(f"--set expects PATH=VALUE with a number, got {item!r}") from None
-        get_leaf(scenario, path.strip())
-    if overrides:
-        scenario = scenario.replace(**overrides)
-        scenario.check()
+    scenario, overrides = apply_overrides(load_scenario(args.scenario), args.set)
     observable = _cli_observable(args.observable)
     kw = dict(t1=args.t1, n_save=args.n_save, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     out = Path(args.out) if args.out else None

@@ -98,30 +98,6 @@ def _compiled_solve(scenario, ts, options):
     return _COMPILED[key]
 
 
-def _parse_set(items: Sequence[str]) -> dict[str, float | list[float]]:
-    """`["rope.stiffness=1e7", "load.mass_centre=[1, 2.5, 1]"]` -> {path: number or list of numbers}."""
-    import json
-
-    from .._errors import ScenarioError
-
-    out = {}
-    for item in items:
-        path, sep, value = item.partition("=")
-        path = path.strip()
-        if not sep or not path:
-            raise ScenarioError("--set expects PATH=VALUE (e.g. foundation.friction_coefficient=0.3), "
-                                f"got {item!r}")
-        try:
-            v = json.loads(value) if value.strip().startswith("[") else float(value)
-            if isinstance(v, list) and not all(type(x) in (int, float) for x in v):
-                raise ValueError
-        except ValueError:
-            raise ScenarioError(f"--set {path}: value must be a number or a list of numbers like "
-                                f"[1, 2.5, 1], got {value!r}") from None
-        out[path] = v
-    return out
-
-
 def _fmt_vec(v) -> str:
     return "(" + ", ".join(f"{x:.4g}" for x in v) + ")"
 
@@ -135,9 +111,8 @@ def run_simulate(args: argparse.Namespace) -> int:
 
     from .._errors import ScenarioError, SolveStatus, require_x64
     from ..io.results import corner_detach_times, liftoff_time, save_trajectory, trajectory_arrays
-    from ..io.scenario import load_scenario
+    from ..io.scenario import apply_overrides, load_scenario
     from ..numerics.solve import SolverOptions, check_times
-    from ..physics.params import get_leaf
 
     require_x64()
     progress = Progress(quiet=args.quiet)
@@ -146,15 +121,7 @@ def run_simulate(args: argparse.Namespace) -> int:
     # ---- host side: everything is checked before anything is compiled
     with progress(f"loading scenario {args.scenario}"):
         scenario = load_scenario(args.scenario)
-        overrides = _parse_set(args.set or [])
-        try:
-            for path in overrides:
-                get_leaf(scenario, path)  # raises ScenarioError naming a bad path
-            if overrides:
-                scenario = scenario.replace(**overrides)
-                scenario.check()
-        except ScenarioError as e:
-            raise ScenarioError(f"{e} [from --set]") from None
+        scenario, overrides = apply_overrides(scenario, args.set)
         t1 = scenario.t1 if args.t1 is None else args.t1
         check_times(t1, None)
         if args.n_save < 2:
@@ -162,16 +129,19 @@ def run_simulate(args: argparse.Namespace) -> int:
         options = SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
         ts = jnp.linspace(0.0, 1.0, args.n_save) * jnp.asarray(t1, dtype=jnp.float64)
     out_dir = Path(args.out) if args.out else Path("out") / scenario.name
-    progress.note(f"scenario {scenario.name}: t1 = {t1:g} s, {args.n_save} saved times, "
-                  f"rtol = {args.rtol:g}, atol = {args.atol:g}")
+    progress.note(
+        f"scenario {scenario.name}: t1 = {t1:g} s, {args.n_save} saved times, "
+        f"rtol = {args.rtol:g}, atol = {args.atol:g}"
+    )
 
     if args.model == "rigid":
         from ..numerics.rigid_solve import simulate_rigid
 
         label = "solving with the rigid-ground model (each phase compiles on first use)"
         with progress(label):
-            traj = simulate_rigid(scenario, t1, ts=np.asarray(ts), rtol=args.rtol, atol=args.atol,
-                                  max_steps=args.max_steps)
+            traj = simulate_rigid(
+                scenario, t1, ts=np.asarray(ts), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps
+            )
         wall_solve = progress.times[label]
     else:
         cached = _cache_key(scenario, ts, options) in _COMPILED
@@ -184,12 +154,24 @@ def run_simulate(args: argparse.Namespace) -> int:
     with progress(f"writing results to {out_dir}"):
         arrays = trajectory_arrays(traj)
         npz, meta = save_trajectory(
-            out_dir / "trajectory", traj, scenario,
+            out_dir / "trajectory",
+            traj,
+            scenario,
             command=[PROG, *args.argv] if args.argv is not None else sys.argv,
-            options={"model": args.model, "solver": "Tsit5", "rtol": args.rtol, "atol": args.atol, "max_steps": args.max_steps,
-                     "t1": t1, "n_save": args.n_save},
-            extra={"source": str(args.scenario), "overrides": overrides,
-                   "timings_s": {k: round(v, 4) for k, v in progress.times.items()}},
+            options={
+                "model": args.model,
+                "solver": "Tsit5",
+                "rtol": args.rtol,
+                "atol": args.atol,
+                "max_steps": args.max_steps,
+                "t1": t1,
+                "n_save": args.n_save,
+            },
+            extra={
+                "source": str(args.scenario),
+                "overrides": overrides,
+                "timings_s": {k: round(v, 4) for k, v in progress.times.items()},
+            },
         )
     pngs = []
     if not args.no_plots:
@@ -209,10 +191,14 @@ def run_simulate(args: argparse.Namespace) -> int:
         f"status        {status.name.lower()}" + ("" if status == SolveStatus.OK else f": {status.message}"),
         f"final C       {_fmt_vec(arrays['position'][-1])} m",
         f"final angles  (φ, ψ, ϑ) = {_fmt_vec(np.degrees(arrays['euler'][-1]))} deg",
-        "lift-off      " + (f"{lift:g} s (first saved time with every N_i = 0)" if lift is not None
-                            else "none within the horizon"),
-        "first N_i = 0 " + ", ".join(f"{c}: {'-' if t is None else f'{t:g} s'}"
-                                     for c, t in zip("DEFH", detach, strict=True)),
+        "lift-off      "
+        + (
+            f"{lift:g} s (first saved time with every N_i = 0)"
+            if lift is not None
+            else "none within the horizon"
+        ),
+        "first N_i = 0 "
+        + ", ".join(f"{c}: {'-' if t is None else f'{t:g} s'}" for c, t in zip("DEFH", detach, strict=True)),
         f"max S         {arrays['rope_tension'].max() / 1e3:.4g} kN",
         f"energy check  max |residual| = {resid:.3g} J (hoist work {arrays['hoist_work'][-1]:.4g} J)",
         f"steps         {int(arrays['num_accepted_steps'])} accepted, "
@@ -226,26 +212,46 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 def configure_simulate(subparsers) -> None:
     p = subparsers.add_parser(
-        "simulate", help="simulate one lift and write npz/json results and PNG plots",
+        "simulate",
+        help="simulate one lift and write npz/json results and PNG plots",
         description="Simulate one lift with the elastic-foundation model (paper §3) and write "
-                    "trajectory.npz, trajectory.json and PNG plots to --out.")
-    p.add_argument("scenario", metavar="SCENARIO",
-                   help="a preset name (paper-2.3, paper-4.1, paper-4.2) or a path to a TOML scenario file")
-    p.add_argument("--t1", type=float, default=None, metavar="T",
-                   help="end time [s] (default: the scenario's t1)")
-    p.add_argument("--n-save", type=int, default=501, metavar="N",
-                   help="number of equally spaced saved times (default 501)")
+        "trajectory.npz, trajectory.json and PNG plots to --out.",
+    )
+    p.add_argument(
+        "scenario",
+        metavar="SCENARIO",
+        help="a preset name (paper-2.3, paper-4.1, paper-4.2) or a path to a TOML scenario file",
+    )
+    p.add_argument(
+        "--t1", type=float, default=None, metavar="T", help="end time [s] (default: the scenario's t1)"
+    )
+    p.add_argument(
+        "--n-save",
+        type=int,
+        default=501,
+        metavar="N",
+        help="number of equally spaced saved times (default 501)",
+    )
     p.add_argument("--rtol", type=float, default=1e-6, metavar="R", help="relative tolerance (default 1e-6)")
     p.add_argument("--atol", type=float, default=1e-8, metavar="A", help="absolute tolerance (default 1e-8)")
-    p.add_argument("--max-steps", type=int, default=200_000, metavar="M",
-                   help="solver step budget (default 200000)")
-    p.add_argument("--set", action="append", metavar="PATH=VALUE",
-                   help="replace a scenario value by dotted path, e.g. foundation.friction_coefficient=0.3 "
-                        "or "
-                        "'load.mass_centre=[1, 2.5, 1]' (repeatable); checked before compiling")
+    p.add_argument(
+        "--max-steps", type=int, default=200_000, metavar="M", help="solver step budget (default 200000)"
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="PATH=VALUE",
+        help="replace a scenario value by dotted path, e.g. foundation.friction_coefficient=0.3 "
+        "or "
+        "'load.mass_centre=[1, 2.5, 1]' (repeatable); checked before compiling",
+    )
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default out/<scenario name>)")
-    p.add_argument("--model", choices=("elastic", "rigid"), default="elastic",
-                   help="elastic foundation (paper §3, default) or the rigid-ground reference (paper §2)")
+    p.add_argument(
+        "--model",
+        choices=("elastic", "rigid"),
+        default="elastic",
+        help="elastic foundation (paper §3, default) or the rigid-ground reference (paper §2)",
+    )
     p.add_argument("--no-plots", action="store_true", help="write only the npz/json files")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run_simulate)
@@ -256,9 +262,12 @@ def configure_simulate(subparsers) -> None:
 
 def _add_unavailable(subparsers, name: str, module: str, error: BaseException) -> None:
     """Register `name` as a subcommand that explains why its module failed to import."""
+
     def run(args):
-        print(f"{PROG} {name}: unavailable, importing {module} failed: {type(error).__name__}: {error}",
-              file=sys.stderr)
+        print(
+            f"{PROG} {name}: unavailable, importing {module} failed: {type(error).__name__}: {error}",
+            file=sys.stderr,
+        )
         return 1
 
     p = subparsers.add_parser(name, help=f"(unavailable: {error})", add_help=False)
@@ -271,8 +280,10 @@ def build_parser() -> argparse.ArgumentParser:
     from .. import __version__
 
     parser = argparse.ArgumentParser(
-        prog=PROG, description="Differentiable simulation of a crane lifting a 3D load off the ground "
-                               "(Grabski & Strzałko 2003).")
+        prog=PROG,
+        description="Differentiable simulation of a crane lifting a 3D load off the ground "
+        "(Grabski & Strzałko 2003).",
+    )
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     configure_simulate(subparsers)

@@ -31,25 +31,55 @@ from ..physics import params as P
 # field -> (unit, required, kind) where kind is "float", "vec3", "mat33", "str" or "float|vec3".
 _REQ, _OPT = True, False
 SCHEMA: dict[str, dict[str, tuple[str, bool, str]]] = {
-    "": {"name": ("-", _OPT, "str"), "description": ("-", _OPT, "str"), "t1": ("s", _OPT, "float"),
-         "gravity": ("m/s^2", _OPT, "float")},
-    "load": {"size": ("m", _REQ, "vec3"), "mass": ("kg", _OPT, "float"), "density": ("kg/m^3", _OPT, "float"),
-             "mass_centre": ("m", _OPT, "vec3"), "inertia": ("kg m^2", _OPT, "mat33")},
-    "foundation": {"stiffness": ("N/m", _REQ, "float"), "damping": ("N s/m", _REQ, "float"),
-                   "friction_coefficient": ("-", _REQ, "float"), "damping_onset": ("m", _OPT, "float")},
-    "foundation.friction:bristle": {"law": ("-", _REQ, "str"), "deflection": ("m", _OPT, "float"),
-                                    "breakaway_ratio": ("-", _OPT, "float"),
-                                    "relaxation_time": ("s", _OPT, "float")},
-    "foundation.friction:regularised-coulomb": {"law": ("-", _REQ, "str"),
-                                                "regularisation_velocity": ("m/s", _OPT, "float")},
-    "rope": {"stiffness": ("N/m", _REQ, "float"), "damping": ("N s/m", _REQ, "float"),
-             "attachment": ("m", _REQ, "vec3"), "slack": ("m", _OPT, "float"),
-             "damping_onset": ("m", _OPT, "float")},
+    "": {
+        "name": ("-", _OPT, "str"),
+        "description": ("-", _OPT, "str"),
+        "t1": ("s", _OPT, "float"),
+        "gravity": ("m/s^2", _OPT, "float"),
+    },
+    "load": {
+        "size": ("m", _REQ, "vec3"),
+        "mass": ("kg", _OPT, "float"),
+        "density": ("kg/m^3", _OPT, "float"),
+        "mass_centre": ("m", _OPT, "vec3"),
+        "inertia": ("kg m^2", _OPT, "mat33"),
+    },
+    "foundation": {
+        "stiffness": ("N/m", _REQ, "float"),
+        "damping": ("N s/m", _REQ, "float"),
+        "friction_coefficient": ("-", _REQ, "float"),
+        "damping_onset": ("m", _OPT, "float"),
+    },
+    "foundation.friction:bristle": {
+        "law": ("-", _REQ, "str"),
+        "deflection": ("m", _OPT, "float"),
+        "breakaway_ratio": ("-", _OPT, "float"),
+        "relaxation_time": ("s", _OPT, "float"),
+    },
+    "foundation.friction:regularised-coulomb": {
+        "law": ("-", _REQ, "str"),
+        "regularisation_velocity": ("m/s", _OPT, "float"),
+    },
+    "rope": {
+        "stiffness": ("N/m", _REQ, "float"),
+        "damping": ("N s/m", _REQ, "float"),
+        "attachment": ("m", _REQ, "vec3"),
+        "slack": ("m", _OPT, "float"),
+        "damping_onset": ("m", _OPT, "float"),
+    },
     "hoist:constant-speed": {"law": ("-", _OPT, "str"), "speed": ("m/s", _REQ, "float")},
-    "hoist:ramped": {"law": ("-", _REQ, "str"), "speed": ("m/s", _REQ, "float"),
-                     "ramp_time": ("s", _OPT, "float"), "travel": ("m", _OPT, "float")},
-    "boom": {"tip_position": ("m", _REQ, "vec3"), "tip_mass": ("kg", _REQ, "float"),
-             "stiffness": ("N/m", _REQ, "float|vec3"), "damping": ("N s/m", _OPT, "float|vec3")},
+    "hoist:ramped": {
+        "law": ("-", _REQ, "str"),
+        "speed": ("m/s", _REQ, "float"),
+        "ramp_time": ("s", _OPT, "float"),
+        "travel": ("m", _OPT, "float"),
+    },
+    "boom": {
+        "tip_position": ("m", _REQ, "vec3"),
+        "tip_mass": ("kg", _REQ, "float"),
+        "stiffness": ("N/m", _REQ, "float|vec3"),
+        "damping": ("N s/m", _OPT, "float|vec3"),
+    },
 }
 FRICTION_LAWS = ("bristle", "regularised-coulomb")
 HOIST_LAWS = ("constant-speed", "ramped")
@@ -73,8 +103,9 @@ class _Reader:
         where = f"table [{table}]" if table else "top level"
         return ScenarioError(f"{msg} [{self.source}, {where}]")
 
-    def table(self, data: dict, table: str, schema_key: str | None = None,
-              subtables: tuple[str, ...] = ()) -> dict[str, Any]:
+    def table(
+        self, data: dict, table: str, schema_key: str | None = None, subtables: tuple[str, ...] = ()
+    ) -> dict[str, Any]:
         """Check one table's keys and value types against SCHEMA; return {field: converted value}.
         `subtables` are the keys that hold a table read separately."""
         schema = SCHEMA[schema_key or table]
@@ -84,15 +115,21 @@ class _Reader:
                 continue
             if isinstance(value, dict) and key in schema:
                 unit, _, kind = schema[key]
-                raise self.error(table, f"{_dotted(table, key)} must be a {kind.replace('|', ' or ')} [{unit}], "
-                                        f"got a table {value!r}")
+                raise self.error(
+                    table,
+                    f"{_dotted(table, key)} must be a {kind.replace('|', ' or ')} [{unit}], "
+                    f"got a table {value!r}",
+                )
             if isinstance(value, dict):
                 allowed = sorted(schema) + list(subtables)
-                raise self.error(table, f"unknown table [{_dotted(table, key)}]{_hint(key, allowed)}; "
-                                        f"allowed: {allowed}")
+                raise self.error(
+                    table, f"unknown table [{_dotted(table, key)}]{_hint(key, allowed)}; allowed: {allowed}"
+                )
             if key not in schema:
-                raise self.error(table, f"unknown field {_dotted(table, key)!r}{_hint(key, schema)}; "
-                                        f"allowed: {sorted(schema)}")
+                raise self.error(
+                    table,
+                    f"unknown field {_dotted(table, key)!r}{_hint(key, schema)}; allowed: {sorted(schema)}",
+                )
             unit, _, kind = schema[key]
             out[key] = self._convert(table, key, value, kind, unit)
         for key, (unit, required, _) in schema.items():
@@ -121,8 +158,11 @@ class _Reader:
                 raise self.error(table, f"{name} must be a list of 3 numbers [{unit}], got {value!r}")
             return [num(v) for v in value]
         if kind == "mat33":
-            if not (isinstance(value, list) and len(value) == 3
-                    and all(isinstance(r, list) and len(r) == 3 for r in value)):
+            if not (
+                isinstance(value, list)
+                and len(value) == 3
+                and all(isinstance(r, list) and len(r) == 3 for r in value)
+            ):
                 raise self.error(table, f"{name} must be a 3x3 list of lists [{unit}], got {value!r}")
             return [[num(v) for v in r] for r in value]
         raise AssertionError(kind)
@@ -137,8 +177,9 @@ def _law(reader: _Reader, data: dict, table: str, laws, default: str | None) -> 
     if law is None:
         raise reader.error(table, f"missing field {table}.law; one of {list(laws)}")
     if law not in laws:
-        raise reader.error(table, f"{table}.law = {law!r} is not a known law{_hint(str(law), laws)}; "
-                                  f"one of {list(laws)}")
+        raise reader.error(
+            table, f"{table}.law = {law!r} is not a known law{_hint(str(law), laws)}; one of {list(laws)}"
+        )
     return law
 
 
@@ -159,21 +200,38 @@ def scenario_from_dict(data: dict, source: str = "<dict>") -> P.Scenario:
 
     try:
         ld = r.table(data["load"], "load")
-        load = P.Load(ld["size"], ld.get("mass"), density=ld.get("density"),
-                      mass_centre=ld.get("mass_centre"), inertia=ld.get("inertia"))
+        load = P.Load(
+            ld["size"],
+            ld.get("mass"),
+            density=ld.get("density"),
+            mass_centre=ld.get("mass_centre"),
+            inertia=ld.get("inertia"),
+        )
         fr_data = data["foundation"].get("friction", {"law": "regularised-coulomb"})
         if not isinstance(fr_data, dict):
-            raise r.error("foundation", f"foundation.friction must be a table [foundation.friction], got {fr_data!r}")
+            raise r.error(
+                "foundation", f"foundation.friction must be a table [foundation.friction], got {fr_data!r}"
+            )
         law = _law(r, fr_data, "foundation.friction", FRICTION_LAWS, None)
         fr = r.table(fr_data, "foundation.friction", f"foundation.friction:{law}")
         fr.pop("law")
         friction = P.BristleFriction(**fr) if law == "bristle" else P.RegularisedCoulomb(**fr)
         fd = r.table(data["foundation"], "foundation", subtables=("friction",))
-        foundation = P.Foundation(fd["stiffness"], fd["damping"], fd["friction_coefficient"], friction,
-                                  fd.get("damping_onset", 1e-4))
+        foundation = P.Foundation(
+            fd["stiffness"],
+            fd["damping"],
+            fd["friction_coefficient"],
+            friction,
+            fd.get("damping_onset", 1e-4),
+        )
         rp = r.table(data["rope"], "rope")
-        rope = P.Rope(rp["stiffness"], rp["damping"], rp["attachment"], rp.get("slack", 0.0),
-                      rp.get("damping_onset", 1e-4))
+        rope = P.Rope(
+            rp["stiffness"],
+            rp["damping"],
+            rp["attachment"],
+            rp.get("slack", 0.0),
+            rp.get("damping_onset", 1e-4),
+        )
         hlaw = _law(r, data["hoist"], "hoist", HOIST_LAWS, "constant-speed")
         hs = r.table(data["hoist"], "hoist", f"hoist:{hlaw}")
         hs.pop("law", None)
@@ -183,14 +241,61 @@ def scenario_from_dict(data: dict, source: str = "<dict>") -> P.Scenario:
         t1 = top.get("t1", 10.0)
         if not (math.isfinite(t1) and t1 > 0):
             raise ScenarioError(f"t1 must be a positive finite time [s], got {t1}")
-        return P.Scenario(load, foundation, rope, hoist, boom, gravity=top.get("gravity", 9.81),
-                          name=top.get("name", Path(source).stem), t1=t1,
-                          description=top.get("description", ""))
+        return P.Scenario(
+            load,
+            foundation,
+            rope,
+            hoist,
+            boom,
+            gravity=top.get("gravity", 9.81),
+            name=top.get("name", Path(source).stem),
+            t1=t1,
+            description=top.get("description", ""),
+        )
     except ScenarioError as e:
         msg = str(e)
         if f"[{source}" in msg:
             raise
         raise ScenarioError(f"{msg} [{source}]") from None
+
+
+def parse_overrides(items) -> dict[str, float | list[float]]:
+    """Command-line overrides `["rope.stiffness=1e7", "load.mass_centre=[1, 2.5, 1]"]` -> {path: value}."""
+    import json
+
+    out = {}
+    for item in items:
+        path, sep, value = item.partition("=")
+        path = path.strip()
+        if not sep or not path:
+            raise ScenarioError(
+                f"--set expects PATH=VALUE (e.g. foundation.friction_coefficient=0.3), got {item!r}"
+            )
+        try:
+            v = json.loads(value) if value.strip().startswith("[") else float(value)
+            if isinstance(v, list) and not all(type(x) in (int, float) for x in v):
+                raise ValueError
+        except ValueError:
+            raise ScenarioError(
+                f"--set {path}: value must be a number or a list of numbers like [1, 2.5, 1], got {value!r}"
+            ) from None
+        out[path] = v
+    return out
+
+
+def apply_overrides(scenario: P.Scenario, items) -> tuple[P.Scenario, dict]:
+    """A scenario with `--set PATH=VALUE` items applied and checked; errors name the path and say
+    "[from --set]". **Returns** `(scenario, {path: value})`."""
+    overrides = parse_overrides(items or [])
+    try:
+        for path in overrides:
+            P.get_leaf(scenario, path)  # raises ScenarioError naming a bad path
+        if overrides:
+            scenario = scenario.replace(**overrides)
+            scenario.check()
+    except ScenarioError as e:
+        raise ScenarioError(f"{e} [from --set]") from None
+    return scenario, overrides
 
 
 def load_scenario(name_or_path: str | Path) -> P.Scenario:
@@ -212,6 +317,8 @@ def _read(name_or_path) -> tuple[str, str]:
         return resources.files("jaxhoist.io.presets").joinpath(f"{s}.toml").read_text(), f"{s}.toml"
     path = Path(s)
     if not path.exists():
-        raise ScenarioError(f"no scenario file {s!r} and no preset of that name{_hint(s, PRESETS)}; "
-                            f"presets are {list(PRESETS)}")
+        raise ScenarioError(
+            f"no scenario file {s!r} and no preset of that name{_hint(s, PRESETS)}; "
+            f"presets are {list(PRESETS)}"
+        )
     return path.read_text(), str(path)

@@ -1142,24 +1142,13 @@ def configure_parser(subparsers) -> None:
 
 def run_cli(args) -> int:
     jax.config.update("jax_enable_x64", True)
-    from ..io.scenario import load_scenario
+    from ..io.scenario import apply_overrides, load_scenario
 
     if len(args.param) != len(args.values):
         raise ScenarioError(
             f"give one --values per --param (got {len(args.param)} --param and {len(args.values)} --values)"
         )
-    scenario = load_scenario(args.scenario)
-    overrides = {}
-    for item in args.set:
-        path, sep, value = item.partition("=")
-        try:
-            overrides[path.strip()] = float(value)
-        except ValueError:
-            raise ScenarioError(f"--set expects PATH=VALUE with a number, got {item!r}") from None
-        get_leaf(scenario, path.strip())
-    if overrides:
-        scenario = scenario.replace(**overrides)
-        scenario.check()
+    scenario, _ = apply_overrides(load_scenario(args.scenario), args.set)
     params = {p: parse_values(v) for p, v in zip(args.param, args.values, strict=True)}
     out = Path(args.out) if args.out else Path("out") / f"scan-{scenario.name}"
     res = scan(

@@ -117,7 +117,9 @@ def _status(result, y1: State) -> Int[Array, ""]:
     return jnp.where(
         result == diffrax.RESULTS.successful,
         jnp.where(finite, SolveStatus.OK, SolveStatus.NONFINITE),
-        jnp.where(result == diffrax.RESULTS.max_steps_reached, SolveStatus.MAX_STEPS, SolveStatus.SOLVER_FAILED),
+        jnp.where(
+            result == diffrax.RESULTS.max_steps_reached, SolveStatus.MAX_STEPS, SolveStatus.SOLVER_FAILED
+        ),
     ).astype(jnp.int32)
 
 
@@ -166,8 +168,11 @@ def solve(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOptions) 
         y0=y0,
         args=(scenario, c),
         saveat=diffrax.SaveAt(ts=ts),
-        stepsize_controller=(diffrax.ConstantStepSize() if options.fixed_step
-                             else diffrax.PIDController(rtol=options.rtol, atol=options.atol)),
+        stepsize_controller=(
+            diffrax.ConstantStepSize()
+            if options.fixed_step
+            else diffrax.PIDController(rtol=options.rtol, atol=options.atol)
+        ),
         max_steps=options.max_steps,
         adjoint=_adjoint(options.adjoint),
         progress_meter=diffrax.TextProgressMeter() if options.progress else diffrax.NoProgressMeter(),
@@ -263,9 +268,16 @@ def simulate(
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()
     scenario = as_float64_leaves(scenario)
-    options = SolverOptions(solver=diffrax.Tsit5() if solver is None else solver, rtol=rtol, atol=atol,
-                            dt0=dt0, max_steps=max_steps, adjoint=adjoint, progress=progress,
-                            fixed_step=fixed_step)
+    options = SolverOptions(
+        solver=diffrax.Tsit5() if solver is None else solver,
+        rtol=rtol,
+        atol=atol,
+        dt0=dt0,
+        max_steps=max_steps,
+        adjoint=adjoint,
+        progress=progress,
+        fixed_step=fixed_step,
+    )
     if t1 is None:
         t1 = scenario.t1 if ts is None else ts[-1]
     check_times(t1, ts)

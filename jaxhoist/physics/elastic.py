@@ -99,9 +99,29 @@ class Snapshot(eqx.Module):
     hoist_power: Scalar
 
 
+def rope_pull(t: Scalar, y: State, R: Rot33, scenario: Scenario, c: Constants):
+    """The rope, eq. (2.14) with l(t) = l0 - s(t), for any model whose state has the body's and the boom
+    tip's motion (the elastic and the rigid model share it).
+
+    **Returns** `(B, e, δ, ds/dt, S, loss)`: rope point B [m], unit vector e from B towards A, stretch
+    δ = |AB| - l(t) [m], hoist rate [m/s], tension S [N] and the rope damper's loss [W].
+    """
+    rope = scenario.rope
+    B = kinematics.points_world(y.position, R, c.attachment_rel[None])[0]
+    v_B = kinematics.points_velocity(y.velocity, R, y.angular_velocity, c.attachment_rel[None])[0]
+    AB = y.tip_position - B
+    L = forces.safe_norm(AB)
+    e = AB / jnp.maximum(L, 1e-12)
+    L_dot = jnp.dot(y.tip_velocity - v_B, e)
+    s_dot = scenario.hoist.rate(t)
+    stretch = L - (c.rope_length - scenario.hoist.shortening(t))
+    S, loss = forces.rope_tension(stretch, L_dot + s_dot, rope.stiffness, rope.damping, rope.damping_onset)
+    return B, e, stretch, s_dot, S, loss
+
+
 def snapshot(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Snapshot:
     """Evaluate all contact, rope and boom forces at (t, y)."""
-    fnd, rope = scenario.foundation, scenario.rope
+    fnd = scenario.foundation
     R = kinematics.quat_to_matrix(y.quaternion)
     omega = y.angular_velocity
 
@@ -113,16 +133,7 @@ def snapshot(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Snapshot:
     T_h = fnd.friction.force(fnd.friction_coefficient, N_i, corner_vel[:, :2], y.friction_state)
     T_i = jnp.concatenate([T_h, jnp.zeros((4, 1))], axis=1)
 
-    # Rope, eq. (2.14), with l(t) = l0 - s(t).
-    B = kinematics.points_world(y.position, R, c.attachment_rel[None])[0]
-    v_B = kinematics.points_velocity(y.velocity, R, omega, c.attachment_rel[None])[0]
-    AB = y.tip_position - B
-    L = forces.safe_norm(AB)
-    e = AB / jnp.maximum(L, 1e-12)
-    L_dot = jnp.dot(y.tip_velocity - v_B, e)
-    s_dot = scenario.hoist.rate(t)
-    stretch = L - (c.rope_length - scenario.hoist.shortening(t))
-    S, rope_loss = forces.rope_tension(stretch, L_dot + s_dot, rope.stiffness, rope.damping, rope.damping_onset)
+    B, e, stretch, s_dot, S, rope_loss = rope_pull(t, y, R, scenario, c)
 
     _, boom_loss = forces.boom_force(y.tip_position - c.tip_rest, y.tip_velocity, scenario.boom.stiffness,
                                      scenario.boom.damping)

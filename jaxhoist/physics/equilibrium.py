@@ -12,7 +12,9 @@ from .elastic import Constants, State, constants
 from .params import Scenario
 
 
-def linear_corner_loads(size: Vec3, mass_centre: Vec3, weight, rope_force: Vec3, attachment: Vec3) -> Float[Array, "4"]:
+def linear_corner_loads(
+    size: Vec3, mass_centre: Vec3, weight, rope_force: Vec3, attachment: Vec3
+) -> Float[Array, "4"]:
     """Corner normal forces N_D, N_E, F_F, N_H [N] of a box resting flat, eqs. (2.3) and (2.8).
 
     Solves the three equilibrium equations (vertical force, moments about the X and Y axes through D)
@@ -26,11 +28,13 @@ def linear_corner_loads(size: Vec3, mass_centre: Vec3, weight, rope_force: Vec3,
     A = jnp.stack([jnp.ones(4), xy[:, 0], xy[:, 1]])
     Sx, Sy, Sz = rope_force
     xB, yB, zB = attachment
-    b = jnp.stack([
-        weight - Sz,
-        weight * mass_centre[0] + zB * Sx - xB * Sz,
-        weight * mass_centre[1] + zB * Sy - yB * Sz,
-    ])
+    b = jnp.stack(
+        [
+            weight - Sz,
+            weight * mass_centre[0] + zB * Sx - xB * Sz,
+            weight * mass_centre[1] + zB * Sy - yB * Sz,
+        ]
+    )
     return A.T @ jnp.linalg.solve(A @ A.T, b)
 
 
@@ -57,8 +61,9 @@ def initial_state(scenario: Scenario, newton_iterations: int = 12) -> tuple[Stat
     """
     load = scenario.load
     corners_rel = kinematics.bottom_corners(load.size) - load.mass_centre
-    flat = linear_corner_loads(load.size, load.mass_centre, load.mass * scenario.gravity, jnp.zeros(3),
-                               jnp.zeros(3))
+    flat = linear_corner_loads(
+        load.size, load.mass_centre, load.mass * scenario.gravity, jnp.zeros(3), jnp.zeros(3)
+    )
     # Start from the mean sinkage, flat; Newton converges quadratically on this smooth (piecewise linear) map.
     x0 = jnp.array([load.mass_centre[2] - jnp.mean(flat) / scenario.foundation.stiffness, 0.0, 0.0])
 

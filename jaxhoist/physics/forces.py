@@ -18,12 +18,14 @@ def onset_ramp(depth, onset):
     derivatives (forward and reverse mode) miss the jump of the sensitivities at that instant.
     """
     pos = onset > 0.0
-    return jnp.where(pos, jnp.clip(depth / jnp.where(pos, onset, 1.0), 0.0, 1.0),
-                     jnp.where(depth > 0.0, 1.0, 0.0))
+    return jnp.where(
+        pos, jnp.clip(depth / jnp.where(pos, onset, 1.0), 0.0, 1.0), jnp.where(depth > 0.0, 1.0, 0.0)
+    )
 
 
-def ground_normal(penetration: PerCorner, penetration_rate: PerCorner, k: Scalar, h: Scalar,
-                  onset: Scalar | float = 0.0):
+def ground_normal(
+    penetration: PerCorner, penetration_rate: PerCorner, k: Scalar, h: Scalar, onset: Scalar | float = 0.0
+):
     """Normal forces N_i [N] of eqs. (3.1)-(3.2): N_i = max(0, k p_i + h w(p_i) dp_i/dt) for p_i > 0, else 0.
 
     p_i = -Z_i is how far corner i is below the ground [m]; w = `onset_ramp(p_i, onset)` (w = 1 beyond
@@ -39,7 +41,9 @@ def ground_normal(penetration: PerCorner, penetration_rate: PerCorner, k: Scalar
     return normal, jnp.sum((normal - elastic) * penetration_rate)
 
 
-def rope_tension(stretch: Scalar, stretch_rate: Scalar, c_l: Scalar, b_l: Scalar, onset: Scalar | float = 0.0):
+def rope_tension(
+    stretch: Scalar, stretch_rate: Scalar, c_l: Scalar, b_l: Scalar, onset: Scalar | float = 0.0
+):
     """Rope tension S [N] of eq. (2.14) with damping: S = max(0, c_l δ + b_l w(δ) dδ/dt) for δ > 0, else 0,
     with w = `onset_ramp(δ, onset)` (onset = 0: the damper acts in full as soon as the rope is taut).
 
@@ -47,7 +51,9 @@ def rope_tension(stretch: Scalar, stretch_rate: Scalar, c_l: Scalar, b_l: Scalar
     """
     taut = stretch > 0.0
     elastic = c_l * jnp.where(taut, stretch, 0.0)
-    tension = jnp.where(taut, jnp.maximum(elastic + b_l * onset_ramp(stretch, onset) * stretch_rate, 0.0), 0.0)
+    tension = jnp.where(
+        taut, jnp.maximum(elastic + b_l * onset_ramp(stretch, onset) * stretch_rate, 0.0), 0.0
+    )
     return tension, (tension - elastic) * stretch_rate
 
 

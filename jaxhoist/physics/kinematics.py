@@ -17,23 +17,27 @@ def quat_to_matrix(q: Quat) -> Rot33:
     """Rotation matrix (body -> world) of a quaternion; q need not be normalised."""
     q = q / jnp.sqrt(jnp.sum(q**2))
     w, x, y, z = q
-    return jnp.array([
-        [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
-        [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
-        [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
-    ])
+    return jnp.array(
+        [
+            [1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+            [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+            [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)],
+        ]
+    )
 
 
 def quat_rate(q: Quat, omega_body: Vec3) -> Quat:
     """dq/dt = ½ q ⊗ (0, ω) for the angular velocity ω in body axes [rad/s]."""
     w, x, y, z = q
     p, r, s = omega_body
-    return 0.5 * jnp.array([
-        -x * p - y * r - z * s,
-        w * p + y * s - z * r,
-        w * r + z * p - x * s,
-        w * s + x * r - y * p,
-    ])
+    return 0.5 * jnp.array(
+        [
+            -x * p - y * r - z * s,
+            w * p + y * s - z * r,
+            w * r + z * p - x * s,
+            w * s + x * r - y * p,
+        ]
+    )
 
 
 def euler_to_quat(phi, psi, theta) -> Quat:
@@ -41,12 +45,14 @@ def euler_to_quat(phi, psi, theta) -> Quat:
     cr, sr = jnp.cos(phi / 2), jnp.sin(phi / 2)
     cp, sp = jnp.cos(theta / 2), jnp.sin(theta / 2)
     cy, sy = jnp.cos(psi / 2), jnp.sin(psi / 2)
-    return jnp.stack([
-        cr * cp * cy + sr * sp * sy,
-        sr * cp * cy - cr * sp * sy,
-        cr * sp * cy + sr * cp * sy,
-        cr * cp * sy - sr * sp * cy,
-    ])
+    return jnp.stack(
+        [
+            cr * cp * cy + sr * sp * sy,
+            sr * cp * cy - cr * sp * sy,
+            cr * sp * cy + sr * cp * sy,
+            cr * cp * sy - sr * sp * cy,
+        ]
+    )
 
 
 def matrix_to_euler(R: Rot33) -> Float[Array, "3"]:
@@ -66,12 +72,14 @@ def bottom_corners(size: Vec3) -> CornerVecs:
     """Body coordinates of the bottom corners D, E, F, H = (0,0,0), (a,0,0), (a,b,0), (0,b,0) [m]."""
     a, b = size[0], size[1]
     z = jnp.zeros_like(a)
-    return jnp.stack([
-        jnp.stack([z, z, z]),
-        jnp.stack([a, z, z]),
-        jnp.stack([a, b, z]),
-        jnp.stack([z, b, z]),
-    ])
+    return jnp.stack(
+        [
+            jnp.stack([z, z, z]),
+            jnp.stack([a, z, z]),
+            jnp.stack([a, b, z]),
+            jnp.stack([z, b, z]),
+        ]
+    )
 
 
 def skew(v: Vec3) -> Rot33:
@@ -84,6 +92,8 @@ def points_world(r_c: Vec3, R: Rot33, rel_body: Float[Array, "n 3"]) -> Float[Ar
     return r_c + rel_body @ R.T
 
 
-def points_velocity(v_c: Vec3, R: Rot33, omega_body: Vec3, rel_body: Float[Array, "n 3"]) -> Float[Array, "n 3"]:
+def points_velocity(
+    v_c: Vec3, R: Rot33, omega_body: Vec3, rel_body: Float[Array, "n 3"]
+) -> Float[Array, "n 3"]:
     """World velocities v_C + R (ω x ρ) of points at body offsets ρ from the mass centre [m/s] (cf. 2.17)."""
     return v_c + jnp.cross(omega_body, rel_body) @ R.T

@@ -36,17 +36,30 @@ def _concrete(x) -> np.ndarray | None:
     return np.asarray(x)
 
 
-def _check(name: str, value, *, unit: str, shape: tuple | None = None, low=None, high=None,
-           low_open=False, high_open=False, symbol: str = "", allow_posinf=False) -> None:
+def _check(
+    name: str,
+    value,
+    *,
+    unit: str,
+    shape: tuple | None = None,
+    low=None,
+    high=None,
+    low_open=False,
+    high_open=False,
+    symbol: str = "",
+    allow_posinf=False,
+) -> None:
     """Raise `ScenarioError` naming `name` unless every element of `value` is finite and in range."""
     v = _concrete(value)
     if v is None:
         return
     label = f"{name} ({symbol})" if symbol else name
     if v.dtype == np.float32:
-        raise ScenarioError(f"{label} is float32. " + "jaxhoist needs float64: call "
-                            "`jax.config.update('jax_enable_x64', True)` before building a scenario.")
-    if shape is not None and v.shape[v.ndim - len(shape):] != shape:
+        raise ScenarioError(
+            f"{label} is float32. " + "jaxhoist needs float64: call "
+            "`jax.config.update('jax_enable_x64', True)` before building a scenario."
+        )
+    if shape is not None and v.shape[v.ndim - len(shape) :] != shape:
         raise ScenarioError(f"{label} must have shape {shape}, got {v.shape}")
     if not np.all(np.isfinite(v)):
         if not allow_posinf or np.any(np.isnan(v) | np.isneginf(v)):
@@ -114,7 +127,8 @@ class Load(eqx.Module):
         if s is not None and c is not None and np.any((c <= 0) | (c >= s)):
             raise ScenarioError(
                 f"load.mass_centre must lie strictly inside the box 0 < C < size = {s.tolist()} m, "
-                f"got {c.tolist()} m")
+                f"got {c.tolist()} m"
+            )
         if self.inertia is not None:
             _check("load.inertia", self.inertia, unit="kg m^2", shape=(3, 3), symbol="J")
             j = _concrete(self.inertia)
@@ -125,7 +139,8 @@ class Load(eqx.Module):
                 if ev[0] <= 0 or ev[2] > ev[0] + ev[1] + 1e-9 * ev[2]:
                     raise ScenarioError(
                         f"load.inertia (J) must be positive definite with principal moments obeying the "
-                        f"triangle inequality, got principal moments {ev.tolist()} kg m^2")
+                        f"triangle inequality, got principal moments {ev.tolist()} kg m^2"
+                    )
 
 
 # ----------------------------------------------------------------------------------------- friction
@@ -140,13 +155,15 @@ class AbstractFrictionLaw(eqx.Module):
     state_size: eqx.AbstractClassVar[int]
 
     @abc.abstractmethod
-    def force(self, mu: Scalar, normal: Float[Array, "4"], velocity: Float[Array, "4 2"],
-              state: Float[Array, "4 n"]) -> Float[Array, "4 2"]:
+    def force(
+        self, mu: Scalar, normal: Float[Array, "4"], velocity: Float[Array, "4 2"], state: Float[Array, "4 n"]
+    ) -> Float[Array, "4 2"]:
         """Horizontal friction force on each corner [N], from μ, N_i [N], corner velocity [m/s]."""
 
     @abc.abstractmethod
-    def state_rate(self, velocity: Float[Array, "4 2"], state: Float[Array, "4 n"],
-                   contact: Float[Array, "4"]) -> Float[Array, "4 n"]:
+    def state_rate(
+        self, velocity: Float[Array, "4 2"], state: Float[Array, "4 n"], contact: Float[Array, "4"]
+    ) -> Float[Array, "4 n"]:
         """Time derivative of the law's internal state. `contact` in [0, 1] is 0 off the ground and 1 once a
         corner is deeper than the foundation's `damping_onset` (continuous in between)."""
 
@@ -177,8 +194,14 @@ class RegularisedCoulomb(AbstractFrictionLaw):
         return state
 
     def check(self):
-        _check("foundation.friction.regularisation_velocity", self.regularisation_velocity, unit="m/s",
-               low=0.0, low_open=True, symbol="ε")
+        _check(
+            "foundation.friction.regularisation_velocity",
+            self.regularisation_velocity,
+            unit="m/s",
+            low=0.0,
+            low_open=True,
+            symbol="ε",
+        )
 
 
 class BristleFriction(AbstractFrictionLaw):
@@ -228,12 +251,26 @@ class BristleFriction(AbstractFrictionLaw):
         return w * rate - (1.0 - w) * state / self.relaxation_time
 
     def check(self):
-        _check("foundation.friction.deflection", self.deflection, unit="m", low=0.0, low_open=True,
-               symbol="δ")
-        _check("foundation.friction.breakaway_ratio", self.breakaway_ratio, unit="-", low=0.0,
-               high=1.0, high_open=True, symbol="r_b")
-        _check("foundation.friction.relaxation_time", self.relaxation_time, unit="s", low=0.0,
-               low_open=True, symbol="τ")
+        _check(
+            "foundation.friction.deflection", self.deflection, unit="m", low=0.0, low_open=True, symbol="δ"
+        )
+        _check(
+            "foundation.friction.breakaway_ratio",
+            self.breakaway_ratio,
+            unit="-",
+            low=0.0,
+            high=1.0,
+            high_open=True,
+            symbol="r_b",
+        )
+        _check(
+            "foundation.friction.relaxation_time",
+            self.relaxation_time,
+            unit="s",
+            low=0.0,
+            low_open=True,
+            symbol="τ",
+        )
 
 
 # ------------------------------------------------------------------------------- foundation, rope, boom
@@ -382,8 +419,9 @@ class RampedHoist(AbstractHoistLaw):
         _check("hoist.travel", self.travel, unit="m", low=0.0, allow_posinf=True)
         v, T, L = (_concrete(x) for x in (self.speed, self.ramp_time, self.travel))
         if v is not None and T is not None and L is not None and np.any(L < v * T):
-            raise ScenarioError(f"hoist.travel must be >= speed * ramp_time = {(v * T).tolist()} m, "
-                                f"got {L.tolist()} m")
+            raise ScenarioError(
+                f"hoist.travel must be >= speed * ramp_time = {(v * T).tolist()} m, got {L.tolist()} m"
+            )
 
 
 class ProfileHoist(AbstractHoistLaw):
@@ -421,8 +459,15 @@ class Boom(eqx.Module):
     def check(self):
         _check("boom.tip_position", self.tip_position, unit="m", shape=(3,), symbol="A")
         _check("boom.tip_mass", self.tip_mass, unit="kg", low=0.0, low_open=True, symbol="m_0")
-        _check("boom.stiffness", self.stiffness, unit="N/m", shape=(3,), low=0.0, low_open=True,
-               symbol="k_X, k_Y, k_Z")
+        _check(
+            "boom.stiffness",
+            self.stiffness,
+            unit="N/m",
+            shape=(3,),
+            low=0.0,
+            low_open=True,
+            symbol="k_X, k_Y, k_Z",
+        )
         _check("boom.damping", self.damping, unit="N s/m", shape=(3,), low=0.0)
 
 
@@ -449,8 +494,9 @@ class Scenario(eqx.Module):
     t1: float = eqx.field(static=True)
     description: str = eqx.field(static=True)
 
-    def __init__(self, load, foundation, rope, hoist, boom, gravity=9.81, name="custom", t1=10.0,
-                 description=""):
+    def __init__(
+        self, load, foundation, rope, hoist, boom, gravity=9.81, name="custom", t1=10.0, description=""
+    ):
         require_x64()
         self.load = load
         self.foundation = foundation
@@ -479,7 +525,8 @@ class Scenario(eqx.Module):
         if s is not None and b is not None and np.any((b < -1e-12) | (b > s + 1e-12)):
             raise ScenarioError(
                 f"rope.attachment (B) must lie on or inside the box 0 <= B <= size = {s.tolist()} m, "
-                f"got {b.tolist()} m")
+                f"got {b.tolist()} m"
+            )
 
     def replace(self, **leaves) -> Scenario:
         """A copy with leaves replaced by dotted path, e.g. `replace(**{"foundation.friction_coefficient": 0.3})`."""

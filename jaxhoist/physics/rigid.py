@@ -38,7 +38,7 @@ from jaxtyping import Array, Bool, Float, Int
 
 from .._typing import CornerVecs, PerCorner, Rot33, Scalar, Vec3
 from . import forces, kinematics, statics
-from .elastic import Constants, State, constants
+from .elastic import Constants, State, constants, rope_pull
 from .energy import Energy
 from .params import Scenario
 
@@ -189,7 +189,7 @@ class Loads(eqx.Module):
 
 def loads(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Loads:
     """Kinematics, rope, boom and weight at (t, y)."""
-    load, rope, boom = scenario.load, scenario.rope, scenario.boom
+    load, boom = scenario.load, scenario.boom
     R = kinematics.quat_to_matrix(y.quaternion)
     omega = y.angular_velocity
     corners = kinematics.points_world(y.position, R, c.corners_rel)
@@ -198,16 +198,8 @@ def loads(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Loads:
         c.corners_rel)
     bias = jnp.cross(omega, jnp.cross(omega, c.corners_rel)) @ R.T
 
-    # Rope (2.14) with l(t) = l0 - s(t), as in the elastic model.
-    B = y.position + R @ c.attachment_rel
-    v_B = y.velocity + R @ jnp.cross(omega, c.attachment_rel)
-    AB = y.tip_position - B
-    L = forces.safe_norm(AB)
-    e = AB / jnp.maximum(L, 1e-12)
-    L_dot = jnp.dot(y.tip_velocity - v_B, e)
-    s_dot = scenario.hoist.rate(t)
-    stretch = L - (c.rope_length - scenario.hoist.shortening(t))
-    S, rope_loss = forces.rope_tension(stretch, L_dot + s_dot, rope.stiffness, rope.damping)
+    # Rope (2.14) with l(t) = l0 - s(t): the elastic model's rope, shared.
+    B, e, stretch, s_dot, S, rope_loss = rope_pull(t, y, R, scenario, c)
     F_boom, boom_loss = forces.boom_force(y.tip_position - c.tip_rest, y.tip_velocity, boom.stiffness,
                                           boom.damping)
 
