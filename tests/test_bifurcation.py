@@ -239,3 +239,62 @@ def test_locator_refuses_a_bracket_without_a_sign_change():
         locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.4, 1.2), **SYM_KW)  # outside the box
     with pytest.raises(BifurcationError, match="same sign"):
         locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.48), level=0.0, **SYM_KW)
+
+
+SYMMETRIC_TOML = """
+name = "symmetric-lift"
+t1 = 0.2
+[load]
+size = [1.0, 1.0, 1.0]
+mass = 1000.0
+mass_centre = [0.45, 0.5, 0.5]
+[foundation]
+stiffness = 1.5e7
+damping = 2.0e5
+friction_coefficient = 0.3
+[rope]
+stiffness = 1.5e7
+damping = 1.3e4
+attachment = [0.5, 0.5, 1.0]
+[hoist]
+speed = 0.05
+[boom]
+tip_position = [0.5, 0.5, 11.0]
+tip_mass = 500.0
+stiffness = 5.0e6
+damping = 5.0e3
+"""
+
+
+def test_scan_and_bifurcation_commands(tmp_path):
+    """The `scan` and `bifurcation` subcommands on `symmetric_lift` written as a scenario file, with a
+    `--set` override: the scan sees E leave first below ξ_C = a/2 and D above it (the sign argument of
+    the test above), and the command-line locator, asked for the sign change of t_E - t_D (`--level 0`;
+    the default level is the midpoint of the values at the bracket ends), lands on a/2."""
+    import json
+
+    from jaxhoist.apps.cli import main
+
+    path = tmp_path / "sym.toml"
+    path.write_text(SYMMETRIC_TOML)
+    out = tmp_path / "scan"
+    rc = main(["scan", str(path), "--param", XI, "--values", "0.45,0.55", "--observable", "first_corner",
+               "--t1", "0.2", "--n-save", "101", "--set", "hoist.speed=0.05", "--out", str(out), "--quiet"])
+    assert rc == 0
+    res = ScanResult.load(out / "scan")
+    np.testing.assert_array_equal(res.coords[XI], [0.45, 0.55])
+    assert np.all(np.asarray(res.status) == 0)
+    # Corner indices D, E, F, H = 0..3; η_C = b/2 makes E and F (and D and H) leave together, so either may
+    # come first by round-off: the E-F edge below a/2, the D-H edge above it.
+    first = [int(x) for x in res["first_corner"]]
+    assert first[0] in (1, 2) and first[1] in (0, 3)
+
+    rc = main(["bifurcation", str(path), "--param", XI, "--bracket", "0.46", "0.57", "--observable",
+               "detach:E-D", "--level", "0", "--method", "bisection", "--tol", "1e-4", "--t1", "0.2",
+               "--n-save", "101",
+               "--set", "hoist.speed=0.05", "--out", str(tmp_path / "bif")])
+    assert rc == 0
+    found = json.loads((tmp_path / "bif" / "bifurcation.json").read_text())
+    assert found["overrides"] == {"hoist.speed": 0.05}
+    (b,) = found["bifurcations"]
+    assert abs(b["value"] - 0.5) <= 1e-4
