@@ -669,8 +669,9 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         idx = len(phases)
         phases.append(phase)
         # Saved times of this phase: t <= ts <= t_end not yet filled.
+        sys_np = jax.tree_util.tree_map(np.asarray, sys_)  # index on the host, not one dispatch per sample
         for k in np.nonzero((ts >= t) & (ts <= t_end) & ~filled)[0]:
-            saved_states[k] = _tree_index(sys_, k)
+            saved_states[k] = _tree_index(sys_np, k)
             saved_phase[k] = idx
             saved_impact[k] = impact_total
             filled[k] = True
@@ -721,21 +722,11 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
 
     for k in np.nonzero(~filled)[0]:  # cannot happen unless ts extends past the last phase
         raise RigidContactError(f"saved time {ts[k]} s was not reached")
-    states = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *saved_states)
-    # Outputs: once with every sample's motion phase (rest samples get a dummy one) and, if there are rest
-    # samples, once in the rest configuration; then pick per sample.
-    is_rest = np.array([phases[i].rest for i in saved_phase])
-    dummy = rigid.make_phase([STICK] * 4)
-    motion = [dummy if phases[i].rest else phases[i] for i in saved_phase]
-    motion_batch = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs), *motion)
-    out = _outputs(jnp.asarray(ts), states, scenario, c, motion_batch, settings)
-    if is_rest.any():
-        rest_batch = jax.tree_util.tree_map(lambda *xs: jnp.stack(xs),
-                                            *[rigid.make_phase([STICK] * 4, rest=True)] * n_t)
-        out_rest = _outputs(jnp.asarray(ts), states, scenario, c, rest_batch, settings)
-        mask = jnp.asarray(is_rest)
-        out = jax.tree_util.tree_map(
-            lambda a, b: jnp.where(mask.reshape((-1,) + (1,) * (a.ndim - 1)), b, a), out, out_rest)
+    # Stack on the host: jnp.stack of n_t arrays would compile one XLA program per leaf and length.
+    states = jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.stack(xs)), *saved_states)
+    # Outputs: one vmapped evaluation with every sample's own phase (rest phases included).
+    batch = jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.stack(xs)), *[phases[i] for i in saved_phase])
+    out = _outputs(jnp.asarray(ts), states, scenario, c, batch, settings)
     euler = out.euler.at[:, :2].set(jnp.unwrap(out.euler[:, :2], axis=0))
     return RigidTrajectory(
         ts=jnp.asarray(ts), position=states.position, velocity=states.velocity, euler=euler,

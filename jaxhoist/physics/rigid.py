@@ -52,11 +52,11 @@ GUARD_NAMES = tuple([f"normal:{c}" for c in CORNERS] + [f"tangential:{c}" for c 
 
 
 class Phase(eqx.Module):
-    """The contact configuration of one phase. Arrays, so that every phase of motion runs through one
-    compiled solve; `rest` is static, so rest phases (the load held fixed) have their own, cheaper one.
+    """The contact configuration of one phase. Arrays only, so that every phase (rest included: the
+    branches are chosen by `lax.cond`) runs through one compiled solve.
 
     - `contact`: per corner D, E, F, H: `FREE` (0), `SLIDE` (1) or `STICK` (2).
-    - `rest`: the load rests on all four corners and is held fixed (static).
+    - `rest`: the load rests on all four corners and is held fixed (a boolean scalar).
     - `slip_hint`: per corner, a horizontal unit vector (world X, Y): the sliding direction at the start of
       the phase (needed when sliding starts from rest; otherwise the direction of the corner velocity).
     - `guard_offset`: added to each guard so that all guards start > 0 (a guard that starts at 0, such as
@@ -73,7 +73,7 @@ class Phase(eqx.Module):
     guard_offset: Float[Array, "10"]
     starting: Bool[Array, "4"]
     free_on_ground: Bool[Array, "4"]
-    rest: bool = eqx.field(static=True, default=False)
+    rest: Bool[Array, ""]
 
 
 def make_phase(contact, rest=False, slip_hint=None, guard_offset=None, starting=None,
@@ -81,7 +81,7 @@ def make_phase(contact, rest=False, slip_hint=None, guard_offset=None, starting=
     """Build a `Phase` from Python values (host side)."""
     return Phase(
         contact=jnp.asarray(contact, dtype=jnp.int32),
-        rest=bool(rest),
+        rest=jnp.asarray(bool(rest)),
         slip_hint=jnp.zeros((4, 2)) if slip_hint is None else jnp.asarray(slip_hint, dtype=jnp.float64),
         guard_offset=jnp.zeros(N_GUARDS) if guard_offset is None else jnp.asarray(guard_offset, jnp.float64),
         starting=jnp.zeros(4, dtype=bool) if starting is None else jnp.asarray(starting, dtype=bool),
@@ -331,17 +331,16 @@ def rest_friction(ld: Loads, c: Constants, scenario: Scenario) -> Float[Array, "
     return -0.25 * F[None, :2] + alpha * jnp.stack([-d[:, 1], d[:, 0]], axis=1)
 
 
-def contact_dynamics(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
-                     settings: Settings) -> Contact:
-    """Contact forces and accelerations of the load in the contact configuration `phase`."""
-    ld = loads(t, y, scenario, c)
-    if phase.rest:
-        # Held fixed: zero acceleration; the corner loads of the linear law (2.3), made nonnegative.
-        S_body = ld.rotation.T @ (ld.rope_tension * ld.rope_direction)
-        st = statics.rest_statics_loads(scenario, S_body)
-        F = jnp.concatenate([rest_friction(ld, c, scenario), st[:, None]], axis=1)
-        return Contact(accel=jnp.zeros(6), force=F, corner_accel=jnp.zeros((4, 3)),
-                       slip_direction=jnp.zeros((4, 2)), loads=ld)
+def _rest_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Contact:
+    # Held fixed: zero acceleration; the corner loads of the linear law (2.3), made nonnegative.
+    S_body = ld.rotation.T @ (ld.rope_tension * ld.rope_direction)
+    st = statics.rest_statics_loads(scenario, S_body)
+    F = jnp.concatenate([rest_friction(ld, c, scenario), st[:, None]], axis=1)
+    return Contact(accel=jnp.zeros(6), force=F, corner_accel=jnp.zeros((4, 3)),
+                   slip_direction=jnp.zeros((4, 2)), loads=ld)
+
+
+def _motion_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Contact:
     mu, m = scenario.foundation.friction_coefficient, scenario.load.mass
     Minv = _mass_inverse(scenario, c)
     tdir = slip_directions(ld.corner_velocity, phase.slip_hint, settings.slip_velocity)
@@ -357,22 +356,24 @@ def contact_dynamics(t: Scalar, y: State, scenario: Scenario, c: Constants, phas
     return Contact(accel=accel, force=F, corner_accel=corner_accel, slip_direction=tdir, loads=ld)
 
 
+def contact_dynamics(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
+                     settings: Settings) -> Contact:
+    """Contact forces and accelerations of the load in the contact configuration `phase`."""
+    ld = loads(t, y, scenario, c)
+    return jax.lax.cond(phase.rest, _rest_contact, _motion_contact, ld, scenario, c, phase, settings)
+
+
 def vector_field(t: Scalar, y: State, args) -> State:
     """dy/dt of the rigid model in the phase `args = (scenario, constants, phase, settings)`."""
     scenario, c, phase, settings = args
     boom, g = scenario.boom, scenario.gravity
-    if phase.rest:
-        ld = loads(t, y, scenario, c)
-        zero3 = jnp.zeros(3)
-        body = dict(position=zero3, velocity=zero3, quaternion=jnp.zeros(4), angular_velocity=zero3,
-                    friction_work=jnp.zeros(()))
-    else:
-        ct = contact_dynamics(t, y, scenario, c, phase, settings)
-        ld = ct.loads
-        body = dict(position=y.velocity, velocity=ct.accel[:3],
-                    quaternion=kinematics.quat_rate(y.quaternion, y.angular_velocity),
-                    angular_velocity=ct.accel[3:],
-                    friction_work=-jnp.sum(ct.force[:, :2] * ld.corner_velocity[:, :2]))
+    ct = contact_dynamics(t, y, scenario, c, phase, settings)
+    ld = ct.loads
+    moving = jnp.logical_not(phase.rest)  # a resting load is held fixed: only the boom tip moves
+    body = dict(position=jnp.where(moving, y.velocity, 0.0), velocity=ct.accel[:3],
+                quaternion=jnp.where(moving, kinematics.quat_rate(y.quaternion, y.angular_velocity), 0.0),
+                angular_velocity=ct.accel[3:],
+                friction_work=jnp.where(moving, -jnp.sum(ct.force[:, :2] * ld.corner_velocity[:, :2]), 0.0))
     F_rope = ld.rope_tension * ld.rope_direction
     tip_acc = (ld.boom_force - F_rope) / boom.tip_mass - g * jnp.array([0.0, 0.0, 1.0])
     return State(tip_position=y.tip_velocity, tip_velocity=tip_acc, friction_state=y.friction_state,
@@ -395,11 +396,18 @@ def raw_guards(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Pha
                settings: Settings) -> Float[Array, "10"]:
     """The guards of `phase` without offsets, dimensionless (forces / G, heights / L, speeds / V); the
     phase is valid while all are > 0. Guards that do not apply (to a corner's mode, or to rest) are +1."""
-    if phase.rest:
-        tip, rho = rest_conditions(loads(t, y, scenario, c), scenario, c)
-        return jnp.concatenate([jnp.ones(8), jnp.stack([tip, 1.0 - rho])])
+    ld = loads(t, y, scenario, c)
+    return jax.lax.cond(phase.rest, _rest_guards, _motion_guards, ld, scenario, c, phase, settings)
+
+
+def _rest_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
+    tip, rho = rest_conditions(ld, scenario, c)
+    return jnp.concatenate([jnp.ones(8), jnp.stack([tip, 1.0 - rho])])
+
+
+def _motion_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
     sc = scales(scenario)
-    ct = contact_dynamics(t, y, scenario, c, phase, settings)
+    ct = _motion_contact(ld, scenario, c, phase, settings)
     ld = ct.loads
     mu = scenario.foundation.friction_coefficient
     N = ct.force[:, 2]
