@@ -214,3 +214,60 @@ def test_first_down_crossing_is_interpolated():
     assert float(O.first_down_crossing(ts, 0.537 - ts)) == pytest.approx(0.537, abs=1e-14)
     assert float(O.first_down_crossing(ts, 1.0 + ts)) == np.inf
     assert float(O.first_down_crossing(ts, ts - 0.5)) == 0.0  # not in contact at t = 0
+
+
+_WORKER = """
+import sys
+import jax
+jax.config.update("jax_num_cpu_devices", 1)
+jax.config.update("jax_enable_x64", True)
+port, pid, out = sys.argv[1], int(sys.argv[2]), sys.argv[3]
+jax.distributed.initialize(coordinator_address=f"127.0.0.1:{port}", num_processes=2, process_id=pid,
+                           initialization_timeout=120)
+import numpy as np
+sys.path.insert(0, sys.argv[4])
+from test_scan import KW, MU, MUS, T1, oblique_box
+from jaxhoist.numerics.scan import scan
+assert jax.process_count() == 2 and len(jax.local_devices()) == 1
+res = scan(oblique_box(), {MU: MUS}, T1, chunk_size=4, out_dir=out, wait_timeout=300, **KW)
+np.savez(f"{out}/process{pid}.npz", **{k: res[k] for k in res.data}, status=res.status)
+"""
+
+
+def test_several_processes_share_the_chunks(clean, tmp_path):
+    """Two processes under `jax.distributed` (one CPU device each) split the scan's two chunks between
+    them through a shared folder; each returns the whole result, bit-for-bit the single-process one
+    (the same groups of 2 lanes are solved by the same compiled computation)."""
+    import os
+    import socket
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    here = str(Path(__file__).parent)
+    procs = [
+        subprocess.Popen(
+            [sys.executable, "-c", _WORKER, str(port), str(pid), str(tmp_path), here],
+            env=env,
+            stdout=subprocess.PIPE,
+            stderr=subprocess.STDOUT,
+            text=True,
+        )
+        for pid in (0, 1)
+    ]
+    logs = [p.communicate(timeout=600)[0] for p in procs]
+    for p, log in zip(procs, logs, strict=True):
+        assert p.returncode == 0, log[-3000:]
+    manifest = json.loads((tmp_path / "manifest.json").read_text())
+    assert sorted(manifest["chunks"]) == ["0", "1"]
+    for pid in (0, 1):
+        with np.load(tmp_path / f"process{pid}.npz") as got:
+            np.testing.assert_array_equal(got["status"], clean.status)
+            for k in clean.data:
+                np.testing.assert_array_equal(got[k], clean[k], err_msg=f"process {pid}: {k}")
+    back = ScanResult.load(tmp_path / "scan.npz")  # written by process 0
+    np.testing.assert_array_equal(back["final_position"], clean["final_position"])

@@ -18,6 +18,10 @@ How the work is laid out (and why results do not depend on the chunk size or the
   each with its own loop, so a slow group on one device does not hold up the other;
 - each group is the same compiled computation on the same inputs whatever the chunk size and the number
   of devices, so the results are bit-for-bit identical.
+- several processes (hosts) under `jax.distributed`: every process runs the chunks k with
+  k mod process_count = process_index on its own local devices and writes them to `out_dir`, which must
+  be a folder all processes share; then each reads the others' chunks and assembles the same result
+  (process 0 writes `scan.npz`). No collective communication is needed.
 - with `fixed_step=True` every member takes the same constant steps (`numerics.fixed_step`, a lean
   Runge-Kutta loop for diffrax's explicit tableaus): nothing waits in lock step, so groups can be wide
   (hundreds of lanes), which spreads the fixed cost of each loop iteration over many members.
@@ -655,6 +659,28 @@ def _write_atomic_npz(path: Path, arrays: Mapping[str, np.ndarray]) -> None:
     os.replace(tmp, path)
 
 
+def _read_chunk(path: Path) -> dict[str, np.ndarray] | None:
+    """A finished chunk file's arrays, or None if it is missing or unreadable (chunk files are written
+    atomically, so a file that exists is complete)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return {k: z[k] for k in z.files}
+    except (OSError, ValueError, KeyError):
+        return None
+
+
+def _wait_for(get, timeout: float, what: str, poll: float = 0.5):
+    """Poll `get()` until it returns something truthy (another process's file), at most `timeout` s."""
+    t0 = time.perf_counter()
+    while True:
+        got = get()
+        if got:
+            return got
+        if time.perf_counter() - t0 > timeout:
+            raise TimeoutError(f"waited {timeout:g} s for {what}; is every process running the same scan?")
+        time.sleep(poll)
+
+
 def _write_manifest(out: Path, manifest: dict) -> None:
     tmp = out / (MANIFEST + ".tmp")
     tmp.write_text(json.dumps(manifest, indent=1, default=_json_default) + "\n")
@@ -698,6 +724,7 @@ def scan(
     out_dir: str | Path | None = None,
     resume: bool = True,
     progress: bool | Callable[[Progress], None] | None = None,
+    wait_timeout: float = 24 * 3600.0,
 ) -> ScanResult:
     """Solve `scenario` for many values of some of its float leaves and evaluate observables of each solve.
 
@@ -724,7 +751,11 @@ def scan(
       Default 16 (adaptive steps: lock-step waste grows with the width) or 256 with `fixed_step`.
     - `chunk_size`: members per compiled call (rounded up to whole groups on every device); default: up
       to 8 groups per device, fewer if the saved histories would exceed `max_memory` bytes.
-    - `devices`: the JAX devices to shard over (default all of `jax.devices()`).
+    - `devices`: the JAX devices of this process to shard over (default all of `jax.local_devices()`).
+    - Several processes: after `jax.distributed.initialize(...)` on every host, call `scan` with the same
+      arguments in each process and an `out_dir` on a shared file system; the chunks are shared out
+      between the processes, and every process returns the whole result. `wait_timeout` [s] bounds how
+      long a process waits for another's chunk file.
     - `sort`: solve members in order of their parameter values (cuts lock-step waste; no effect on results
       beyond the grouping).
     - `derivatives`: also compute forward-mode sensitivities of every observable with respect to the swept
@@ -790,7 +821,13 @@ def scan(
         lanes = 256 if fixed_step else 16
     if int(lanes) < 1:
         raise ScenarioError(f"lanes must be >= 1, got {lanes}")
-    devs = tuple(jax.devices() if devices is None else devices)
+    devs = tuple(jax.local_devices() if devices is None else devices)
+    n_proc, proc = jax.process_count(), jax.process_index()
+    if n_proc > 1 and out_dir is None:
+        raise ScenarioError(
+            f"this is process {proc} of {n_proc} (jax.distributed): a scan over several processes needs "
+            f"out_dir, a folder on a file system that all of them share"
+        )
     n = members.shape[0]
     n_dev = len(devs)
     lanes = int(min(int(lanes), 1 << max(0, math.ceil(math.log2(n)))))
@@ -839,6 +876,12 @@ def scan(
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         mpath = out / MANIFEST
+        if n_proc > 1 and proc != 0:
+            _wait_for(
+                lambda: mpath.exists() and json.loads(mpath.read_text()).get("fingerprint") == fp,
+                wait_timeout,
+                f"process 0's {mpath} of this scan",
+            )
         if mpath.exists() and resume:
             old = json.loads(mpath.read_text())
             if old.get("fingerprint") != fp:
@@ -849,12 +892,9 @@ def scan(
                 )
             chunk = int(old["chunk_size"])  # the files' layout wins
             for k_str in old.get("chunks", {}):
-                f = out / f"chunk_{int(k_str):05d}.npz"
-                try:
-                    with np.load(f, allow_pickle=False) as z:
-                        done_chunks[int(k_str)] = {k: z[k] for k in z.files}
-                except (OSError, ValueError, KeyError):
-                    pass  # missing or truncated: recompute
+                res = _read_chunk(out / f"chunk_{int(k_str):05d}.npz")
+                if res is not None:  # else missing or truncated: recompute
+                    done_chunks[int(k_str)] = res
         manifest = {
             "format": FORMAT + "-manifest",
             "fingerprint": fp,
@@ -866,7 +906,8 @@ def scan(
             "lanes": lanes,
             "chunks": {str(k): {"file": f"chunk_{k:05d}.npz"} for k in sorted(done_chunks)},
         }
-        _write_manifest(out, manifest)
+        if proc == 0:
+            _write_manifest(out, manifest)
 
     n_chunks = math.ceil(n / chunk)
     groups_per_chunk = chunk // lanes
@@ -882,6 +923,12 @@ def scan(
         idx = order[lo:hi]
         t_start = time.perf_counter()
         loaded = k in done_chunks
+        if not loaded and k % n_proc != proc:  # another process's chunk: wait for its file
+            path_k = out / f"chunk_{k:05d}.npz"
+            done_chunks[k] = _wait_for(
+                lambda: _read_chunk(path_k), wait_timeout, f"{path_k} from process {k % n_proc}"
+            )
+            loaded = True
         if loaded:
             res = done_chunks[k]
         else:
@@ -909,7 +956,8 @@ def scan(
                     "members": [lo, hi],
                     "wall_s": round(time.perf_counter() - t_start, 4),
                 }
-                _write_manifest(out, manifest)
+                if n_proc == 1:  # with several processes the chunk files themselves are the record
+                    _write_manifest(out, manifest)
         results[k] = res
         failed += int(np.sum(res["status"] != 0))
         if report is not None:
@@ -1018,7 +1066,10 @@ def scan(
         descriptions=descriptions,
         attrs=attrs,
     )
-    if out is not None:
+    if out is not None and proc == 0:
+        if n_proc > 1:  # record every chunk, now that all are on disk
+            manifest["chunks"] = {str(k): {"file": f"chunk_{k:05d}.npz"} for k in range(n_chunks)}
+            _write_manifest(out, manifest)
         result.save(out / "scan")
     return result
 
