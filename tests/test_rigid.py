@@ -231,8 +231,9 @@ def test_model_switch_and_cli_reach_the_rigid_driver(slide_run, tmp_path):
 
     path = tmp_path / "rigid.toml"
     a, b, c = (float(x) for x in sc.load.size)
+    # Same name and t1 (static fields) as `_scenario`, so the CLI reuses the phase solve compiled above.
     path.write_text(f"""
-name = "rigid-cli"
+name = "rigid-test"
 t1 = {T1}
 [load]
 size = [{a}, {b}, {c}]
