@@ -142,12 +142,13 @@ def test_rope_jerk_at_the_start_and_at_re_tension(jerk_runs):
     assert ph[0].rest and ph[0].rope == "slack" and "rope:taut rope-jerk" in ph[0].end
     assert ph[0].t_end == pytest.approx(0.005 / V, abs=1e-9)
     assert ph[1].rope == "taut"
-    # The jerk's loss (the log gives 4 digits), then a few much smaller bounces and jerks (< 1 %).
-    assert f"rope-jerk ({0.5 * mu * V**2:.4g} J)" in ph[0].end
+    # The jerk's loss (the log gives 4 digits), then a few much smaller bounces and jerks (1.1 % more).
+    jerk = 0.5 * mu * V**2
+    assert f"rope-jerk ({jerk:.4g} J)" in ph[0].end
     loss = np.asarray(tr_b.impact_loss)
     after = np.asarray(tr_b.ts) > ph[0].t_end
     assert np.all(loss[~after] == 0.0)
-    np.testing.assert_allclose(loss[after], 0.5 * mu * V**2, rtol=1e-2)
+    assert np.all(loss[after] >= jerk * (1 - 1e-9)) and np.all(loss[after] <= 1.02 * jerk)
 
 
 def test_energy_balance_closes_with_the_rope_jerk_losses(jerk_runs):
@@ -182,7 +183,48 @@ def test_rope_switch_errors():
 def test_model_switch_reaches_the_inextensible_rope(ramped_lift):
     """`jaxhoist.simulate(..., model="rigid", rope="inextensible")` is `simulate_rigid(..., rope=...)`."""
     sc, ref = ramped_lift
-    tr = jh.simulate(sc, T1, n_save=N_SAVE, model="rigid", rope="inextensible", rtol=1e-8, atol=1e-9)
+    # simulate_rigid's own defaults (max_steps is static in the compiled solve: the same value reuses it).
+    kw = dict(rtol=1e-8, atol=1e-9, max_steps=100_000)
+    tr = jh.simulate(sc, T1, n_save=N_SAVE, model="rigid", rope="inextensible", **kw)
     np.testing.assert_array_equal(np.asarray(tr.position), np.asarray(ref.position))
     assert [p.rope for p in tr.phases] == [p.rope for p in ref.phases]
     assert math.isfinite(float(tr.rope_tension[-1]))
+
+
+def test_cli_runs_the_inextensible_rope(ramped_lift, tmp_path):
+    """`jaxhoist simulate FILE --model rigid --rope inextensible` gives the same lift."""
+    from jaxhoist.apps.cli import main
+    from jaxhoist.io.results import load_trajectory
+
+    _, ref = ramped_lift
+    path = tmp_path / "rope.toml"
+    path.write_text(f"""
+name = "rigid-test"
+t1 = {T1}
+[load]
+size = [1.0, 1.0, 1.0]
+mass = {M}
+[foundation]
+stiffness = 1e7
+damping = 1e5
+friction_coefficient = 0.3
+[rope]
+stiffness = 1e5
+damping = 0.0
+attachment = [0.5, 0.5, 1.0]
+[hoist]
+law = "ramped"
+speed = {V}
+ramp_time = {RAMP}
+[boom]
+tip_position = [0.5, 0.5, 10.0]
+tip_mass = {M0}
+stiffness = [1e9, 1e9, {K_Z}]
+damping = [0.0, 0.0, {C_Z}]
+""")
+    args = ["simulate", str(path), "--model", "rigid", "--rope", "inextensible", "--n-save", str(N_SAVE)]
+    args += ["--rtol", "1e-8", "--atol", "1e-9", "--max-steps", "100000", "--out", str(tmp_path / "out")]
+    assert main([*args, "--no-plots", "--quiet"]) == 0
+    arrays = load_trajectory(tmp_path / "out" / "trajectory")
+    np.testing.assert_allclose(arrays["position"], np.asarray(ref.position), atol=1e-12)
+    np.testing.assert_allclose(arrays["rope_tension"], np.asarray(ref.rope_tension), atol=1e-6)

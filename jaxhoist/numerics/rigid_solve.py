@@ -140,12 +140,13 @@ class _Options:
     event_atol: float
 
 
-def _phase_solve(scenario, c, phase, settings, y0, t0, t1, ts, options: _Options):
+def _phase_solve(scenario, c, phase, settings, y0, t0, t1, ts, options: _Options, inextensible: bool = False):
     event = diffrax.Event(rigid.event_condition,
                           root_finder=optx.Bisection(rtol=1e-14, atol=options.event_atol), direction=False)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(rigid.vector_field), diffrax.Tsit5(), t0=t0, t1=t1, dt0=None, y0=y0,
-        args=(scenario, c, phase, settings), saveat=diffrax.SaveAt(ts=ts, t1=True),
+        args=(scenario, c, phase, settings) + ((True,) if inextensible else ()),
+        saveat=diffrax.SaveAt(ts=ts, t1=True),
         stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
         max_steps=options.max_steps, event=event, throw=False)
     return sol.ts, sol.ys, sol.result, sol.stats["num_accepted_steps"], sol.stats["num_rejected_steps"]
@@ -156,13 +157,13 @@ _raw_guards_jit = eqx.filter_jit(rigid.raw_guards)
 
 
 @eqx.filter_jit
-def _eval_candidates(t, y, scenario, c, settings, contact, hints, rope):
+def _eval_candidates(t, y, scenario, c, settings, contact, hints, rope, inextensible=False):
     """Contact forces, corner accelerations, body accelerations and rope tension for a batch of
     configurations (rope mode `rope`, an integer array)."""
 
     def one(ct, h):
         ph = rigid.make_phase(ct, slip_hint=h, rope=rope)
-        d = rigid.contact_dynamics(t, y, scenario, c, ph, settings)
+        d = rigid.contact_dynamics(t, y, scenario, c, ph, settings, inextensible)
         return d.force, d.corner_accel, d.accel, d.loads.rope_tension
 
     return jax.vmap(one)(contact, hints)
@@ -195,13 +196,14 @@ class _RopeWouldPush(Exception):
 
 
 @eqx.filter_jit
-def _forces(t, y, scenario, c, phase, settings):
-    return rigid.contact_dynamics(t, y, scenario, c, phase, settings).force
+def _forces(t, y, scenario, c, phase, settings, inextensible=False):
+    return rigid.contact_dynamics(t, y, scenario, c, phase, settings, inextensible).force
 
 
 @eqx.filter_jit
-def _outputs(ts, ys, scenario, c, phases, settings):
-    return jax.vmap(lambda t, y, ph: rigid.output(t, y, scenario, c, ph, settings))(ts, ys, phases)
+def _outputs(ts, ys, scenario, c, phases, settings, inextensible=False):
+    return jax.vmap(lambda t, y, ph: rigid.output(t, y, scenario, c, ph, settings, inextensible))(ts, ys,
+                                                                                               phases)
 
 
 def _tree_index(tree, i):
@@ -234,7 +236,8 @@ class _Driver:
 
     # ---------------------------------------------------------------------------- helpers
     def guards(self, t, y, phase) -> np.ndarray:
-        return _np(_raw_guards_jit(jnp.asarray(t), y, self.sc, self.c, phase, self.settings))
+        return _np(_raw_guards_jit(jnp.asarray(t), y, self.sc, self.c, phase, self.settings,
+                                   self.inextensible))
 
     def matrices(self, t, y, rope: int = rigid.ROPE_ELASTIC):
         m = _contact_matrices(jnp.asarray(t), y, self.sc, self.c, self.settings, rope)
@@ -255,7 +258,8 @@ class _Driver:
         # Strongly typed float64 everywhere (a weakly typed leaf would compile the solve a second time).
         t0, t1 = jnp.asarray(t0, dtype=jnp.float64), jnp.asarray(t1, dtype=jnp.float64)
         ts_c = jnp.clip(jnp.asarray(ts, dtype=jnp.float64), t0, t1)
-        out = _phase_solve_jit(self.sc, self.c, phase, self.settings, y, t0, t1, ts_c, self.options)
+        out = _phase_solve_jit(self.sc, self.c, phase, self.settings, y, t0, t1, ts_c, self.options,
+                               self.inextensible)
         sts, sys_, result, acc, rej = out
         self.accepted += int(acc)
         self.rejected += int(rej)
@@ -345,7 +349,7 @@ class _Driver:
         hints[:len(combos)] = np.array(hints_list)
         force, acc_c, accel, tension = _eval_candidates(jnp.asarray(t), y, self.sc, self.c, self.settings,
                                                         jnp.asarray(contact), jnp.asarray(hints),
-                                                        jnp.asarray(rope, dtype=jnp.int32))
+                                                        jnp.asarray(rope, dtype=jnp.int32), self.inextensible)
         force, acc_c, accel, tension = map(_np, (force, acc_c, accel, tension))
 
         tF, tA = self.tol["force"] * self.G, self.tol["accel"] * self.g
@@ -394,7 +398,8 @@ class _Driver:
         if previous is not None and int(previous.rope) != rope:
             previous = eqx.tree_at(lambda p: p.rope, previous, jnp.asarray(rope, dtype=jnp.int32))
         if previous is not None:
-            prev_N = _np(_forces(jnp.asarray(t), y, self.sc, self.c, previous, self.settings))[:, 2]
+            prev_N = _np(_forces(jnp.asarray(t), y, self.sc, self.c, previous, self.settings,
+                                 self.inextensible))[:, 2]
         else:
             prev_N = None
         jump = lambda k: 0.0 if prev_N is None else float(np.linalg.norm(force[k, :, 2] - prev_N))  # noqa: E731
@@ -901,7 +906,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
     states = jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.stack(xs)), *saved_states)
     # Outputs: one vmapped evaluation with every sample's own phase (rest phases included).
     batch = jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.stack(xs)), *[phases[i] for i in saved_phase])
-    out = _outputs(jnp.asarray(ts), states, scenario, c, batch, settings)
+    out = _outputs(jnp.asarray(ts), states, scenario, c, batch, settings, drv.inextensible)
     euler = out.euler.at[:, :2].set(jnp.unwrap(out.euler[:, :2], axis=0))
     return RigidTrajectory(
         ts=jnp.asarray(ts), position=states.position, velocity=states.velocity, euler=euler,

@@ -26,7 +26,9 @@ along its sliding direction reaching 0 (stop or turn), and for rest: R leaving t
 `numerics.rigid_solve`.
 
 The state is `elastic.State` (with an empty friction state, shape (4, 0)); the rope (2.14) and the boom
-(2.13) are the force laws of `forces`. All functions are pure JAX.
+(2.13) are the force laws of `forces`. With `inextensible=True` the rope is instead the constraint (2.15)
+|AB| = l(t) (taut or slack by `Phase.rope`): a taut rope's tension joins the contact forces as an unknown,
+and the boom tip's acceleration joins the constrained accelerations. All functions are pure JAX.
 """
 
 from __future__ import annotations
@@ -70,9 +72,10 @@ class Phase(eqx.Module):
     - `free_on_ground`: per corner, a free corner lying on the ground while the other three carry the flat
       load: its guard watches the load the linear law (2.3) would give it (it takes load again when that
       becomes positive), instead of its height, which the other three keep at zero.
-    - `rope`: `ROPE_ELASTIC` (0, the rope law (2.14)), `ROPE_TAUT` (1, the inextensible rope (2.15) as a
-      constraint |AB| = l(t) with unknown tension S >= 0) or `ROPE_SLACK` (2, inextensible and slack:
-      S = 0, |AB| < l(t)); an integer scalar.
+    - `rope`: the rope mode, an integer scalar: `ROPE_ELASTIC` (0, the rope law (2.14)), `ROPE_TAUT` (1, the
+      inextensible rope (2.15) as a constraint |AB| = l(t) with unknown tension S >= 0) or `ROPE_SLACK`
+      (2, inextensible and slack: S = 0, |AB| < l(t)). The rope *model* itself is the static `inextensible`
+      argument of `contact_dynamics`, `raw_guards` and the solve's `args` (elastic: this field is unused).
     """
 
     contact: Int[Array, "4"]
@@ -209,9 +212,10 @@ class Loads(eqx.Module):
     hoist_accel: Scalar
 
 
-def loads(t: Scalar, y: State, scenario: Scenario, c: Constants, inextensible=False) -> Loads:
-    """Kinematics, rope, boom and weight at (t, y). With `inextensible` (a boolean, may be traced) the
-    rope carries no force here (its tension is a constraint force, see `contact_dynamics`)."""
+def loads(t: Scalar, y: State, scenario: Scenario, c: Constants, inextensible: bool = False) -> Loads:
+    """Kinematics, rope, boom and weight at (t, y). With `inextensible` (a Python bool) the rope carries
+    no force here (its tension is a constraint force, see `contact_dynamics`) and the rope's kinematics
+    fields are filled (`inextensible_loads`); for the elastic rope they are 0 (unused)."""
     load, boom = scenario.load, scenario.boom
     R = kinematics.quat_to_matrix(y.quaternion)
     omega = y.angular_velocity
@@ -223,10 +227,6 @@ def loads(t: Scalar, y: State, scenario: Scenario, c: Constants, inextensible=Fa
 
     # Rope (2.14) with l(t) = l0 - s(t): the elastic model's rope, shared.
     B, e, stretch, s_dot, S, rope_loss = rope_pull(t, y, R, scenario, c)
-    rope_spring = 0.5 * scenario.rope.stiffness * jnp.maximum(stretch, 0.0) ** 2
-    S = jnp.where(inextensible, 0.0, S)
-    rope_loss = jnp.where(inextensible, 0.0, rope_loss)
-    rope_spring = jnp.where(inextensible, 0.0, rope_spring)
     F_boom, boom_loss = forces.boom_force(y.tip_position - c.tip_rest, y.tip_velocity, boom.stiffness,
                                           boom.damping)
 
@@ -234,21 +234,36 @@ def loads(t: Scalar, y: State, scenario: Scenario, c: Constants, inextensible=Fa
     z_hat = jnp.array([0.0, 0.0, 1.0])
     force = F_rope - load.mass * scenario.gravity * z_hat
     moment = jnp.cross(c.attachment_rel, R.T @ F_rope) - jnp.cross(omega, c.inertia @ omega)
+    zero = jnp.zeros_like(stretch)
+    ld = Loads(rotation=R, corners=corners, corner_velocity=corner_vel, jacobians=jac, bias=bias,
+               generalised_force=jnp.concatenate([force, moment]), rope_point=B, rope_tension=S,
+               rope_direction=e, stretch=stretch, hoist_rate=s_dot, rope_loss=rope_loss,
+               rope_spring=0.5 * scenario.rope.stiffness * jnp.maximum(stretch, 0.0) ** 2, boom_force=F_boom,
+               boom_loss=boom_loss, rope_generalised=jnp.zeros(6), rope_jacobian=jnp.zeros((3, 6)),
+               rope_bias=jnp.zeros(3), rope_rate_error=zero, rope_curvature=zero, hoist_accel=zero)
+    return inextensible_loads(t, y, ld, scenario, c) if inextensible else ld
 
-    # Kinematics of the rope length |AB| for the constraint (2.15), differentiated twice.
+
+def inextensible_loads(t: Scalar, y: State, ld: Loads, scenario: Scenario, c: Constants) -> Loads:
+    """The elastic rope's `ld` turned into the inextensible rope's: no rope force, loss or energy (the
+    tension is a constraint force), and the kinematics of |AB| for the constraint (2.15)."""
+    R, omega, e = ld.rotation, y.angular_velocity, ld.rope_direction
+    zero = jnp.zeros_like(ld.stretch)
+    force = -scenario.load.mass * scenario.gravity * jnp.array([0.0, 0.0, 1.0])
+    moment = -jnp.cross(omega, c.inertia @ omega)
     rho_B = c.attachment_rel
-    jac_B = jnp.concatenate([jnp.eye(3), -R @ kinematics.skew(rho_B)], axis=1)
     v_rel = y.tip_velocity - (y.velocity + R @ jnp.cross(omega, rho_B))
-    L = forces.safe_norm(y.tip_position - B)
+    L = forces.safe_norm(y.tip_position - ld.rope_point)
     L_dot = jnp.dot(v_rel, e)
-    s_ddot = jax.jvp(scenario.hoist.rate, (t,), (jnp.ones_like(t),))[1]
-    return Loads(rotation=R, corners=corners, corner_velocity=corner_vel, jacobians=jac, bias=bias,
-                 generalised_force=jnp.concatenate([force, moment]), rope_point=B, rope_tension=S,
-                 rope_direction=e, stretch=stretch, hoist_rate=s_dot, rope_loss=rope_loss,
-                 rope_spring=rope_spring, boom_force=F_boom, boom_loss=boom_loss,
-                 rope_generalised=jnp.concatenate([e, jnp.cross(rho_B, R.T @ e)]), rope_jacobian=jac_B,
-                 rope_bias=R @ jnp.cross(omega, jnp.cross(omega, rho_B)), rope_rate_error=L_dot + s_dot,
-                 rope_curvature=(jnp.sum(v_rel**2) - L_dot**2) / jnp.maximum(L, 1e-12), hoist_accel=s_ddot)
+    return eqx.tree_at(
+        lambda x: (x.generalised_force, x.rope_tension, x.rope_loss, x.rope_spring, x.rope_generalised,
+                   x.rope_jacobian, x.rope_bias, x.rope_rate_error, x.rope_curvature, x.hoist_accel),
+        ld,
+        (jnp.concatenate([force, moment]), zero, zero, zero, jnp.concatenate([e, jnp.cross(rho_B, R.T @ e)]),
+         jnp.concatenate([jnp.eye(3), -R @ kinematics.skew(rho_B)], axis=1),
+         R @ jnp.cross(omega, jnp.cross(omega, rho_B)), L_dot + ld.hoist_rate,
+         (jnp.sum(v_rel**2) - L_dot**2) / jnp.maximum(L, 1e-12),
+         jax.jvp(scenario.hoist.rate, (t,), (jnp.ones_like(t),))[1]))
 
 
 def with_tension(ld: Loads, S: Scalar, taut) -> Loads:
@@ -456,9 +471,13 @@ def _rest_loads(ld: Loads, scenario: Scenario, phase: Phase, settings: Settings)
     return with_tension(ld, rest_rope_tension(ld, scenario, settings), taut)
 
 
+def _rest_contact_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
+                       settings: Settings) -> Contact:
+    return _rest_contact(_rest_loads(ld, scenario, phase, settings), scenario, c, phase, settings)
+
+
 def _rest_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Contact:
     # Held fixed: zero acceleration; the corner loads of the linear law (2.3), made nonnegative.
-    ld = _rest_loads(ld, scenario, phase, settings)
     S_body = ld.rotation.T @ (ld.rope_tension * ld.rope_direction)
     st = statics.rest_statics_loads(scenario, S_body)
     F = jnp.concatenate([rest_friction(ld, c, scenario), st[:, None]], axis=1)
@@ -466,7 +485,8 @@ def _rest_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, set
                    slip_direction=jnp.zeros((4, 2)), loads=ld)
 
 
-def _motion_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Contact:
+def _motion_contact_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
+                         settings: Settings) -> Contact:
     return jax.lax.cond(phase.rope == ROPE_TAUT, _motion_contact_taut, _motion_contact_free, ld, scenario, c,
                         phase, settings)
 
@@ -516,18 +536,39 @@ def _motion_contact_taut(ld: Loads, scenario: Scenario, c: Constants, phase: Pha
 
 
 def contact_dynamics(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
-                     settings: Settings) -> Contact:
-    """Contact forces and accelerations of the load in the contact configuration `phase` (with the taut
-    inextensible rope's tension solved together with the contact forces; `Contact.loads` carries it)."""
-    ld = loads(t, y, scenario, c, inextensible=phase.rope != ROPE_ELASTIC)
-    return jax.lax.cond(phase.rest, _rest_contact, _motion_contact, ld, scenario, c, phase, settings)
+                     settings: Settings, inextensible: bool = False) -> Contact:
+    """Contact forces and accelerations of the load in the contact configuration `phase`. With
+    `inextensible` (a Python bool: the rope model, fixed for a whole solve) the rope is the constraint
+    (2.15), taut or slack by `phase.rope`, and a taut rope's tension is solved together with the contact
+    forces (`Contact.loads` carries it); without, the elastic rope (2.14)."""
+    ld = loads(t, y, scenario, c)
+    if inextensible:
+        return _contact_rope(t, y, ld, scenario, c, phase, settings)
+    return _contact_elastic(t, y, ld, scenario, c, phase, settings)
+
+
+def _contact_elastic(t, y, ld, scenario, c, phase, settings) -> Contact:
+    return jax.lax.cond(phase.rest, _rest_contact, _motion_contact_free, ld, scenario, c, phase, settings)
+
+
+def _contact_rope(t, y, ld, scenario, c, phase, settings) -> Contact:
+    ld = inextensible_loads(t, y, ld, scenario, c)
+    return jax.lax.cond(phase.rest, _rest_contact_rope, _motion_contact_rope, ld, scenario, c, phase,
+                        settings)
+
+
+def _unpack(args):
+    """`args = (scenario, constants, phase, settings[, inextensible])` -> the five, inextensible a bool."""
+    scenario, c, phase, settings, *rest = args
+    return scenario, c, phase, settings, bool(rest[0]) if rest else False
 
 
 def vector_field(t: Scalar, y: State, args) -> State:
-    """dy/dt of the rigid model in the phase `args = (scenario, constants, phase, settings)`."""
-    scenario, c, phase, settings = args
+    """dy/dt of the rigid model in the phase `args = (scenario, constants, phase, settings[, inextensible])`
+    (`inextensible`: a Python bool, the rope model of the solve, default False: the elastic rope)."""
+    scenario, c, phase, settings, inextensible = _unpack(args)
     boom, g = scenario.boom, scenario.gravity
-    ct = contact_dynamics(t, y, scenario, c, phase, settings)
+    ct = contact_dynamics(t, y, scenario, c, phase, settings, inextensible)
     ld = ct.loads
     moving = jnp.logical_not(phase.rest)  # a resting load is held fixed: only the boom tip moves
     body = dict(position=jnp.where(moving, y.velocity, 0.0), velocity=ct.accel[:3],
@@ -553,12 +594,16 @@ def rest_conditions(ld: Loads, scenario: Scenario, c: Constants):
 
 
 def raw_guards(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
-               settings: Settings) -> Float[Array, "12"]:
+               settings: Settings, inextensible: bool = False) -> Float[Array, "12"]:
     """The guards of `phase` without offsets, dimensionless (forces / G, heights / L, speeds / V); the
     phase is valid while all are > 0. Guards that do not apply (to a corner's mode, or to rest, or to the
-    rope mode) are +1."""
-    ld = loads(t, y, scenario, c, inextensible=phase.rope != ROPE_ELASTIC)
-    return jax.lax.cond(phase.rest, _rest_guards, _motion_guards, ld, scenario, c, phase, settings)
+    rope model and mode) are +1. `inextensible`: the rope model (see `contact_dynamics`)."""
+    ld = loads(t, y, scenario, c, inextensible=inextensible)
+    if inextensible:
+        return jax.lax.cond(phase.rest, _rest_guards_rope, _motion_guards_rope, ld, scenario, c, phase,
+                            settings)
+    g = jax.lax.cond(phase.rest, _rest_guards, _motion_guards, ld, scenario, c, phase, settings)
+    return jnp.concatenate([g, jnp.ones(2)])
 
 
 def _rope_guards(ld: Loads, scenario: Scenario, phase: Phase) -> Float[Array, "2"]:
@@ -571,14 +616,25 @@ def _rope_guards(ld: Loads, scenario: Scenario, phase: Phase) -> Float[Array, "2
 
 
 def _rest_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
-    ld = _rest_loads(ld, scenario, phase, settings)
     tip, rho = rest_conditions(ld, scenario, c)
-    return jnp.concatenate([jnp.ones(8), jnp.stack([tip, 1.0 - rho]), _rope_guards(ld, scenario, phase)])
+    return jnp.concatenate([jnp.ones(8), jnp.stack([tip, 1.0 - rho])])
 
 
-def _motion_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
+def _rest_guards_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
+    ld = _rest_loads(ld, scenario, phase, settings)
+    g = _rest_guards(ld, scenario, c, phase, settings)
+    return jnp.concatenate([g, _rope_guards(ld, scenario, phase)])
+
+
+def _motion_guards_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
+    ct = _motion_contact_rope(ld, scenario, c, phase, settings)
+    g = _motion_guards(ld, scenario, c, phase, settings, ct)
+    return jnp.concatenate([g, _rope_guards(ct.loads, scenario, phase)])
+
+
+def _motion_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings, ct=None):
     sc = scales(scenario)
-    ct = _motion_contact(ld, scenario, c, phase, settings)
+    ct = _motion_contact_free(ld, scenario, c, phase, settings) if ct is None else ct
     ld = ct.loads
     mu = scenario.foundation.friction_coefficient
     N = ct.force[:, 2]
@@ -601,13 +657,13 @@ def _motion_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, se
                           2.0 * v_stop - speed) / sc.velocity
     g_slide = jnp.where(phase.starting, g_start, (speed - v_stop) / sc.velocity)
     g_tan = jnp.where(contact == STICK, (mu * N - T) / sc.force, jnp.where(contact == SLIDE, g_slide, 1.0))
-    return jnp.concatenate([g_normal, g_tan, jnp.ones(2), _rope_guards(ld, scenario, phase)])
+    return jnp.concatenate([g_normal, g_tan, jnp.ones(2)])
 
 
 def event_condition(t, y, args, **kwargs) -> Scalar:
     """min over the guards (+ offsets): > 0 while the phase is valid; its zero ends the phase."""
-    scenario, c, phase, settings = args
-    return jnp.min(raw_guards(t, y, scenario, c, phase, settings) + phase.guard_offset)
+    scenario, c, phase, settings, inextensible = _unpack(args)
+    return jnp.min(raw_guards(t, y, scenario, c, phase, settings, inextensible) + phase.guard_offset)
 
 
 # ------------------------------------------------------------------------------------------ impacts
@@ -697,8 +753,9 @@ class Output(eqx.Module):
     euler: Float[Array, "3"]
 
 
-def output(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Output:
-    ct = contact_dynamics(t, y, scenario, c, phase, settings)
+def output(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase, settings: Settings,
+           inextensible: bool = False) -> Output:
+    ct = contact_dynamics(t, y, scenario, c, phase, settings, inextensible)
     ld = ct.loads
     return Output(corners=ld.corners, normal=ct.force[:, 2],
                   friction=ct.force.at[:, 2].set(0.0), rope_tension=ld.rope_tension,
