@@ -813,7 +813,10 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         stretch, rate_error, _ = map(float, _rope_state(jnp.asarray(t_plus), y, scenario, c))
         drv.rope_taut = stretch >= -drv.tol["z"] * drv.L  # rope.slack = 0: just taut
         if drv.rope_taut and rate_error > drv.tol["v"] * drv.V:
-            y, _, loss = _rope_jerk(drv, 0.0, y, t_rate=t_plus)
+            try:
+                y, _, loss = _rope_jerk(drv, 0.0, y, t_rate=t_plus)
+            except _RopeWouldPush as err:
+                raise RigidContactError(str(err)) from None
             impact_total += loss
     phase = drv.select(t, y, "start")
     while True:
@@ -867,7 +870,10 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
             y_before = y_end
             drv.rope_taut = True
             if rate_error > drv.tol["v"] * drv.V:
-                y_end, _, loss = _rope_jerk(drv, t_end, y_end)
+                try:
+                    y_end, _, loss = _rope_jerk(drv, t_end, y_end)
+                except _RopeWouldPush as err:
+                    raise RigidContactError(str(err)) from None
                 impact_total += loss
                 end += f" rope-jerk ({loss:.4g} J)"
             records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name))
