@@ -185,6 +185,11 @@ _contact_matrices = eqx.filter_jit(rigid.contact_matrices)
 
 
 @eqx.filter_jit
+def _rope_direction(t, y, scenario, c):
+    return rigid.loads(t, y, scenario, c).rope_direction
+
+
+@eqx.filter_jit
 def _rope_state(t, y, scenario, c):
     """|AB| - l(t) [m], d|AB|/dt - dl/dt [m/s] and ds/dt [m/s] of the inextensible rope."""
     ld = rigid.loads(t, y, scenario, c, inextensible=True)
@@ -591,6 +596,19 @@ def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None
     y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work), y,
                      (jnp.asarray(v1[best]), jnp.asarray(w1[best]), jnp.asarray(tip1[best]),
                       y.hoist_work + work))
+    # Settling, as after corner impacts: a load flat on the ground that the jerk would move slower than
+    # Settings.rest_velocity stays at rest (the ground takes its share of the impulse) and the jerk acts on
+    # the boom tip alone. Without it, a resting load under a rope whose tip lags the hoist chatters: each
+    # small jerk lifts it, it falls back and the rope slackens, and the tip springs back into the next jerk.
+    if not striking and np.all(near) and float(np.max(np.linalg.norm(cv1[best], axis=1))) < float(
+            drv.settings.rest_velocity):
+        e = _np(_rope_direction(tj, y, drv.sc, drv.c))
+        v_A = _np(y.tip_velocity)
+        P_tip = m0 * (float(e @ v_A) + s_dot)  # tip alone: e·v_A+ = dl/dt = -ds/dt, load at rest
+        work = P_tip * s_dot
+        y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work), y,
+                         (jnp.zeros(3), jnp.zeros(3), jnp.asarray(v_A - (P_tip / m0) * e),
+                          y.hoist_work + work))
     loss = work - (ke(y1) - ke(y))
     if loss < -1e-9 * max(abs(work), 1.0):
         raise RigidContactError(f"t = {t:.9g} s: the rope jerk would gain energy ({-loss:.4g} J)")
