@@ -294,6 +294,30 @@ class _Driver:
         return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
                            (jnp.asarray(u1[:3]), jnp.asarray(u1[3:]))), float(loss)
 
+    def _project_taut(self, t, y, full: np.ndarray, normal: np.ndarray):
+        """`_project` with the taut inextensible rope: the boom tip's velocity joins the coordinates and
+        the rope's rate d|AB|/dt is kept (a rope impulse P does the hoist work P ds/dt, booked as in the
+        rope jerk). Returns (y, loss [J])."""
+        mats = self.matrices(t, y, rigid.ROPE_TAUT)
+        rows = [mats.jacobians[i] for i in range(4) if full[i]]
+        rows += [mats.jacobians[i, 2:3] for i in range(4) if normal[i] and not full[i]]
+        if not rows:
+            return y, 0.0
+        u = np.concatenate([_np(y.velocity), _np(y.angular_velocity), _np(y.tip_velocity)])
+        J = np.concatenate(rows + [mats.rope_row[None, :]], axis=0)
+        b = np.zeros(J.shape[0])
+        b[-1] = mats.rope_row @ u  # the rope keeps its rate
+        Minv = np.linalg.inv(mats.mass)
+        lam = np.linalg.pinv(J @ Minv @ J.T, rcond=1e-10) @ (J @ u - b)
+        u1 = u - Minv @ J.T @ lam
+        _, _, s_dot = map(float, _rope_state(jnp.asarray(t), y, self.sc, self.c))
+        work = float(lam[-1]) * s_dot  # the rope impulse P = λ_rope pulls the tip towards B
+        loss = work - (0.5 * u1 @ mats.mass @ u1 - 0.5 * u @ mats.mass @ u)
+        y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work), y,
+                         (jnp.asarray(u1[:3]), jnp.asarray(u1[3:6]), jnp.asarray(u1[6:]),
+                          y.hoist_work + work))
+        return y1, float(loss)
+
     def project(self, t, y, phase: Phase):
         """Remove the velocity components that the phase's constraints forbid: the slip of sticking corners
         and of corners that start sliding from rest (their slip died out below the stop velocity; they
@@ -304,7 +328,10 @@ class _Driver:
             return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
                                (jnp.zeros(3), jnp.zeros(3))), ke
         contact, starting = _np(phase.contact), _np(phase.starting)
-        return self._project(t, y, (contact == STICK) | ((contact == SLIDE) & starting), contact != FREE)
+        full, normal = (contact == STICK) | ((contact == SLIDE) & starting), contact != FREE
+        if self.inextensible and int(phase.rope) == rigid.ROPE_TAUT:
+            return self._project_taut(t, y, full, normal)
+        return self._project(t, y, full, normal)
 
     def select(self, t, y, where: str, previous: Phase | None = None) -> Phase:
         """Choose the contact configuration at (t, y) (see the module docstring). With the inextensible
