@@ -126,6 +126,10 @@ def run_simulate(args: argparse.Namespace) -> int:
         check_times(t1, None)
         if args.n_save < 2:
             raise ScenarioError(f"--n-save must be >= 2, got {args.n_save}")
+        if args.rope != "elastic" and args.model != "rigid":
+            raise ScenarioError(
+                f"--rope {args.rope} needs --model rigid (the elastic-foundation model has the elastic rope)"
+            )
         options = SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
         ts = jnp.linspace(0.0, 1.0, args.n_save) * jnp.asarray(t1, dtype=jnp.float64)
     out_dir = Path(args.out) if args.out else Path("out") / scenario.name
@@ -140,7 +144,13 @@ def run_simulate(args: argparse.Namespace) -> int:
         label = "solving with the rigid-ground model (each phase compiles on first use)"
         with progress(label):
             traj = simulate_rigid(
-                scenario, t1, ts=np.asarray(ts), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps
+                scenario,
+                t1,
+                ts=np.asarray(ts),
+                rtol=args.rtol,
+                atol=args.atol,
+                max_steps=args.max_steps,
+                rope=args.rope,
             )
         wall_solve = progress.times[label]
     else:
@@ -160,6 +170,7 @@ def run_simulate(args: argparse.Namespace) -> int:
             command=[PROG, *args.argv] if args.argv is not None else sys.argv,
             options={
                 "model": args.model,
+                "rope": args.rope,
                 "solver": "Tsit5",
                 "rtol": args.rtol,
                 "atol": args.atol,
@@ -251,6 +262,12 @@ def configure_simulate(subparsers) -> None:
         choices=("elastic", "rigid"),
         default="elastic",
         help="elastic foundation (paper §3, default) or the rigid-ground reference (paper §2)",
+    )
+    p.add_argument(
+        "--rope",
+        choices=("elastic", "inextensible"),
+        default="elastic",
+        help="elastic rope (2.14, default) or inextensible rope (2.15, with --model rigid only)",
     )
     p.add_argument("--no-plots", action="store_true", help="write only the npz/json files")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")

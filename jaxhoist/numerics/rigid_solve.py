@@ -56,9 +56,11 @@ class PhaseRecord:
 
     - `t_start`, `t_end`: [s]; `contact`: mode per corner D, E, F, H ("free", "slide", "stick");
     - `rest`: the load rested on all four corners (held fixed);
-    - `end`: why the phase ended: the guards that fired (e.g. "normal:D", "tangential:E", "rest:slip"),
-      "impact:F" when an impact followed, or "t1".
+    - `end`: why the phase ended: the guards that fired (e.g. "normal:D", "tangential:E", "rest:slip",
+      "rope:slack"), "impact:F" when an impact followed, "rope-jerk" when the inextensible rope snapped
+      taut, or "t1".
     - `state_end`: the state at `t_end` (before any impact).
+    - `rope`: "elastic" (2.14), or the inextensible rope (2.15) "taut" or "slack".
     """
 
     t_start: float
@@ -67,10 +69,13 @@ class PhaseRecord:
     rest: bool
     end: str
     state_end: State | None = dataclasses.field(default=None, compare=False, repr=False)
+    rope: str = "elastic"
 
     def __str__(self) -> str:
         modes = "rest" if self.rest else " ".join(f"{c}:{m}" for c, m in zip(rigid.CORNERS, self.contact,
                                                                             strict=True))
+        if self.rope != "elastic":
+            modes += f"  rope:{self.rope}"
         return f"{self.t_start:10.6f} - {self.t_end:10.6f} s  {modes:40s} -> {self.end}"
 
 
@@ -135,12 +140,13 @@ class _Options:
     event_atol: float
 
 
-def _phase_solve(scenario, c, phase, settings, y0, t0, t1, ts, options: _Options):
+def _phase_solve(scenario, c, phase, settings, y0, t0, t1, ts, options: _Options, inextensible: bool = False):
     event = diffrax.Event(rigid.event_condition,
                           root_finder=optx.Bisection(rtol=1e-14, atol=options.event_atol), direction=False)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(rigid.vector_field), diffrax.Tsit5(), t0=t0, t1=t1, dt0=None, y0=y0,
-        args=(scenario, c, phase, settings), saveat=diffrax.SaveAt(ts=ts, t1=True),
+        args=(scenario, c, phase, settings) + ((True,) if inextensible else ()),
+        saveat=diffrax.SaveAt(ts=ts, t1=True),
         stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
         max_steps=options.max_steps, event=event, throw=False)
     return sol.ts, sol.ys, sol.result, sol.stats["num_accepted_steps"], sol.stats["num_rejected_steps"]
@@ -151,15 +157,22 @@ _raw_guards_jit = eqx.filter_jit(rigid.raw_guards)
 
 
 @eqx.filter_jit
-def _eval_candidates(t, y, scenario, c, settings, contact, hints):
-    """Contact forces, corner accelerations and body accelerations for a batch of configurations."""
+def _eval_candidates(t, y, scenario, c, settings, contact, hints, rope, inextensible=False):
+    """Contact forces, corner accelerations, body accelerations and rope tension for a batch of
+    configurations (rope mode `rope`, an integer array)."""
 
     def one(ct, h):
-        ph = rigid.make_phase(ct, slip_hint=h)
-        d = rigid.contact_dynamics(t, y, scenario, c, ph, settings)
-        return d.force, d.corner_accel, d.accel
+        ph = rigid.make_phase(ct, slip_hint=h, rope=rope)
+        d = rigid.contact_dynamics(t, y, scenario, c, ph, settings, inextensible)
+        return d.force, d.corner_accel, d.accel, d.loads.rope_tension
 
     return jax.vmap(one)(contact, hints)
+
+
+@eqx.filter_jit
+def _eval_rope_impulses(t, y, scenario, c, modes, slip_dirs, normal_target, rcond):
+    return jax.vmap(lambda m, s: rigid.rope_impulse_response(t, y, scenario, c, m, s, normal_target, rcond))(
+        modes, slip_dirs)
 
 
 @eqx.filter_jit
@@ -172,13 +185,30 @@ _contact_matrices = eqx.filter_jit(rigid.contact_matrices)
 
 
 @eqx.filter_jit
-def _forces(t, y, scenario, c, phase, settings):
-    return rigid.contact_dynamics(t, y, scenario, c, phase, settings).force
+def _rope_direction(t, y, scenario, c):
+    return rigid.loads(t, y, scenario, c).rope_direction
 
 
 @eqx.filter_jit
-def _outputs(ts, ys, scenario, c, phases, settings):
-    return jax.vmap(lambda t, y, ph: rigid.output(t, y, scenario, c, ph, settings))(ts, ys, phases)
+def _rope_state(t, y, scenario, c):
+    """|AB| - l(t) [m], d|AB|/dt - dl/dt [m/s] and ds/dt [m/s] of the inextensible rope."""
+    ld = rigid.loads(t, y, scenario, c, inextensible=True)
+    return ld.stretch, ld.rope_rate_error, ld.hoist_rate
+
+
+class _RopeWouldPush(Exception):
+    """No configuration (or impulse) with the taut inextensible rope has S >= 0: try the slack rope."""
+
+
+@eqx.filter_jit
+def _forces(t, y, scenario, c, phase, settings, inextensible=False):
+    return rigid.contact_dynamics(t, y, scenario, c, phase, settings, inextensible).force
+
+
+@eqx.filter_jit
+def _outputs(ts, ys, scenario, c, phases, settings, inextensible=False):
+    return jax.vmap(lambda t, y, ph: rigid.output(t, y, scenario, c, ph, settings, inextensible))(ts, ys,
+                                                                                               phases)
 
 
 def _tree_index(tree, i):
@@ -206,13 +236,16 @@ class _Driver:
         self.accepted = 0
         self.rejected = 0
         self.debug = False
+        self.inextensible = False
+        self.rope_taut = False  # the inextensible rope is at its length (taut, or may be): try taut first
 
     # ---------------------------------------------------------------------------- helpers
     def guards(self, t, y, phase) -> np.ndarray:
-        return _np(_raw_guards_jit(jnp.asarray(t), y, self.sc, self.c, phase, self.settings))
+        return _np(_raw_guards_jit(jnp.asarray(t), y, self.sc, self.c, phase, self.settings,
+                                   self.inextensible))
 
-    def matrices(self, t, y):
-        m = _contact_matrices(jnp.asarray(t), y, self.sc, self.c, self.settings)
+    def matrices(self, t, y, rope: int = rigid.ROPE_ELASTIC):
+        m = _contact_matrices(jnp.asarray(t), y, self.sc, self.c, self.settings, rope)
         return jax.tree_util.tree_map(_np, m)
 
     def kin(self, t, y):
@@ -230,7 +263,8 @@ class _Driver:
         # Strongly typed float64 everywhere (a weakly typed leaf would compile the solve a second time).
         t0, t1 = jnp.asarray(t0, dtype=jnp.float64), jnp.asarray(t1, dtype=jnp.float64)
         ts_c = jnp.clip(jnp.asarray(ts, dtype=jnp.float64), t0, t1)
-        out = _phase_solve_jit(self.sc, self.c, phase, self.settings, y, t0, t1, ts_c, self.options)
+        out = _phase_solve_jit(self.sc, self.c, phase, self.settings, y, t0, t1, ts_c, self.options,
+                               self.inextensible)
         sts, sys_, result, acc, rej = out
         self.accepted += int(acc)
         self.rejected += int(rej)
@@ -260,6 +294,30 @@ class _Driver:
         return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
                            (jnp.asarray(u1[:3]), jnp.asarray(u1[3:]))), float(loss)
 
+    def _project_taut(self, t, y, full: np.ndarray, normal: np.ndarray):
+        """`_project` with the taut inextensible rope: the boom tip's velocity joins the coordinates and
+        the rope's rate d|AB|/dt is kept (a rope impulse P does the hoist work P ds/dt, booked as in the
+        rope jerk). Returns (y, loss [J])."""
+        mats = self.matrices(t, y, rigid.ROPE_TAUT)
+        rows = [mats.jacobians[i] for i in range(4) if full[i]]
+        rows += [mats.jacobians[i, 2:3] for i in range(4) if normal[i] and not full[i]]
+        if not rows:
+            return y, 0.0
+        u = np.concatenate([_np(y.velocity), _np(y.angular_velocity), _np(y.tip_velocity)])
+        J = np.concatenate(rows + [mats.rope_row[None, :]], axis=0)
+        b = np.zeros(J.shape[0])
+        b[-1] = mats.rope_row @ u  # the rope keeps its rate
+        Minv = np.linalg.inv(mats.mass)
+        lam = np.linalg.pinv(J @ Minv @ J.T, rcond=1e-10) @ (J @ u - b)
+        u1 = u - Minv @ J.T @ lam
+        _, _, s_dot = map(float, _rope_state(jnp.asarray(t), y, self.sc, self.c))
+        work = float(lam[-1]) * s_dot  # the rope impulse P = λ_rope pulls the tip towards B
+        loss = work - (0.5 * u1 @ mats.mass @ u1 - 0.5 * u @ mats.mass @ u)
+        y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work), y,
+                         (jnp.asarray(u1[:3]), jnp.asarray(u1[3:6]), jnp.asarray(u1[6:]),
+                          y.hoist_work + work))
+        return y1, float(loss)
+
     def project(self, t, y, phase: Phase):
         """Remove the velocity components that the phase's constraints forbid: the slip of sticking corners
         and of corners that start sliding from rest (their slip died out below the stop velocity; they
@@ -270,23 +328,39 @@ class _Driver:
             return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
                                (jnp.zeros(3), jnp.zeros(3))), ke
         contact, starting = _np(phase.contact), _np(phase.starting)
-        return self._project(t, y, (contact == STICK) | ((contact == SLIDE) & starting), contact != FREE)
+        full, normal = (contact == STICK) | ((contact == SLIDE) & starting), contact != FREE
+        if self.inextensible and int(phase.rope) == rigid.ROPE_TAUT:
+            return self._project_taut(t, y, full, normal)
+        return self._project(t, y, full, normal)
 
     def select(self, t, y, where: str, previous: Phase | None = None) -> Phase:
-        """Choose the contact configuration at (t, y) (see the module docstring)."""
+        """Choose the contact configuration at (t, y) (see the module docstring). With the inextensible
+        rope at its length, the taut rope (S >= 0) is tried first, then the slack rope."""
+        if not self.inextensible:
+            return self._select(t, y, where, previous, rigid.ROPE_ELASTIC)
+        if self.rope_taut:
+            try:
+                return self._select(t, y, where, previous, rigid.ROPE_TAUT)
+            except _RopeWouldPush:
+                self.rope_taut = False
+        return self._select(t, y, where, previous, rigid.ROPE_SLACK)
+
+    def _select(self, t, y, where: str, previous: Phase | None, rope: int) -> Phase:
         near, resting, corners, cv = self.near_ground(t, y)
         body_at_rest = bool(np.all(near) and np.all(resting))
         # Evaluate as the chosen phase will start: resting corners still, contacts not moving normally.
         y, _ = self._project(t, y, resting, near)
 
         # The load resting flat on all four corners: the rest conditions decide.
-        rest_phase = rigid.make_phase([STICK] * 4, rest=True)
+        rest_phase = rigid.make_phase([STICK] * 4, rest=True, rope=rope)
         if body_at_rest:
             g = self.guards(t, y, rest_phase)
             if g[8] >= -self.tol["rest"] and g[9] >= -self.tol["rest"]:
+                if g[10] < -self.tol["force"]:  # the taut rope would push: it is slack
+                    raise _RopeWouldPush
                 return rest_phase
 
-        mats = self.matrices(t, y)
+        mats = self.matrices(t, y, rope)
         near_idx = [i for i in range(4) if near[i]]
         combos, hints_list = [], []
         for r in range(len(near_idx), -1, -1):
@@ -305,12 +379,14 @@ class _Driver:
         hints = np.zeros((n_max, 4, 2))
         contact[:len(combos)] = np.array(combos)
         hints[:len(combos)] = np.array(hints_list)
-        force, acc_c, accel = _eval_candidates(jnp.asarray(t), y, self.sc, self.c, self.settings,
-                                               jnp.asarray(contact), jnp.asarray(hints))
-        force, acc_c, accel = map(_np, (force, acc_c, accel))
+        force, acc_c, accel, tension = _eval_candidates(jnp.asarray(t), y, self.sc, self.c, self.settings,
+                                                        jnp.asarray(contact), jnp.asarray(hints),
+                                                        jnp.asarray(rope, dtype=jnp.int32), self.inextensible)
+        force, acc_c, accel, tension = map(_np, (force, acc_c, accel, tension))
 
         tF, tA = self.tol["force"] * self.G, self.tol["accel"] * self.g
         consistent, why = [], []
+        rope_rejected = False
         for k, combo in enumerate(combos):
             N = force[k, :, 2]
             T = np.linalg.norm(force[k, :, :2], axis=1)
@@ -333,10 +409,15 @@ class _Driver:
                                              f"direction (a_h = {ah}, t = {h})")
                 if not ok:
                     break
+            if ok and rope == rigid.ROPE_TAUT and tension[k] < -tF:
+                ok, reason = False, f"the rope would push (S = {tension[k]:.4g} N)"
+                rope_rejected = True
             (consistent if ok else why).append(k if ok else (combo, reason))
             if self.debug:
                 print(f"  [{where} t={t:.9g}] {_fmt(combo)}: {'ok' if ok else reason}; N={np.round(N, 1)} "
                       f"accel={np.round(accel[k], 6)}")
+        if not consistent and rope_rejected:
+            raise _RopeWouldPush  # only the rope's S >= 0 failed: it goes slack
         if not consistent:
             tried = "; ".join(f"{_fmt(cb)}: {r}" for cb, r in why[:12])
             raise RigidContactError(
@@ -346,8 +427,11 @@ class _Driver:
         # Prefer the most corners in contact (every corner that can carry load does, as with (2.3)); among
         # those, the one whose normal forces continue the previous phase's (the rigid limit of a stiff
         # ground: the corner whose load has vanished is the one that unloads); then the most sticking.
+        if previous is not None and int(previous.rope) != rope:
+            previous = eqx.tree_at(lambda p: p.rope, previous, jnp.asarray(rope, dtype=jnp.int32))
         if previous is not None:
-            prev_N = _np(_forces(jnp.asarray(t), y, self.sc, self.c, previous, self.settings))[:, 2]
+            prev_N = _np(_forces(jnp.asarray(t), y, self.sc, self.c, previous, self.settings,
+                                 self.inextensible))[:, 2]
         else:
             prev_N = None
         jump = lambda k: 0.0 if prev_N is None else float(np.linalg.norm(force[k, :, 2] - prev_N))  # noqa: E731
@@ -371,11 +455,13 @@ class _Driver:
         hint = np.where((combo == SLIDE)[:, None], hints[best], 0.0)
         flat3 = bool(np.all(near)) and int(np.sum(combo != FREE)) == 3
         return rigid.make_phase(combo, rest=False, slip_hint=hint, starting=(combo == SLIDE) & resting,
-                                free_on_ground=(combo == FREE) & near & flat3)
+                                free_on_ground=(combo == FREE) & near & flat3, rope=rope)
 
     # ---------------------------------------------------------------------------- impacts
-    def impact(self, t, y, striking: list[int]):
-        """Velocity jump at an impact of the `striking` corners; returns (y+, loss [J], record)."""
+    def impact(self, t, y, striking: list[int], taut: bool = False):
+        """Velocity jump at an impact of the `striking` corners; returns (y+, loss [J]). With the taut
+        inextensible rope (`taut`) the rope takes an impulse too (it keeps its rate), unless that would
+        need a push: then it goes slack in the impact."""
         corners, cv, ke0 = self.kin(t, y)
         near = corners[:, 2] < self.tol["z"] * self.L
         involved = [i for i in range(4) if near[i] or i in striking]
@@ -383,6 +469,12 @@ class _Driver:
         for i in striking:
             if cv[i, 2] < -self.tol["bounce"] * self.V:
                 normal_target[i] = -self.e * cv[i, 2]
+        if taut:
+            try:
+                y1, _, loss = _rope_jerk(self, t, y, striking, normal_target)
+                return y1, loss
+            except _RopeWouldPush:
+                self.rope_taut = False
         vh = cv[:, :2]
         speed = np.linalg.norm(vh, axis=1)
         slipping = speed >= self.tol["v"] * self.V
@@ -456,6 +548,100 @@ class _Driver:
         return y1, loss
 
 
+def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None, t_rate=None):
+    """The inextensible rope snapping taut (or the hoist starting with a speed jump): a plastic jerk that
+    sets d|AB|/dt = dl/dt, with the corners on the ground taking impulses as in `_Driver.impact` (every
+    combination of free / slide / stick tried; consistent: P >= 0, normal impulses >= 0, sticking ones in
+    the friction cone, sliding ones not reversing the slip, free corners on the ground not driven into
+    it; the most contacts, then the most sticking win). With `striking` corners and their post-impact
+    normal velocities `normal_target`, it is a corner impact while the rope is taut (the rope keeps its
+    rate; P >= 0 is its impulse). `t_rate`: where to take dl/dt (the start uses t = 0+).
+
+    **Returns** `(y+, hoist work P ds/dt [J], loss [J])`: the hoist pays P ds/dt during the jerk (the drum
+    runs at ds/dt), the kinetic energy of load and boom tip grows by less; the difference is the loss.
+    """
+    corners, cv, _ = drv.kin(t, y)
+    near = (corners[:, 2] < drv.tol["z"] * drv.L) | np.isin(np.arange(4), list(striking))
+    normal_target = np.zeros(4) if normal_target is None else np.asarray(normal_target)
+    vh = cv[:, :2]
+    speed = np.linalg.norm(vh, axis=1)
+    slipping = speed >= drv.tol["v"] * drv.V
+    dirs = np.where(slipping[:, None], vh / np.maximum(speed, 1e-300)[:, None], 0.0)
+    options = [[FREE, SLIDE, STICK] if near[i] else [FREE] for i in range(4)]
+    combos = [np.array(cb) for cb in itertools.product(*options)]
+    n = len(combos)
+    modes = np.zeros((n, 4), dtype=np.int32)
+    sd = np.zeros((n, 4, 2))
+    for k, cb in enumerate(combos):
+        modes[k] = np.where(cb == SLIDE, STICK, cb)  # first pass: sticking impulses give the slide directions
+    tj = jnp.asarray(t if t_rate is None else t_rate, dtype=jnp.float64)
+    out0 = map(_np, _eval_rope_impulses(tj, y, drv.sc, drv.c, jnp.asarray(modes), jnp.asarray(sd),
+                                        jnp.asarray(normal_target), drv.settings.rcond))
+    imp0 = list(out0)[3]
+    for k, cb in enumerate(combos):
+        modes[k] = cb
+        for i in range(4):
+            if cb[i] == SLIDE:
+                if slipping[i]:
+                    sd[k, i] = dirs[i]
+                else:
+                    pv = -imp0[k, i, :2]
+                    nv = np.linalg.norm(pv)
+                    sd[k, i] = pv / nv if nv > 0 else 0.0
+    v1, w1, tip1, imp, P, cv1 = map(_np, _eval_rope_impulses(tj, y, drv.sc, drv.c, jnp.asarray(modes),
+                                                              jnp.asarray(sd), jnp.asarray(normal_target),
+                                                              drv.settings.rcond))
+    tP = drv.tol["force"] * drv.G * 1e-3  # impulses [N s]
+    tV = drv.tol["v"] * drv.V
+    consistent = []
+    for k, cb in enumerate(combos):
+        ok = P[k] >= -tP
+        for i in range(4):
+            Pz, Ph = imp[k, i, 2], np.linalg.norm(imp[k, i, :2])
+            if cb[i] != FREE and Pz < -tP:
+                ok = False
+            elif cb[i] == STICK and Ph > drv.mu * Pz + tP:
+                ok = False
+            elif cb[i] == SLIDE and float(cv1[k, i, :2] @ sd[k, i]) < -tV:
+                ok = False
+            elif cb[i] == FREE and near[i] and cv1[k, i, 2] < -tV:
+                ok = False
+        if ok:
+            consistent.append(k)
+    if not consistent:
+        raise _RopeWouldPush(f"t = {t:.9g} s: the jerk of the inextensible rope has no consistent impulse "
+                             "(Painlevé-type impact inconsistency)")
+    consistent.sort(key=lambda k: (-int(np.sum(combos[k] != FREE)), -int(np.sum(combos[k] == STICK))))
+    best = consistent[0]
+    _, _, s_dot = map(float, _rope_state(tj, y, drv.sc, drv.c))
+    m0 = float(drv.sc.boom.tip_mass)
+
+    def ke(yy):
+        return drv.kin(t, yy)[2] + 0.5 * m0 * float(np.sum(_np(yy.tip_velocity) ** 2))
+
+    work = float(P[best]) * s_dot
+    y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work), y,
+                     (jnp.asarray(v1[best]), jnp.asarray(w1[best]), jnp.asarray(tip1[best]),
+                      y.hoist_work + work))
+    # Settling, as after corner impacts: a load flat on the ground that the jerk would move slower than
+    # Settings.rest_velocity stays at rest (the ground takes its share of the impulse) and the jerk acts on
+    # the boom tip alone. Without it, a resting load under a rope whose tip lags the hoist chatters: each
+    # small jerk lifts it, it falls back and the rope slackens, and the tip springs back into the next jerk.
+    if not striking and np.all(near) and float(np.max(np.linalg.norm(cv1[best], axis=1))) < float(
+            drv.settings.rest_velocity):
+        e = _np(_rope_direction(tj, y, drv.sc, drv.c))
+        v_A = _np(y.tip_velocity)
+        P_tip = m0 * (float(e @ v_A) + s_dot)  # tip alone: e·v_A+ = dl/dt = -ds/dt, load at rest
+        work = P_tip * s_dot
+        y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work), y,
+                         (jnp.zeros(3), jnp.zeros(3), jnp.asarray(v_A - (P_tip / m0) * e),
+                          y.hoist_work + work))
+    loss = work - (ke(y1) - ke(y))
+    if loss < -1e-9 * max(abs(work), 1.0):
+        raise RigidContactError(f"t = {t:.9g} s: the rope jerk would gain energy ({-loss:.4g} J)")
+    return y1, work, loss
+
+
 def coulomb_pattern(mats, in_contact, resting, mu: float, G: float, g: float, n_outer: int = 12,
                     debug: bool = False):
     """Which resting contacts stick and in which direction the others start to slide, for the contact set
@@ -470,6 +656,8 @@ def coulomb_pattern(mats, in_contact, resting, mu: float, G: float, g: float, n_
     slides with T_i = -μÑ_i a_i,h / |a_i,h|. The norm is smoothed, sqrt(|a|² + ε²), and ε decreased from
     1e-2 g to 1e-13 g with Newton's method in the null space of the contact constraints; the normal forces
     are the (minimum-norm) multipliers and are iterated to a fixed point (`n_outer` times). Host-side numpy.
+    With the taut inextensible rope (`mats.rope_row`), u̇ includes the boom tip's acceleration and the
+    rope's d²|AB|/dt² is one more equality constraint (its multiplier is the tension).
 
     **Returns** `(modes, hints)`: per corner FREE / SLIDE / STICK and the sliding directions (4, 2).
     """
@@ -487,6 +675,9 @@ def coulomb_pattern(mats, in_contact, resting, mu: float, G: float, g: float, n_
     tdir[mov] = cv[mov, :2] / speed[mov, None]
     Gz = jac[idx, 2, :]                       # (n_c, 6)
     rz = target[idx, 2] - bias[idx, 2]
+    if mats.rope_row is not None:  # the taut inextensible rope: one more equality (coordinates incl. tip)
+        Gz = np.concatenate([Gz, mats.rope_row[None, :]], axis=0)
+        rz = np.append(rz, mats.rope_rhs)
     u0 = np.linalg.lstsq(Gz, rz, rcond=None)[0]
     _, sv, Vt = np.linalg.svd(Gz)
     rank = int(np.sum(sv > 1e-10 * sv.max()))
@@ -503,7 +694,7 @@ def coulomb_pattern(mats, in_contact, resting, mu: float, G: float, g: float, n_
             r = r - A[i].T @ (-mu * Nt[i] * s / np.sqrt(s @ s + eps**2))
         lam = np.linalg.lstsq(Gz.T, r, rcond=None)[0]
         N = np.zeros(4)
-        N[idx] = lam
+        N[idx] = lam[:idx.size]
         return N
 
     def minimise(Nt, q, eps_list):
@@ -578,6 +769,9 @@ def _fmt(combo) -> str:
     return " ".join(f"{c}:{rigid.MODE_NAMES[int(m)]}" for c, m in zip(rigid.CORNERS, combo, strict=True))
 
 
+#: The rope models of `simulate_rigid(..., rope=...)`.
+ROPE_MODELS = ("elastic", "inextensible")
+
 _DEFAULT_TOL = dict(
     z=1e-7,            # a corner is on the ground if Z < z L
     v=1e-6,            # ... and |v_z| < v V; it rests if also |v_h| < v V
@@ -596,7 +790,7 @@ _DEFAULT_TOL = dict(
 def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_save: int = 501,
                    restitution: float = 0.0, rtol: float = 1e-8, atol: float = 1e-9, max_steps: int = 100_000,
                    max_phases: int = 2000, settings: rigid.Settings | None = None,
-                   verbose: bool = False) -> RigidTrajectory:
+                   verbose: bool = False, rope: str = "elastic") -> RigidTrajectory:
     """Simulate a lift with the rigid-body-on-rigid-ground model (paper §2) from rest at t = 0 to `t1`.
 
     Not differentiable and not vmappable (the phase sequence is decided on the host).
@@ -609,6 +803,13 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
     - `rtol`, `atol`, `max_steps`: Tsit5 settings of each phase; `max_phases`: guard against Zeno sequences.
     - `settings`: `physics.rigid.Settings` (Baumgarte β, slip blend velocity, pseudo-inverse cut-off).
     - `verbose`: print each phase as it ends.
+    - `rope`: "elastic" (the rope law (2.14), default) or "inextensible" (the constraint (2.15) with the
+      boom-tip motion (2.13): |AB| = l(t) while taut, tension S >= 0 solved with the contact forces; the
+      rope goes slack when S reaches 0 and snaps taut again with a plastic jerk when |AB| reaches l(t);
+      `rope.stiffness`, `rope.damping` and `rope.damping_onset` are not used). A hoist whose speed jumps
+      at t = 0 (`ConstantSpeedHoist`, `RampedHoist` with ramp_time 0) jerks the taut rope at the start:
+      the jerk's loss is booked in `impact_loss` (see docs/rigid-model.md, "Inextensible rope (2.15)");
+      `RampedHoist(v, ramp_time > 0)` starts without one.
 
     **Returns** a `RigidTrajectory` (with the phase log in `.phases`).
 
@@ -616,6 +817,8 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
     contact situations and solver failures.
     """
     require_x64()
+    if rope not in ROPE_MODELS:
+        raise ScenarioError(f"rope must be one of {', '.join(map(repr, ROPE_MODELS))}, got {rope!r}")
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()
@@ -636,6 +839,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
     y0, c = rigid.initial_state(scenario)
     drv = _Driver(scenario, c, settings, options, restitution, dict(_DEFAULT_TOL))
     drv.debug = verbose == "debug"
+    drv.inextensible = rope == "inextensible"
 
     n_t = ts.size
     filled = np.zeros(n_t, dtype=bool)
@@ -647,6 +851,18 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
     impact_total = 0.0
 
     t, y = 0.0, y0
+    if drv.inextensible:
+        # A taut inextensible rope and a hoist already running at t = 0+: the start is a rope jerk.
+        # The hoist speed just after the start (a jump at t = 0 may leave ds/dt(0) = 0 exactly).
+        t_plus = 1e-9
+        stretch, rate_error, _ = map(float, _rope_state(jnp.asarray(t_plus), y, scenario, c))
+        drv.rope_taut = stretch >= -drv.tol["z"] * drv.L  # rope.slack = 0: just taut
+        if drv.rope_taut and rate_error > drv.tol["v"] * drv.V:
+            try:
+                y, _, loss = _rope_jerk(drv, 0.0, y, t_rate=t_plus)
+            except _RopeWouldPush as err:
+                raise RigidContactError(str(err)) from None
+            impact_total += loss
     phase = drv.select(t, y, "start")
     while True:
         if len(records) >= max_phases:
@@ -676,8 +892,9 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
             saved_impact[k] = impact_total
             filled[k] = True
         modes = tuple(rigid.MODE_NAMES[int(m)] for m in _np(phase.contact))
+        rope_name = rigid.ROPE_NAMES[int(phase.rope)]
         if not bool(event) or t_end >= t1:
-            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), "t1", y_end))
+            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), "t1", y_end, rope_name))
             break
         g = drv.guards(t_end, y_end, phase) + _np(phase.guard_offset)
         # Fired: near zero now, and well below where the guard started (a guard that started at its small
@@ -692,9 +909,23 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         corners, cv, _ = drv.kin(t_end, y_end)
         striking = [k for k in fired if k < 4 and contact[k] == FREE and not bool(phase.rest)]
         hard = [i for i in striking if cv[i, 2] < -drv.tol["v"] * drv.V]
-        if hard:
+        if 11 in fired:
+            # The slack inextensible rope reaches its length: a jerk if it would stretch, then a new phase.
+            _, rate_error, _ = map(float, _rope_state(jnp.asarray(t_end), y_end, scenario, c))
             y_before = y_end
-            y_end, loss = drv.impact(t_end, y_end, hard)
+            drv.rope_taut = True
+            if rate_error > drv.tol["v"] * drv.V:
+                try:
+                    y_end, _, loss = _rope_jerk(drv, t_end, y_end)
+                except _RopeWouldPush as err:
+                    raise RigidContactError(str(err)) from None
+                impact_total += loss
+                end += f" rope-jerk ({loss:.4g} J)"
+            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name))
+            new = drv.select(t_end, y_end, "after the rope became taut", phase)
+        elif hard:
+            y_before = y_end
+            y_end, loss = drv.impact(t_end, y_end, hard, taut=int(phase.rope) == rigid.ROPE_TAUT)
             impact_total += loss
             end += f" impact:{''.join(rigid.CORNERS[i] for i in hard)} ({loss:.4g} J)"
             # Settling: if every corner on the ground leaves the impact slower than rest_velocity, the
@@ -711,10 +942,10 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
                     y_end, loss = drv._project(t_end, y_end, np.zeros(4, dtype=bool), near)
                     impact_total += loss
                 end += " settled"
-            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before))
+            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name))
             new = drv.select(t_end, y_end, "after impact")
         else:
-            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_end))
+            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_end, rope_name))
             new = _transition(drv, t_end, y_end, phase, fired, ts)
         if verbose:
             print(records[-1], f"[{drv.accepted} steps so far]", flush=True)
@@ -726,7 +957,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
     states = jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.stack(xs)), *saved_states)
     # Outputs: one vmapped evaluation with every sample's own phase (rest phases included).
     batch = jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.stack(xs)), *[phases[i] for i in saved_phase])
-    out = _outputs(jnp.asarray(ts), states, scenario, c, batch, settings)
+    out = _outputs(jnp.asarray(ts), states, scenario, c, batch, settings, drv.inextensible)
     euler = out.euler.at[:, :2].set(jnp.unwrap(out.euler[:, :2], axis=0))
     return RigidTrajectory(
         ts=jnp.asarray(ts), position=states.position, velocity=states.velocity, euler=euler,
@@ -757,7 +988,7 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
         for i in grown:
             start[i] = False
         return rigid.make_phase(contact, rest=False, slip_hint=hint, starting=start,
-                                free_on_ground=_np(phase.free_on_ground))
+                                free_on_ground=_np(phase.free_on_ground), rope=int(phase.rope))
     where = f"after {','.join(rigid.GUARD_NAMES[k] for k in fired)}"
     # A slip that died out: choose at the event itself (the corner is now resting).
     if any(speed[i] < 1.5 * drv.v_stop for i in tangential):

@@ -19,7 +19,7 @@ from ..physics.elastic import Constants, State, snapshot, vector_field
 from ..physics.energy import Energy
 from ..physics.equilibrium import initial_state
 from ..physics.params import Scenario
-from .rigid_solve import RigidTrajectory, simulate_rigid
+from .rigid_solve import ROPE_MODELS, RigidTrajectory, simulate_rigid
 
 
 class Trajectory(eqx.Module):
@@ -235,6 +235,7 @@ def simulate(
     fixed_step: bool = False,
     throw: bool = True,
     model: str = "elastic",
+    rope: str = "elastic",
 ) -> Trajectory | RigidTrajectory:
     """Simulate a lift with the elastic-foundation model (paper §3) from rest at t = 0 to `t1`.
 
@@ -251,6 +252,8 @@ def simulate(
       reference `numerics.rigid_solve.simulate_rigid`: host-side phase loop, not differentiable or
       vmappable; only `t1`, `ts`, `n_save`, `rtol`, `atol`, `max_steps` apply, and it returns a
       `RigidTrajectory` with the same output names plus `impact_loss` and the phase log).
+    - `rope`: "elastic" (eq. 2.14, both models) or "inextensible" (eq. 2.15, a constraint with the boom
+      tip's motion; `model="rigid"` only, see `simulate_rigid`).
 
     **Returns** a `Trajectory`.
 
@@ -260,10 +263,19 @@ def simulate(
     require_x64()
     if model not in ("elastic", "rigid"):
         raise ScenarioError(f"model must be 'elastic' or 'rigid', got {model!r}")
+    if rope not in ROPE_MODELS:
+        raise ScenarioError(f"rope must be one of {', '.join(map(repr, ROPE_MODELS))}, got {rope!r}")
+    if model == "elastic" and rope != "elastic":
+        raise ScenarioError(
+            f"rope={rope!r} is available with model='rigid' only (the elastic-foundation model of §3 has "
+            "the elastic rope (2.14)); use model='rigid' or rope='elastic'"
+        )
     if model == "rigid":
         if solver is not None or fixed_step or dt0 is not None or adjoint != "reverse":
-            raise ScenarioError("model='rigid' takes only t1, ts, n_save, rtol, atol and max_steps")
-        return simulate_rigid(scenario, t1, ts=ts, n_save=n_save, rtol=rtol, atol=atol, max_steps=max_steps)
+            raise ScenarioError("model='rigid' takes only t1, ts, n_save, rtol, atol, max_steps and rope")
+        return simulate_rigid(
+            scenario, t1, ts=ts, n_save=n_save, rtol=rtol, atol=atol, max_steps=max_steps, rope=rope
+        )
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()

@@ -26,7 +26,9 @@ along its sliding direction reaching 0 (stop or turn), and for rest: R leaving t
 `numerics.rigid_solve`.
 
 The state is `elastic.State` (with an empty friction state, shape (4, 0)); the rope (2.14) and the boom
-(2.13) are the force laws of `forces`. All functions are pure JAX.
+(2.13) are the force laws of `forces`. With `inextensible=True` the rope is instead the constraint (2.15)
+|AB| = l(t) (taut or slack by `Phase.rope`): a taut rope's tension joins the contact forces as an unknown,
+and the boom tip's acceleration joins the constrained accelerations. All functions are pure JAX.
 """
 
 from __future__ import annotations
@@ -45,10 +47,14 @@ from .params import Scenario
 FREE, SLIDE, STICK = 0, 1, 2
 MODE_NAMES = {FREE: "free", SLIDE: "slide", STICK: "stick"}
 CORNERS = ("D", "E", "F", "H")
-#: Guards: 0-3 normal/touch-down per corner, 4-7 stick/slide per corner, 8 rest tip/lift, 9 rest slip.
-N_GUARDS = 10
+#: Rope modes (`Phase.rope`): the elastic rope (2.14), or the inextensible rope (2.15), taut or slack.
+ROPE_ELASTIC, ROPE_TAUT, ROPE_SLACK = 0, 1, 2
+ROPE_NAMES = {ROPE_ELASTIC: "elastic", ROPE_TAUT: "taut", ROPE_SLACK: "slack"}
+#: Guards: 0-3 normal/touch-down per corner, 4-7 stick/slide per corner, 8 rest tip/lift, 9 rest slip,
+#: 10 the inextensible rope's tension (taut), 11 its length reaching l(t) (slack).
+N_GUARDS = 12
 GUARD_NAMES = tuple([f"normal:{c}" for c in CORNERS] + [f"tangential:{c}" for c in CORNERS]
-                    + ["rest:tip", "rest:slip"])
+                    + ["rest:tip", "rest:slip", "rope:slack", "rope:taut"])
 
 
 class Phase(eqx.Module):
@@ -66,22 +72,28 @@ class Phase(eqx.Module):
     - `free_on_ground`: per corner, a free corner lying on the ground while the other three carry the flat
       load: its guard watches the load the linear law (2.3) would give it (it takes load again when that
       becomes positive), instead of its height, which the other three keep at zero.
+    - `rope`: the rope mode, an integer scalar: `ROPE_ELASTIC` (0, the rope law (2.14)), `ROPE_TAUT` (1, the
+      inextensible rope (2.15) as a constraint |AB| = l(t) with unknown tension S >= 0) or `ROPE_SLACK`
+      (2, inextensible and slack: S = 0, |AB| < l(t)). The rope *model* itself is the static `inextensible`
+      argument of `contact_dynamics`, `raw_guards` and the solve's `args` (elastic: this field is unused).
     """
 
     contact: Int[Array, "4"]
     slip_hint: Float[Array, "4 2"]
-    guard_offset: Float[Array, "10"]
+    guard_offset: Float[Array, "12"]
     starting: Bool[Array, "4"]
     free_on_ground: Bool[Array, "4"]
     rest: Bool[Array, ""]
+    rope: Int[Array, ""]
 
 
 def make_phase(contact, rest=False, slip_hint=None, guard_offset=None, starting=None,
-               free_on_ground=None) -> Phase:
+               free_on_ground=None, rope=ROPE_ELASTIC) -> Phase:
     """Build a `Phase` from Python values (host side)."""
     return Phase(
         contact=jnp.asarray(contact, dtype=jnp.int32),
         rest=jnp.asarray(bool(rest)),
+        rope=jnp.asarray(rope, dtype=jnp.int32),
         slip_hint=jnp.zeros((4, 2)) if slip_hint is None else jnp.asarray(slip_hint, dtype=jnp.float64),
         guard_offset=jnp.zeros(N_GUARDS) if guard_offset is None else jnp.asarray(guard_offset, jnp.float64),
         starting=jnp.zeros(4, dtype=bool) if starting is None else jnp.asarray(starting, dtype=bool),
@@ -167,8 +179,14 @@ class Loads(eqx.Module):
     - `jacobians`: B_i (4, 3, 6) with v_i = B_i (v_C, ω_body); `bias`: R(ω×(ω×ρ_i)) [m/s²], the part of
       the corner acceleration not proportional to (dv_C/dt, dω/dt).
     - `generalised_force`: (F, M - ω×Jω) with F world [N] and M about C in body axes [N m]: rope + weight.
-    - rope (2.14): `rope_point` B, `rope_tension` S, `rope_direction` (B -> A), `stretch`, `hoist_rate`,
-      `rope_loss` [W]; boom (2.13): `boom_force` on the tip [N], `boom_loss` [W].
+    - rope (2.14): `rope_point` B, `rope_tension` S, `rope_direction` (B -> A), `stretch` |AB| - l(t),
+      `hoist_rate` ds/dt, `rope_loss` [W], `rope_spring` its elastic energy [J]; boom (2.13): `boom_force`
+      on the tip [N], `boom_loss` [W]. For the inextensible rope (2.15) S, the loss and the energy are 0
+      here: the tension is a constraint force, solved with the contact forces.
+    - the inextensible rope's kinematics: `rope_generalised` (6), the generalised force of a unit pull at
+      B towards A (e, ρ_B × Rᵀe); `rope_jacobian` J_B (3, 6) and `rope_bias` R(ω×(ω×ρ_B)) of B;
+      `rope_rate_error` d|AB|/dt - dl/dt [m/s]; `rope_curvature` (|v_A - v_B|² - (d|AB|/dt)²)/|AB| [m/s²]
+      (d²|AB|/dt² = e·(a_A - a_B) + this); `hoist_accel` d²s/dt² [m/s²].
     """
 
     rotation: Rot33
@@ -183,12 +201,21 @@ class Loads(eqx.Module):
     stretch: Scalar
     hoist_rate: Scalar
     rope_loss: Scalar
+    rope_spring: Scalar
     boom_force: Vec3
     boom_loss: Scalar
+    rope_generalised: Float[Array, "6"]
+    rope_jacobian: Float[Array, "3 6"]
+    rope_bias: Vec3
+    rope_rate_error: Scalar
+    rope_curvature: Scalar
+    hoist_accel: Scalar
 
 
-def loads(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Loads:
-    """Kinematics, rope, boom and weight at (t, y)."""
+def loads(t: Scalar, y: State, scenario: Scenario, c: Constants, inextensible: bool = False) -> Loads:
+    """Kinematics, rope, boom and weight at (t, y). With `inextensible` (a Python bool) the rope carries
+    no force here (its tension is a constraint force, see `contact_dynamics`) and the rope's kinematics
+    fields are filled (`inextensible_loads`); for the elastic rope they are 0 (unused)."""
     load, boom = scenario.load, scenario.boom
     R = kinematics.quat_to_matrix(y.quaternion)
     omega = y.angular_velocity
@@ -207,10 +234,68 @@ def loads(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Loads:
     z_hat = jnp.array([0.0, 0.0, 1.0])
     force = F_rope - load.mass * scenario.gravity * z_hat
     moment = jnp.cross(c.attachment_rel, R.T @ F_rope) - jnp.cross(omega, c.inertia @ omega)
-    return Loads(rotation=R, corners=corners, corner_velocity=corner_vel, jacobians=jac, bias=bias,
-                 generalised_force=jnp.concatenate([force, moment]), rope_point=B, rope_tension=S,
-                 rope_direction=e, stretch=stretch, hoist_rate=s_dot, rope_loss=rope_loss, boom_force=F_boom,
-                 boom_loss=boom_loss)
+    zero = jnp.zeros_like(stretch)
+    ld = Loads(rotation=R, corners=corners, corner_velocity=corner_vel, jacobians=jac, bias=bias,
+               generalised_force=jnp.concatenate([force, moment]), rope_point=B, rope_tension=S,
+               rope_direction=e, stretch=stretch, hoist_rate=s_dot, rope_loss=rope_loss,
+               rope_spring=0.5 * scenario.rope.stiffness * jnp.maximum(stretch, 0.0) ** 2, boom_force=F_boom,
+               boom_loss=boom_loss, rope_generalised=jnp.zeros(6), rope_jacobian=jnp.zeros((3, 6)),
+               rope_bias=jnp.zeros(3), rope_rate_error=zero, rope_curvature=zero, hoist_accel=zero)
+    return inextensible_loads(t, y, ld, scenario, c) if inextensible else ld
+
+
+def inextensible_loads(t: Scalar, y: State, ld: Loads, scenario: Scenario, c: Constants) -> Loads:
+    """The elastic rope's `ld` turned into the inextensible rope's: no rope force, loss or energy (the
+    tension is a constraint force), and the kinematics of |AB| for the constraint (2.15)."""
+    R, omega, e = ld.rotation, y.angular_velocity, ld.rope_direction
+    zero = jnp.zeros_like(ld.stretch)
+    force = -scenario.load.mass * scenario.gravity * jnp.array([0.0, 0.0, 1.0])
+    moment = -jnp.cross(omega, c.inertia @ omega)
+    rho_B = c.attachment_rel
+    v_rel = y.tip_velocity - (y.velocity + R @ jnp.cross(omega, rho_B))
+    L = forces.safe_norm(y.tip_position - ld.rope_point)
+    L_dot = jnp.dot(v_rel, e)
+    return eqx.tree_at(
+        lambda x: (x.generalised_force, x.rope_tension, x.rope_loss, x.rope_spring, x.rope_generalised,
+                   x.rope_jacobian, x.rope_bias, x.rope_rate_error, x.rope_curvature, x.hoist_accel),
+        ld,
+        (jnp.concatenate([force, moment]), zero, zero, zero, jnp.concatenate([e, jnp.cross(rho_B, R.T @ e)]),
+         jnp.concatenate([jnp.eye(3), -R @ kinematics.skew(rho_B)], axis=1),
+         R @ jnp.cross(omega, jnp.cross(omega, rho_B)), L_dot + ld.hoist_rate,
+         (jnp.sum(v_rel**2) - L_dot**2) / jnp.maximum(L, 1e-12),
+         jax.jvp(scenario.hoist.rate, (t,), (jnp.ones_like(t),))[1]))
+
+
+def with_tension(ld: Loads, S: Scalar, taut) -> Loads:
+    """`ld` with the inextensible rope's constraint tension S [N] applied where `taut` (else unchanged,
+    exactly: `ld` of a taut rope carries S = 0)."""
+    return eqx.tree_at(lambda x: (x.rope_tension, x.generalised_force), ld,
+                       (jnp.where(taut, S, ld.rope_tension),
+                        jnp.where(taut, ld.generalised_force + S * ld.rope_generalised,
+                                  ld.generalised_force)))
+
+
+def rope_accel_target(ld: Loads, settings: Settings) -> Scalar:
+    """d²|AB|/dt² that the taut inextensible rope must have: l'' - 2β (d|AB|/dt - l') - β² (|AB| - l)
+    [m/s²] (Baumgarte stabilisation of the constraint (2.15), as for the contacts)."""
+    beta = settings.baumgarte
+    return -ld.hoist_accel - 2.0 * beta * ld.rope_rate_error - beta**2 * ld.stretch
+
+
+def _tip_free_accel(ld: Loads, scenario: Scenario) -> Vec3:
+    """Boom-tip acceleration (2.13) without the rope force (inextensible rope: S = 0 in `ld`)."""
+    g = scenario.gravity
+    return (ld.boom_force - ld.rope_tension * ld.rope_direction) / scenario.boom.tip_mass - g * jnp.array(
+        [0.0, 0.0, 1.0])
+
+
+def rest_rope_tension(ld: Loads, scenario: Scenario, settings: Settings) -> Scalar:
+    """Tension S [N] of the taut inextensible rope while the load is held fixed: the constraint then fixes
+    the tip's motion along the rope, e·a_A + curvature = target with m_0 a_A = boom force - S e - m_0 g."""
+    e = ld.rope_direction
+    m0 = scenario.boom.tip_mass
+    return m0 * (jnp.dot(e, _tip_free_accel(ld, scenario)) + ld.rope_curvature
+                 - rope_accel_target(ld, settings))
 
 
 def _mass_inverse(scenario: Scenario, c: Constants) -> Float[Array, "6 6"]:
@@ -270,33 +355,82 @@ def solve_contact_system(jacobians, Minv, P, s_rows, target, mass, rcond):
     return jnp.linalg.pinv(A, rtol=rcond) @ rhs
 
 
+def solve_rope_contact_system(jacobians, Minv, P, s_rows, target, g_rope, m0, rhs_rope, mass, rcond):
+    """`solve_contact_system` extended by the taut inextensible rope's force S along the generalised
+    direction `g_rope` (6) (a unit pull at B towards A) and one more row, the rope's:
+
+        corner rows:  B M⁻¹ (Bᵀ P λ + g S) = target;
+        rope row:     gᵀ M⁻¹ Bᵀ P λ + (gᵀ M⁻¹ g + 1/m_0) S = rhs_rope,
+
+    where rhs_rope is the rate at which the free motion (S = 0) would separate A from B beyond what the
+    rope allows (accelerations; or velocities for the rope jerk). Same treatment of redundant contacts.
+
+    **Returns** `(λ (12), S)`.
+    """
+    Bbig = jacobians.reshape(12, 6)
+    s = s_rows.reshape(12)
+    PB = _block_diag(P)
+    A_cc = s[:, None] * (Bbig @ Minv @ Bbig.T @ PB) + jnp.diag(1.0 - s)
+    A_cs = s * (Bbig @ Minv @ g_rope)
+    A_sc = g_rope @ Minv @ Bbig.T @ PB
+    A_ss = g_rope @ Minv @ g_rope + 1.0 / m0
+    A = jnp.concatenate([jnp.concatenate([A_cc, A_cs[:, None]], axis=1),
+                         jnp.concatenate([A_sc, A_ss[None]])[None, :]], axis=0)
+    rhs = jnp.concatenate([s * target.reshape(12), jnp.reshape(rhs_rope, (1,))])
+    four = jnp.all(s_rows[:, 2] > 0)
+    w_row = jnp.zeros(13).at[jnp.array([2, 5, 8, 11])].set(jnp.asarray(statics._W)) * four
+    A = jnp.concatenate([mass * A, w_row[None, :]], axis=0)
+    rhs = jnp.concatenate([mass * rhs, jnp.zeros(1)])
+    x = jnp.linalg.pinv(A, rtol=rcond) @ rhs
+    return x[:12], x[12]
+
+
 class ContactMatrices(eqx.Module):
     """The data of the contact problem at one instant, for host-side analysis (`numerics.rigid_solve`).
 
     - `mass`: M = diag(m I, J) (6, 6); `force`: generalised applied force (6) (see `Loads`);
     - `jacobians` B_i (4, 3, 6), `bias` (4, 3), `corner_velocity` (4, 3), `corners` (4, 3);
     - `target`: the Baumgarte-stabilised acceleration a constrained corner must have (4, 3).
+    - `rope_row`, `rope_rhs`: None, or with the taut inextensible rope: the coordinates are extended by the
+      boom tip's, (dv_C/dt, dω/dt, a_A) (9: `mass` diag(m I, J, m_0 I), `force` with the boom force and
+      the tip's weight, `jacobians` padded with zeros), and the rope is one more equality constraint
+      `rope_row`·(dv_C/dt, dω/dt, a_A) = `rope_rhs` (d²|AB|/dt² = its Baumgarte target).
     """
 
-    mass: Float[Array, "6 6"]
-    force: Float[Array, "6"]
-    jacobians: Float[Array, "4 3 6"]
+    mass: Float[Array, "n n"]
+    force: Float[Array, " n"]
+    jacobians: Float[Array, "4 3 n"]
     bias: CornerVecs
     corner_velocity: CornerVecs
     corners: CornerVecs
     target: CornerVecs
+    rope_row: Float[Array, " n"] | None = None
+    rope_rhs: Scalar | None = None
 
 
 def contact_matrices(t: Scalar, y: State, scenario: Scenario, c: Constants,
-                     settings: Settings) -> ContactMatrices:
-    ld = loads(t, y, scenario, c)
+                     settings: Settings, rope: int = ROPE_ELASTIC) -> ContactMatrices:
+    """The contact problem at (t, y) for the rope mode `rope` (a Python int: it sets the shapes)."""
+    ld = loads(t, y, scenario, c, inextensible=rope != ROPE_ELASTIC)
     m = scenario.load.mass
     z = jnp.zeros((3, 3))
     M = jnp.block([[m * jnp.eye(3), z], [z, c.inertia]])
     beta = settings.baumgarte
     target = -2.0 * beta * ld.corner_velocity - beta**2 * ld.corners[:, 2:3] * jnp.array([0.0, 0.0, 1.0])
-    return ContactMatrices(mass=M, force=ld.generalised_force, jacobians=ld.jacobians, bias=ld.bias,
-                           corner_velocity=ld.corner_velocity, corners=ld.corners, target=target)
+    if rope != ROPE_TAUT:
+        return ContactMatrices(mass=M, force=ld.generalised_force, jacobians=ld.jacobians, bias=ld.bias,
+                               corner_velocity=ld.corner_velocity, corners=ld.corners, target=target)
+    m0 = scenario.boom.tip_mass
+    e = ld.rope_direction
+    M9 = jnp.zeros((9, 9)).at[:6, :6].set(M).at[6:, 6:].set(m0 * jnp.eye(3))
+    f9 = jnp.concatenate([ld.generalised_force, m0 * _tip_free_accel(ld, scenario)])
+    jac9 = jnp.concatenate([ld.jacobians, jnp.zeros((4, 3, 3))], axis=2)
+    # d²|AB|/dt² = e·(a_A - J_B u̇ - bias_B) + curvature = target.
+    row = jnp.concatenate([-e @ ld.rope_jacobian, e])
+    rhs = rope_accel_target(ld, settings) - ld.rope_curvature + jnp.dot(e, ld.rope_bias)
+    return ContactMatrices(mass=M9, force=f9, jacobians=jac9, bias=ld.bias,
+                           corner_velocity=ld.corner_velocity, corners=ld.corners, target=target,
+                           rope_row=row, rope_rhs=rhs)
 
 
 class Contact(eqx.Module):
@@ -331,6 +465,17 @@ def rest_friction(ld: Loads, c: Constants, scenario: Scenario) -> Float[Array, "
     return -0.25 * F[None, :2] + alpha * jnp.stack([-d[:, 1], d[:, 0]], axis=1)
 
 
+def _rest_loads(ld: Loads, scenario: Scenario, phase: Phase, settings: Settings) -> Loads:
+    """`ld` of a load held fixed, with the taut inextensible rope's tension (if any) applied."""
+    taut = phase.rope == ROPE_TAUT
+    return with_tension(ld, rest_rope_tension(ld, scenario, settings), taut)
+
+
+def _rest_contact_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
+                       settings: Settings) -> Contact:
+    return _rest_contact(_rest_loads(ld, scenario, phase, settings), scenario, c, phase, settings)
+
+
 def _rest_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Contact:
     # Held fixed: zero acceleration; the corner loads of the linear law (2.3), made nonnegative.
     S_body = ld.rotation.T @ (ld.rope_tension * ld.rope_direction)
@@ -340,7 +485,14 @@ def _rest_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, set
                    slip_direction=jnp.zeros((4, 2)), loads=ld)
 
 
-def _motion_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Contact:
+def _motion_contact_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
+                         settings: Settings) -> Contact:
+    return jax.lax.cond(phase.rope == ROPE_TAUT, _motion_contact_taut, _motion_contact_free, ld, scenario, c,
+                        phase, settings)
+
+
+def _motion_contact_free(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
+                         settings: Settings) -> Contact:
     mu, m = scenario.foundation.friction_coefficient, scenario.load.mass
     Minv = _mass_inverse(scenario, c)
     tdir = slip_directions(ld.corner_velocity, phase.slip_hint, settings.slip_velocity)
@@ -356,18 +508,67 @@ def _motion_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, s
     return Contact(accel=accel, force=F, corner_accel=corner_accel, slip_direction=tdir, loads=ld)
 
 
+def _motion_contact_taut(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
+                         settings: Settings) -> Contact:
+    """The moving load with a taut inextensible rope: unknowns λ (12) and the tension S, from "constrained
+    corner accelerations vanish" (Baumgarte-stabilised) and d²|AB|/dt² = `rope_accel_target`, with the
+    boom tip's acceleration (2.13) m_0 a_A = boom force - S e - m_0 g."""
+    mu, m = scenario.foundation.friction_coefficient, scenario.load.mass
+    m0 = scenario.boom.tip_mass
+    Minv = _mass_inverse(scenario, c)
+    tdir = slip_directions(ld.corner_velocity, phase.slip_hint, settings.slip_velocity)
+    P, s_rows = _maps(phase.contact, tdir, mu)
+    beta = settings.baumgarte
+    z_only = jnp.array([0.0, 0.0, 1.0])
+    a_free = jnp.einsum("kij,j->ki", ld.jacobians, Minv @ ld.generalised_force) + ld.bias
+    a_target = -2.0 * beta * ld.corner_velocity - beta**2 * ld.corners[:, 2:3] * z_only
+    e = ld.rope_direction
+    a_B_free = ld.rope_jacobian @ (Minv @ ld.generalised_force) + ld.rope_bias
+    rhs_s = (jnp.dot(e, _tip_free_accel(ld, scenario)) - jnp.dot(e, a_B_free) + ld.rope_curvature
+             - rope_accel_target(ld, settings))
+    lam, S = solve_rope_contact_system(ld.jacobians, Minv, P, s_rows, a_target - a_free,
+                                       ld.rope_generalised, m0, rhs_s, m, settings.rcond)
+    ld = with_tension(ld, S, True)
+    F = jnp.einsum("kij,kj->ki", P, lam.reshape(4, 3))
+    accel = Minv @ (ld.generalised_force + jnp.einsum("kij,ki->j", ld.jacobians, F))
+    corner_accel = jnp.einsum("kij,j->ki", ld.jacobians, accel) + ld.bias
+    return Contact(accel=accel, force=F, corner_accel=corner_accel, slip_direction=tdir, loads=ld)
+
+
 def contact_dynamics(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
-                     settings: Settings) -> Contact:
-    """Contact forces and accelerations of the load in the contact configuration `phase`."""
+                     settings: Settings, inextensible: bool = False) -> Contact:
+    """Contact forces and accelerations of the load in the contact configuration `phase`. With
+    `inextensible` (a Python bool: the rope model, fixed for a whole solve) the rope is the constraint
+    (2.15), taut or slack by `phase.rope`, and a taut rope's tension is solved together with the contact
+    forces (`Contact.loads` carries it); without, the elastic rope (2.14)."""
     ld = loads(t, y, scenario, c)
-    return jax.lax.cond(phase.rest, _rest_contact, _motion_contact, ld, scenario, c, phase, settings)
+    if inextensible:
+        return _contact_rope(t, y, ld, scenario, c, phase, settings)
+    return _contact_elastic(t, y, ld, scenario, c, phase, settings)
+
+
+def _contact_elastic(t, y, ld, scenario, c, phase, settings) -> Contact:
+    return jax.lax.cond(phase.rest, _rest_contact, _motion_contact_free, ld, scenario, c, phase, settings)
+
+
+def _contact_rope(t, y, ld, scenario, c, phase, settings) -> Contact:
+    ld = inextensible_loads(t, y, ld, scenario, c)
+    return jax.lax.cond(phase.rest, _rest_contact_rope, _motion_contact_rope, ld, scenario, c, phase,
+                        settings)
+
+
+def _unpack(args):
+    """`args = (scenario, constants, phase, settings[, inextensible])` -> the five, inextensible a bool."""
+    scenario, c, phase, settings, *rest = args
+    return scenario, c, phase, settings, bool(rest[0]) if rest else False
 
 
 def vector_field(t: Scalar, y: State, args) -> State:
-    """dy/dt of the rigid model in the phase `args = (scenario, constants, phase, settings)`."""
-    scenario, c, phase, settings = args
+    """dy/dt of the rigid model in the phase `args = (scenario, constants, phase, settings[, inextensible])`
+    (`inextensible`: a Python bool, the rope model of the solve, default False: the elastic rope)."""
+    scenario, c, phase, settings, inextensible = _unpack(args)
     boom, g = scenario.boom, scenario.gravity
-    ct = contact_dynamics(t, y, scenario, c, phase, settings)
+    ct = contact_dynamics(t, y, scenario, c, phase, settings, inextensible)
     ld = ct.loads
     moving = jnp.logical_not(phase.rest)  # a resting load is held fixed: only the boom tip moves
     body = dict(position=jnp.where(moving, y.velocity, 0.0), velocity=ct.accel[:3],
@@ -393,11 +594,25 @@ def rest_conditions(ld: Loads, scenario: Scenario, c: Constants):
 
 
 def raw_guards(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
-               settings: Settings) -> Float[Array, "10"]:
+               settings: Settings, inextensible: bool = False) -> Float[Array, "12"]:
     """The guards of `phase` without offsets, dimensionless (forces / G, heights / L, speeds / V); the
-    phase is valid while all are > 0. Guards that do not apply (to a corner's mode, or to rest) are +1."""
-    ld = loads(t, y, scenario, c)
-    return jax.lax.cond(phase.rest, _rest_guards, _motion_guards, ld, scenario, c, phase, settings)
+    phase is valid while all are > 0. Guards that do not apply (to a corner's mode, or to rest, or to the
+    rope model and mode) are +1. `inextensible`: the rope model (see `contact_dynamics`)."""
+    ld = loads(t, y, scenario, c, inextensible=inextensible)
+    if inextensible:
+        return jax.lax.cond(phase.rest, _rest_guards_rope, _motion_guards_rope, ld, scenario, c, phase,
+                            settings)
+    g = jax.lax.cond(phase.rest, _rest_guards, _motion_guards, ld, scenario, c, phase, settings)
+    return jnp.concatenate([g, jnp.ones(2)])
+
+
+def _rope_guards(ld: Loads, scenario: Scenario, phase: Phase) -> Float[Array, "2"]:
+    """The inextensible rope: while taut, its tension S / G (it goes slack at 0); while slack,
+    (l(t) - |AB|) / L (it becomes taut again at 0). +1 otherwise."""
+    sc = scales(scenario)
+    slack = jnp.where(phase.rope == ROPE_TAUT, ld.rope_tension / sc.force, 1.0)
+    taut = jnp.where(phase.rope == ROPE_SLACK, -ld.stretch / sc.length, 1.0)
+    return jnp.stack([slack, taut])
 
 
 def _rest_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
@@ -405,9 +620,21 @@ def _rest_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, sett
     return jnp.concatenate([jnp.ones(8), jnp.stack([tip, 1.0 - rho])])
 
 
-def _motion_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
+def _rest_guards_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
+    ld = _rest_loads(ld, scenario, phase, settings)
+    g = _rest_guards(ld, scenario, c, phase, settings)
+    return jnp.concatenate([g, _rope_guards(ld, scenario, phase)])
+
+
+def _motion_guards_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
+    ct = _motion_contact_rope(ld, scenario, c, phase, settings)
+    g = _motion_guards(ld, scenario, c, phase, settings, ct)
+    return jnp.concatenate([g, _rope_guards(ct.loads, scenario, phase)])
+
+
+def _motion_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings, ct=None):
     sc = scales(scenario)
-    ct = _motion_contact(ld, scenario, c, phase, settings)
+    ct = _motion_contact_free(ld, scenario, c, phase, settings) if ct is None else ct
     ld = ct.loads
     mu = scenario.foundation.friction_coefficient
     N = ct.force[:, 2]
@@ -435,8 +662,8 @@ def _motion_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, se
 
 def event_condition(t, y, args, **kwargs) -> Scalar:
     """min over the guards (+ offsets): > 0 while the phase is valid; its zero ends the phase."""
-    scenario, c, phase, settings = args
-    return jnp.min(raw_guards(t, y, scenario, c, phase, settings) + phase.guard_offset)
+    scenario, c, phase, settings, inextensible = _unpack(args)
+    return jnp.min(raw_guards(t, y, scenario, c, phase, settings, inextensible) + phase.guard_offset)
 
 
 # ------------------------------------------------------------------------------------------ impacts
@@ -467,6 +694,32 @@ def impulse_response(y: State, scenario: Scenario, c: Constants, modes: Int[Arra
     return u1[:3], u1[3:], imp, jnp.einsum("kij,j->ki", jac, u1)
 
 
+def rope_impulse_response(t: Scalar, y: State, scenario: Scenario, c: Constants, modes: Int[Array, "4"],
+                          slip_dirs: Float[Array, "4 2"], normal_target: PerCorner, rcond) -> tuple:
+    """The jerk of the inextensible rope: a plastic impulse P >= 0 along the rope that sets the rate
+    d|AB|/dt to the hoist's dl/dt = -ds/dt, shared by the boom tip (-P e) and the load (+P e at B), with
+    the corners in `modes` taking impulses as in `impulse_response` (post-jerk normal velocity
+    `normal_target`; sticking corners do not slip; sliding ones take -μ P_n along `slip_dirs`). The same
+    system serves a corner impact while the rope is taut (the rope keeps its rate).
+
+    **Returns** `(velocity, angular_velocity, tip_velocity, corner impulses (4, 3), P, corner_velocity_after
+    (4, 3))`.
+    """
+    ld = loads(t, y, scenario, c, inextensible=True)
+    Minv = _mass_inverse(scenario, c)
+    u = jnp.concatenate([y.velocity, y.angular_velocity])
+    v = jnp.einsum("kij,j->ki", ld.jacobians, u)
+    P, s_rows = _maps(modes, slip_dirs, scenario.foundation.friction_coefficient)
+    m0 = scenario.boom.tip_mass
+    target = jnp.concatenate([jnp.zeros((4, 2)), normal_target[:, None]], axis=1)
+    lam, P_rope = solve_rope_contact_system(ld.jacobians, Minv, P, s_rows, target - v, ld.rope_generalised,
+                                            m0, ld.rope_rate_error, scenario.load.mass, rcond)
+    imp = jnp.einsum("kij,kj->ki", P, lam.reshape(4, 3))
+    u1 = u + Minv @ (jnp.einsum("kij,ki->j", ld.jacobians, imp) + P_rope * ld.rope_generalised)
+    tip1 = y.tip_velocity - P_rope * ld.rope_direction / m0
+    return u1[:3], u1[3:], tip1, imp, P_rope, jnp.einsum("kij,j->ki", ld.jacobians, u1)
+
+
 # ------------------------------------------------------------------------------------------ outputs
 
 
@@ -479,13 +732,12 @@ def kinetic_energy(y: State, scenario: Scenario, c: Constants) -> Scalar:
 def energy(y: State, ld: Loads, scenario: Scenario, c: Constants) -> Energy:
     """Energy terms [J] (`ground_spring` is 0: the ground is rigid)."""
     load, boom, g = scenario.load, scenario.boom, scenario.gravity
-    stretch = jnp.maximum(ld.stretch, 0.0)
     dx = y.tip_position - c.tip_rest
     return Energy(
         kinetic=kinetic_energy(y, scenario, c) + 0.5 * boom.tip_mass * jnp.sum(y.tip_velocity**2),
         potential=g * (load.mass * y.position[2] + boom.tip_mass * y.tip_position[2]),
         ground_spring=jnp.zeros(()),
-        rope_spring=0.5 * scenario.rope.stiffness * stretch**2,
+        rope_spring=ld.rope_spring,
         boom_spring=0.5 * jnp.sum(boom.stiffness * dx**2),
     )
 
@@ -501,8 +753,9 @@ class Output(eqx.Module):
     euler: Float[Array, "3"]
 
 
-def output(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Output:
-    ct = contact_dynamics(t, y, scenario, c, phase, settings)
+def output(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase, settings: Settings,
+           inextensible: bool = False) -> Output:
+    ct = contact_dynamics(t, y, scenario, c, phase, settings, inextensible)
     ld = ct.loads
     return Output(corners=ld.corners, normal=ct.force[:, 2],
                   friction=ct.force.at[:, 2].set(0.0), rope_tension=ld.rope_tension,
