@@ -788,7 +788,7 @@ _DEFAULT_TOL = dict(
 
 
 def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_save: int = 501,
-                   restitution: float = 0.0, rtol: float = 1e-8, atol: float = 1e-9, max_steps: int = 100_000,
+                   restitution: float = 0.0, rtol: float = 1e-8, atol: float = 1e-9, max_steps: int = 200_000,
                    max_phases: int = 2000, settings: rigid.Settings | None = None,
                    verbose: bool = False, rope: str = "elastic") -> RigidTrajectory:
     """Simulate a lift with the rigid-body-on-rigid-ground model (paper §2) from rest at t = 0 to `t1`.
