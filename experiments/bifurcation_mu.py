@@ -3,15 +3,19 @@
 1. scan μ over [0.1, 0.6] (4000 points; resumable: the chunks go to DIR/scan) and record final position
    and Euler angles, maximum tilt, lift-off time, the corner that leaves first and the impact count;
 2. find candidate jumps of the final yaw ψ (and the other observables) on the grid;
-3. refine the largest ones to |Δμ| <= 1e-6 (multisection: 16 μ per vmapped round);
-4. plot every observable against μ with the located μ* marked, a zoom around each μ*, and the time
-   histories x, y, φ, ϑ, ψ for μ values just below and just above a located μ* (Figs 10-12 analogue);
+3. refine every candidate jump of ψ to |Δμ| <= 1e-6 (value-only bisection by default; --method
+   multisection solves 16 μ per vmapped round);
+4. plot every observable against μ with the located μ* marked, a zoom around each of the largest `--detail`
+   jumps, and the time histories x, y, φ, ϑ, ψ for μ values just below and just above its μ* (Figs 10-12
+   analogue);
 5. continue the first μ* along the hoist speed v_l (the two-parameter boundary μ*(v_l), by continuation).
 
     python experiments/bifurcation_mu.py --out out/bifurcation-mu            # full: 4000 μ over 25 s
     python experiments/bifurcation_mu.py --out out/bifurcation-mu --quick    # 48 μ over 4 s, tol 1e-4
 
-Writes DIR/bifurcation_mu.json (jumps, located μ*, solves used vs a uniform grid, timings) and PNGs.
+Writes DIR/bifurcation_mu.json (jumps, located μ*, solves used vs a uniform grid, timings; rewritten after
+every stage, so an interrupted run leaves what it had) and PNGs. The scan resumes from its chunks if the
+command is rerun.
 """
 
 from __future__ import annotations
@@ -72,7 +76,19 @@ def main(argv=None):
         "--tol", type=float, default=None, help="|Δμ| of the located μ* (default 1e-6; quick 1e-4)"
     )
     p.add_argument(
-        "--jumps", type=int, default=None, help="how many jumps of ψ to refine (default 3; quick 1)"
+        "--jumps",
+        type=int,
+        default=None,
+        help="how many jumps of ψ to refine, largest first (default: every candidate; quick 1)",
+    )
+    p.add_argument(
+        "--detail", type=int, default=3, help="zooms and histories for the largest N located jumps (3)"
+    )
+    p.add_argument(
+        "--method",
+        choices=("bisection", "multisection", "newton"),
+        default="bisection",
+        help="locator (default bisection: ~log2(Δμ/tol)+2 value-only solves per jump)",
     )
     p.add_argument("--lanes", type=int, default=16)
     p.add_argument(
@@ -89,7 +105,8 @@ def main(argv=None):
     t1 = args.t1 or (4.0 if q else 25.0)
     n_save = args.n_save or (101 if q else 251)
     tol = args.tol or (1e-4 if q else 1e-6)
-    n_jumps = args.jumps if args.jumps is not None else (1 if q else 3)
+    n_jumps = args.jumps if args.jumps is not None else (1 if q else None)
+    wall_start = time.perf_counter()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sc = jh.load_scenario("paper-4.2")
@@ -102,7 +119,14 @@ def main(argv=None):
         "tol": tol,
         "quick": q,
         "command": [sys.executable, *sys.argv],
+        "devices": [str(d) for d in jax.devices()],
     }
+    path = out / "bifurcation_mu.json"
+
+    def write(stage):
+        rec["stage"] = stage
+        rec["wall_total_s"] = time.perf_counter() - wall_start
+        path.write_text(json.dumps(rec, indent=1, default=float) + "\n")
 
     # 1. the scan
     mus = np.linspace(0.1, 0.6, n)
@@ -131,6 +155,8 @@ def main(argv=None):
         flush=True,
     )
 
+    write("scan")
+
     # 2. candidate jumps
     jumps = {name: find_jumps(res, name) for name in OBSERVABLES}
     rec["candidate_jumps"] = {k: [vars(j) for j in v] for k, v in jumps.items()}
@@ -140,7 +166,9 @@ def main(argv=None):
     # 3. refine the largest jumps of the final yaw ψ
     psi_jumps = sorted(jumps["final_psi"], key=lambda j: -abs(j.size))[:n_jumps]
     located = []
-    for j in psi_jumps:
+    not_refined = []
+    t0 = time.perf_counter()
+    for k, j in enumerate(psi_jumps):
         try:
             b = locate_bifurcation(
                 sc,
@@ -148,7 +176,7 @@ def main(argv=None):
                 "final_psi",
                 (j.lo, j.hi),
                 tol=tol,
-                method="multisection",
+                method=args.method,
                 points_per_round=16,
                 lanes=16,
                 t1=t1,
@@ -156,10 +184,27 @@ def main(argv=None):
             )
         except BifurcationError as e:
             print(f"  jump at μ in [{j.lo:.6f}, {j.hi:.6f}]: not refined ({e})", flush=True)
+            not_refined.append({"lo": j.lo, "hi": j.hi, "size": j.size, "reason": str(e)})
             continue
         located.append(b)
-        print("  " + b.summary(), flush=True)
+        print(f"  [{k + 1}/{len(psi_jumps)}] " + b.summary(), flush=True)
+        if (k + 1) % 5 == 0:
+            rec["located"] = [b.to_dict() for b in located]
+            write(f"locate {k + 1}/{len(psi_jumps)}")
     rec["located"] = [b.to_dict() for b in located]
+    rec["not_refined"] = not_refined
+    rec["locate_summary"] = {
+        "n_candidates": len(jumps["final_psi"]),
+        "n_refined": len(psi_jumps),
+        "n_located": len(located),
+        "n_jump": sum(b.kind == "jump" for b in located),
+        "n_crossing": sum(b.kind == "crossing" for b in located),
+        "solves": int(sum(b.n_solves for b in located)),
+        "uniform_grid_solves": int(sum(b.n_uniform for b in located)),
+        "wall_s": time.perf_counter() - t0,
+    }
+    print(f"  locate: {rec['locate_summary']}", flush=True)
+    write("located")
 
     # 4a. observables against μ, with the located μ* marked
     fig, axes = plt.subplots(3, 3, figsize=(13, 9), sharex=True)
@@ -182,7 +227,9 @@ def main(argv=None):
     plt.close(fig)
 
     # 4b. zoom around each μ* and 4c. histories across it (Figs 10-12 analogue)
-    for i, b in enumerate(located):
+    detail = sorted(located, key=lambda b: -abs(_initial_change(b)))[: args.detail]
+    rec["detail"] = [b.value for b in detail]
+    for i, b in enumerate(detail):
         lo, hi = b.bracket
         half = max(50 * tol, 20 * (hi - lo))
         zoom = scan(
@@ -287,9 +334,17 @@ def main(argv=None):
         fig.savefig(out / "boundary_mu_vl.png", dpi=110)
         plt.close(fig)
 
-    path = out / "bifurcation_mu.json"
-    path.write_text(json.dumps(rec, indent=1, default=float) + "\n")
-    print(f"wrote {path} and PNGs in {out}")
+    write("done")
+    print(f"wrote {path} and PNGs in {out} ({rec['wall_total_s']:.0f} s in all)")
+
+
+def _initial_change(b) -> float:
+    """Change of the observable across the bracket the locator started from (its first two evaluations)."""
+    h = b.history
+    if b.method == "multisection":
+        ends = [x for x in h if x[3] == "multisection"][:16]
+        return float(ends[-1][1] - ends[0][1]) if ends else 0.0
+    return float(h[1][1] - h[0][1]) if len(h) >= 2 else 0.0
 
 
 if __name__ == "__main__":
