@@ -22,8 +22,11 @@ forward-mode slopes.
    every ε;
 3. a check of each final bracket: E's first detachment time at its two ends (inf within t1 below μ*, ~0.25 s
    above) and the time of E's closest approach to lift-off (varies smoothly with ε);
-4. fits μ*(ε) = μ0 + a ε (+ b ε²) over several subsets of the ε values and Richardson extrapolation of
-   the smallest pairs, with residuals: the ε -> 0 limit;
+4. the ε -> 0 limit: least-squares fits of μ*(ε) = μ0 + a ε (+ b ε²), μ0 + a ε + b ε ln ε and
+   μ0 + A ε^p over the 3, 4, 5 and all smallest ε, Richardson extrapolation of neighbouring pairs, with
+   residuals; the reported limit is the power law over the 5 smallest ε (it fits them to ~2e-7, i.e.
+   within the 1e-6 brackets; the polynomial fits leave residuals 100x larger), with the spread of the
+   models over the same points as its uncertainty;
 5. μ* for BristleFriction (deflection δ = 1e-3 m, breakaway ratio 0.5, relaxation time 0.01 s: the
    defaults) and by continuation along δ = 1e-3 ... 1e-4 m;
 6. an accuracy check at the preset ε = 1e-3: rtol 1e-10 and twice as many saved times;
@@ -31,6 +34,7 @@ forward-mode slopes.
 
     python experiments/bifurcation_eps.py --out out/bifurcation-eps            # ~10 min on 2 shared cores
     python experiments/bifurcation_eps.py --out out/bifurcation-eps --quick    # 3 ε, 1 δ, no checks
+    python experiments/bifurcation_eps.py --out out/bifurcation-eps --refit    # fits + plot from the JSON
 
 Writes DIR/bifurcation_eps.json (every number) and DIR/mu_star_vs_eps.png, DIR/contact_E_across_mu_star.png.
 """
@@ -114,6 +118,144 @@ def _fit(eps, mu, deg):
     }
 
 
+def _fit_power(eps, mu):
+    """Least-squares μ*(ε) = μ0 + A ε^p: linear in (μ0, A) for each p on a grid (step 5e-4) over [0.2, 2]."""
+    eps, mu = np.asarray(eps), np.asarray(mu)
+    best = None
+    for pw in np.arange(0.2, 2.0, 5e-4):
+        A = np.stack([np.ones_like(eps), eps**pw], axis=1)
+        coef, *_ = np.linalg.lstsq(A, mu, rcond=None)
+        res = mu - A @ coef
+        if best is None or np.sum(res**2) < best[0]:
+            best = (float(np.sum(res**2)), float(pw), coef, res)
+    _, pw, coef, res = best
+    return {
+        "model": "mu0 + A eps^p",
+        "eps_used": eps.tolist(),
+        "mu0": float(coef[0]),
+        "A": float(coef[1]),
+        "p": pw,
+        "residuals": res.tolist(),
+        "max_abs_residual": float(np.max(np.abs(res))),
+        "rms_residual": float(np.sqrt(np.mean(res**2))),
+        "dof": len(eps) - 3,
+    }
+
+
+def _fit_elog(eps, mu):
+    """Least-squares μ*(ε) = μ0 + a ε + b ε ln ε."""
+    eps, mu = np.asarray(eps), np.asarray(mu)
+    A = np.stack([np.ones_like(eps), eps, eps * np.log(eps)], axis=1)
+    coef, *_ = np.linalg.lstsq(A, mu, rcond=None)
+    res = mu - A @ coef
+    return {
+        "model": "mu0 + a eps + b eps ln eps",
+        "eps_used": eps.tolist(),
+        "mu0": float(coef[0]),
+        "coefficients": coef.tolist(),
+        "residuals": res.tolist(),
+        "max_abs_residual": float(np.max(np.abs(res))),
+        "rms_residual": float(np.sqrt(np.mean(res**2))),
+        "dof": len(eps) - 3,
+    }
+
+
+def _model(f, e):
+    e = np.asarray(e, dtype=np.float64)
+    if f.get("model") == "mu0 + A eps^p":
+        return f["mu0"] + f["A"] * e ** f["p"]
+    if f.get("model") == "mu0 + a eps + b eps ln eps":
+        c = f["coefficients"]
+        return c[0] + c[1] * e + c[2] * e * np.log(np.where(e > 0, e, 1.0))
+    return np.polyval(f["coefficients"][::-1], e)
+
+
+def _limit(rows, key="eps"):
+    """Fits of μ*(ε) over the smallest 3, 4, 5, ... ε values (`key`: "eps", or "deflection" for the bristle
+    law's δ), Richardson pairs, and the reported limit: the power law over the 5 smallest values (or all, if
+    fewer); the spread of the models over those points is `model_spread`."""
+    sym = "ε" if key == "eps" else "δ"
+    ok = sorted((r[key], r["mu_star"]) for r in rows if r["mu_star"] is not None)
+    e_ok, m_ok = np.array([x[0] for x in ok]), np.array([x[1] for x in ok])
+    fits = {}
+    for n_pts in sorted({3, 4, 5, len(e_ok)}):
+        if 2 <= n_pts <= len(e_ok):
+            fits[f"linear, {n_pts} smallest {sym}"] = _fit(e_ok[:n_pts], m_ok[:n_pts], 1)
+        if 3 <= n_pts <= len(e_ok):
+            fits[f"quadratic, {n_pts} smallest {sym}"] = _fit(e_ok[:n_pts], m_ok[:n_pts], 2)
+            fits[f"ε ln ε, {n_pts} smallest {sym}"] = _fit_elog(e_ok[:n_pts], m_ok[:n_pts])
+        if 4 <= n_pts <= len(e_ok):  # three parameters: fit only with at least one degree of freedom
+            fits[f"power law, {n_pts} smallest {sym}"] = _fit_power(e_ok[:n_pts], m_ok[:n_pts])
+    rich = []
+    for i in range(len(e_ok) - 1):  # linear extrapolation through neighbouring pairs (Richardson, order 1)
+        e1, e2, m1, m2 = e_ok[i], e_ok[i + 1], m_ok[i], m_ok[i + 1]
+        rich.append({"eps": [float(e1), float(e2)], "mu0": float(m1 - e1 * (m2 - m1) / (e2 - e1))})
+    k = min(5, len(e_ok))
+    reported = fits.get(f"power law, {k} smallest {sym}") or fits.get(f"quadratic, {k} smallest {sym}")
+    reported = reported or next(iter(fits.values()))
+    same_pts = [
+        f["mu0"]
+        for name, f in fits.items()
+        if name.endswith(f", {k} smallest {sym}") and "linear" not in name
+    ]
+    return {
+        "fits": fits,
+        "richardson_pairs": rich,
+        "reported": reported,
+        "reported_name": next(n for n, f in fits.items() if f is reported),
+        "model_spread": [min(same_pts), max(same_pts)] if same_pts else None,
+    }
+
+
+def _plot_eps(rec, out):
+    ok = sorted((r["eps"], r["mu_star"]) for r in rec["regularised"]["rows"] if r["mu_star"] is not None)
+    e_ok, m_ok = np.array([x[0] for x in ok]), np.array([x[1] for x in ok])
+    best, name = rec["limit"]["reported"], rec["limit"]["reported_name"]
+    fig, axes = plt.subplots(1, 3, figsize=(15, 4.4), sharey=True)
+    for ax, logx in zip(axes[:2], (False, True), strict=True):
+        ax.plot(e_ok, m_ok, "o", color="C0", label="regularised Coulomb: located μ*")
+        ee = np.geomspace(e_ok[0] / 3, e_ok.max(), 300) if logx else np.linspace(0.0, e_ok.max(), 300)
+        ax.plot(ee, _model(best, ee), "-", color="C0", lw=0.8, label=f"fit: {name}")
+        if not logx:
+            ax.plot([0.0], [best["mu0"]], "*", color="C3", ms=12, label=f"ε → 0: μ0 = {best['mu0']:.5f}")
+        else:
+            ax.axhline(best["mu0"], color="C3", lw=0.8, ls=":", label="ε → 0 limit")
+        for k, r in enumerate(rec["bristle"]["rows"]):
+            if r["mu_star"] is not None:
+                ax.axhline(
+                    r["mu_star"],
+                    color=f"C{2 + k}",
+                    ls="--",
+                    lw=0.8,
+                    label=f"bristle δ = {r['deflection']:g} m, r_b = {r['breakaway_ratio']:g}: "
+                    f"{r['mu_star']:.5f}",
+                )
+        ax.set_xlabel("regularisation velocity ε [m/s]")
+        ax.set_ylabel("μ* [-]")
+        if logx:
+            ax.set_xscale("log")
+    axes[0].legend(fontsize=7)
+    ax = axes[2]
+    brows = [r for r in rec["bristle"]["rows"] if r["mu_star"] is not None]
+    ds = np.array([r["deflection"] for r in brows])
+    ax.plot(ds, [r["mu_star"] for r in brows], "s", color="C2", label="bristle law: located μ*")
+    bl = rec["bristle"].get("limit")
+    if bl:
+        dd = np.geomspace(ds.min() / 3, ds.max(), 300)
+        ax.plot(dd, _model(bl["reported"], dd), "-", color="C2", lw=0.8, label=f"fit: {bl['reported_name']}")
+        ax.axhline(
+            bl["reported"]["mu0"], color="C2", ls=":", lw=0.8, label=f"δ → 0: {bl['reported']['mu0']:.5f}"
+        )
+    ax.axhline(best["mu0"], color="C3", ls=":", lw=0.8, label=f"regularised ε → 0: {best['mu0']:.5f}")
+    ax.set_xscale("log")
+    ax.set_xlabel("bristle deflection δ [m] (r_b = 0.5, τ = 0.01 s)")
+    ax.legend(fontsize=7)
+    fig.suptitle(f"{rec['scenario']}: μ* above which corner E hops off the ground at t ≈ 0.25 s")
+    fig.tight_layout()
+    fig.savefig(out / "mu_star_vs_eps.png", dpi=100)
+    plt.close(fig)
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True)
@@ -132,7 +274,26 @@ def main(argv=None):
     p.add_argument("--rtol", type=float, default=1e-8)
     p.add_argument("--atol", type=float, default=1e-10)
     p.add_argument("--method", choices=("newton", "bisection"), default="newton")
+    p.add_argument(
+        "--refit",
+        action="store_true",
+        help="no solves: recompute the ε -> 0 fits and mu_star_vs_eps.png from DIR/bifurcation_eps.json",
+    )
     args = p.parse_args(argv)
+    if args.refit:
+        path = Path(args.out) / "bifurcation_eps.json"
+        rec = json.loads(path.read_text())
+        rec["limit"] = _limit(rec["regularised"]["rows"])
+        rec["bristle"]["limit"] = _limit(rec["bristle"]["rows"], "deflection")
+        path.write_text(json.dumps(rec, indent=1, default=float) + "\n")
+        _plot_eps(rec, Path(args.out))
+        for k, f in rec["limit"]["fits"].items():
+            print(f"{k}: μ0 = {f['mu0']:.7f}, max |residual| {f['max_abs_residual']:.1e}")
+        print(f"reported: {rec['limit']['reported_name']}, μ0 = {rec['limit']['reported']['mu0']:.7f}")
+        bl = rec["bristle"].get("limit")
+        if bl:
+            print(f"bristle δ -> 0: {bl['reported_name']}, μ0 = {bl['reported']['mu0']:.7f}")
+        return
     q = args.quick
     eps_list = [
         float(x)
@@ -259,24 +420,11 @@ def main(argv=None):
     write("check")
 
     # 4. ε -> 0
-    e_ok = np.array([r["eps"] for r in ok])
-    m_ok = np.array([r["mu_star"] for r in ok])
-    order = np.argsort(e_ok)
-    e_ok, m_ok = e_ok[order], m_ok[order]
-    fits = {}
-    for n_pts in (3, 4, 5, len(e_ok)):
-        if n_pts <= len(e_ok) and n_pts >= 2:
-            fits[f"linear, {n_pts} smallest ε"] = _fit(e_ok[:n_pts], m_ok[:n_pts], 1)
-        if n_pts <= len(e_ok) and n_pts >= 3:
-            fits[f"quadratic, {n_pts} smallest ε"] = _fit(e_ok[:n_pts], m_ok[:n_pts], 2)
-    rich = []
-    for i in range(len(e_ok) - 1):  # linear extrapolation through neighbouring pairs (Richardson, order 1)
-        e1, e2, m1, m2 = e_ok[i], e_ok[i + 1], m_ok[i], m_ok[i + 1]
-        rich.append({"eps": [float(e1), float(e2)], "mu0": float(m1 - e1 * (m2 - m1) / (e2 - e1))})
-    rec["limit"] = {"fits": fits, "richardson_pairs": rich}
-    for k, f in fits.items():
+    rec["limit"] = _limit(rec["regularised"]["rows"])
+    for k, f in rec["limit"]["fits"].items():
         print(f"{k}: μ0 = {f['mu0']:.7f}, max |residual| {f['max_abs_residual']:.1e}", flush=True)
     write("limit")
+    m_ok = np.array(sorted((r["eps"], r["mu_star"]) for r in ok))[:, 1]
 
     # 5. the sticking law (bracket: the coarse scan's sign change, else around the regularised limit)
     sc_coarse = rec.get("coarse_scan", {}).get(f"bristle delta={delta_list[0]:g}", {}).get("sign_changes", [])
@@ -317,6 +465,8 @@ def main(argv=None):
         brows.append(row)
         print(f"bristle δ = {d:g} m: μ* = {row['mu_star']!r}", flush=True)
     rec["bristle"] = {"rows": brows, "n_solves": trb.n_solves, "wall_s": time.perf_counter() - t0}
+    if len(brows) >= 2:
+        rec["bristle"]["limit"] = _limit(brows, "deflection")
     write("bristle")
 
     # 6. accuracy at the preset ε
@@ -340,40 +490,7 @@ def main(argv=None):
         write("accuracy")
 
     # 7a. μ* against ε
-    best = fits.get(f"quadratic, {min(4, len(e_ok))} smallest ε") or next(iter(fits.values()))
-    rec["limit"]["reported"] = best
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
-    for ax, logx in zip(axes, (False, True), strict=True):
-        ax.plot(e_ok, m_ok, "o", color="C0", label="regularised Coulomb, located μ*")
-        ee = np.linspace(0.0 if not logx else e_ok[0] / 2, e_ok[: len(best["eps_used"])].max(), 200)
-        ax.plot(
-            ee,
-            np.polyval(best["coefficients"][::-1], ee),
-            "-",
-            color="C0",
-            lw=0.8,
-            label="fit, " + ", ".join(f"{x:g}" for x in best["eps_used"]),
-        )
-        if not logx:
-            ax.plot([0.0], [best["mu0"]], "*", color="C3", ms=12, label=f"ε -> 0: μ0 = {best['mu0']:.5f}")
-        for k, r in enumerate(brows):
-            if r["mu_star"] is not None:
-                ax.axhline(
-                    r["mu_star"],
-                    color=f"C{2 + k}",
-                    ls="--",
-                    lw=0.8,
-                    label=f"bristle δ = {r['deflection']:g} m: {r['mu_star']:.5f}",
-                )
-        ax.set_xlabel("regularisation velocity ε [m/s]")
-        ax.set_ylabel("μ* [-]")
-        if logx:
-            ax.set_xscale("log")
-    axes[0].legend(fontsize=7)
-    fig.suptitle(f"{base.name}: μ* above which corner E hops off the ground at t ~ 0.25 s")
-    fig.tight_layout()
-    fig.savefig(out / "mu_star_vs_eps.png", dpi=100)
-    plt.close(fig)
+    _plot_eps(rec, out)
 
     # 7b. E's contact function across μ* at the preset ε (the grazing)
     ref_eps = rec["preset_eps"] if any(r["eps"] == rec["preset_eps"] for r in ok) else ok[-1]["eps"]
