@@ -2,13 +2,15 @@
 
 1. scan μ over [0.1, 0.6] (4000 points; resumable: the chunks go to DIR/scan) and record final position
    and Euler angles, maximum tilt, lift-off time, the corner that leaves first and the impact count;
-2. find candidate jumps of the final yaw ψ (and the other observables) on the grid;
-3. refine every candidate jump of ψ to |Δμ| <= 1e-6 (value-only bisection by default; --method
-   multisection solves 16 μ per vmapped round);
-4. plot every observable against μ with the located μ* marked, a zoom around each of the largest `--detail`
-   jumps, and the time histories x, y, φ, ϑ, ψ for μ values just below and just above its μ* (Figs 10-12
-   analogue);
-5. continue the first μ* along the hoist speed v_l (the two-parameter boundary μ*(v_l), by continuation).
+2. find candidate jumps of every observable on the grid (`find_jumps`);
+3. refine every candidate jump of the continuous observables (lift-off time, final position and Euler
+   angles, maximum tilt; one per grid cell) to |Δμ| <= 1e-6, value-only bisection by default, saving 2501
+   times instead of the scan's 251 (a jump made by the coarse grid alone comes out as a "crossing"); and
+   the level crossing in the cell where ψ(t1) changes most steeply (a steep ramp need not be a jump);
+4. plot every observable against μ with the located μ* marked, a zoom and the time histories x, y, φ, ϑ, ψ
+   across the steepest change of ψ (μ* ± 0.25e-3, ± 2.5e-3: the Figs 10-12 analogue) and across the
+   located jumps with the highest scores (`--detail`);
+5. continue the highest-scoring jump along the hoist speed v_l (μ*(v_l), by continuation).
 
     python experiments/bifurcation_mu.py --out out/bifurcation-mu            # full: 4000 μ over 25 s
     python experiments/bifurcation_mu.py --out out/bifurcation-mu --quick    # 48 μ over 4 s, tol 1e-4
@@ -79,7 +81,7 @@ def main(argv=None):
         "--jumps",
         type=int,
         default=None,
-        help="how many jumps of ψ to refine, largest first (default: every candidate; quick 1)",
+        help="how many candidate jumps to refine, highest score first (default: every one; quick 1)",
     )
     p.add_argument(
         "--detail", type=int, default=3, help="zooms and histories for the largest N located jumps (3)"
@@ -89,6 +91,14 @@ def main(argv=None):
         choices=("bisection", "multisection", "newton"),
         default="bisection",
         help="locator (default bisection: ~log2(Δμ/tol)+2 value-only solves per jump)",
+    )
+    p.add_argument(
+        "--refine",
+        default="liftoff_time,final_psi,final_x,final_y,final_phi,final_theta,max_tilt",
+        help="observables whose candidate jumps are refined (comma-separated)",
+    )
+    p.add_argument(
+        "--refine-n-save", type=int, default=2501, help="saved times in the refining solves (default 2501)"
     )
     p.add_argument("--lanes", type=int, default=16)
     p.add_argument(
@@ -163,44 +173,82 @@ def main(argv=None):
     for k, v in jumps.items():
         print(f"  {k}: {len(v)} candidate jumps", flush=True)
 
-    # 3. refine the largest jumps of the final yaw ψ
-    psi_jumps = sorted(jumps["final_psi"], key=lambda j: -abs(j.size))[:n_jumps]
+    # 3. refine every candidate jump of the continuous observables (event counts and the first corner are
+    #    read on the saved grid and are not refined), one per grid cell: where several observables jump in
+    #    the same cells, the one with the highest score is refined. The refinement saves `--refine-n-save`
+    #    times, finer than the scan: a jump that only the coarse grid produced comes out as a "crossing".
+    refine_obs = [o for o in args.refine.split(",") if o]
+    cands = sorted(
+        (j for o in refine_obs for j in jumps[o]),
+        key=lambda j: -j.score if np.isfinite(j.score) else -np.inf,
+    )
+    chosen: list = []
+    for j in cands:
+        if all(j.hi < c.lo or j.lo > c.hi for c in chosen):
+            chosen.append(j)
+    chosen = chosen[:n_jumps]
+    refine_kw = dict(solve_kw, n_save=args.refine_n_save)
     located = []
+    score_of: dict = {}
     not_refined = []
     t0 = time.perf_counter()
-    for k, j in enumerate(psi_jumps):
+    for k, j in enumerate(chosen):
         try:
             b = locate_bifurcation(
                 sc,
                 MU,
-                "final_psi",
+                j.observable,
                 (j.lo, j.hi),
                 tol=tol,
                 method=args.method,
                 points_per_round=16,
                 lanes=16,
                 t1=t1,
-                **solve_kw,
+                **refine_kw,
             )
         except BifurcationError as e:
-            print(f"  jump at μ in [{j.lo:.6f}, {j.hi:.6f}]: not refined ({e})", flush=True)
-            not_refined.append({"lo": j.lo, "hi": j.hi, "size": j.size, "reason": str(e)})
+            print(f"  {j.observable} jump at μ in [{j.lo:.6f}, {j.hi:.6f}]: not refined ({e})", flush=True)
+            not_refined.append(
+                {"observable": j.observable, "lo": j.lo, "hi": j.hi, "size": j.size, "reason": str(e)}
+            )
             continue
         located.append(b)
-        print(f"  [{k + 1}/{len(psi_jumps)}] " + b.summary(), flush=True)
+        score_of[id(b)] = j.score
+        print(f"  [{k + 1}/{len(chosen)}] " + b.summary(), flush=True)
         if (k + 1) % 5 == 0:
             rec["located"] = [b.to_dict() for b in located]
-            write(f"locate {k + 1}/{len(psi_jumps)}")
+            write(f"locate {k + 1}/{len(chosen)}")
     rec["located"] = [b.to_dict() for b in located]
     rec["not_refined"] = not_refined
+
+    # 3b. the steepest change of ψ on the grid (a steep ramp need not be a jump): its level crossing
+    psi = np.asarray(res["final_psi"])
+    steep = int(np.nanargmax(np.abs(np.diff(psi))))
+    ramp = locate_bifurcation(
+        sc, MU, "final_psi", (mus[steep], mus[steep + 1]), tol=tol, method=args.method, t1=t1, **refine_kw
+    )
+    slope = np.abs(np.diff(psi)) / np.diff(mus)
+    big = slope > 0.5 * slope[steep]
+    rec["steepest_psi"] = {
+        **ramp.to_dict(),
+        "max_slope_rad_per_unit_mu": float(slope[steep]),
+        "median_slope_rad_per_unit_mu": float(np.median(slope)),
+        "cells_above_half_max_slope": int(big.sum()),
+        "psi_deg_at": {
+            f"{m:.4f}": float(np.degrees(np.interp(m, mus, psi))) for m in (0.450, 0.452, 0.457, 0.460)
+        },
+    }
+    print("  steepest ψ: " + ramp.summary(), flush=True)
     rec["locate_summary"] = {
-        "n_candidates": len(jumps["final_psi"]),
-        "n_refined": len(psi_jumps),
+        "observables": refine_obs,
+        "n_candidates": {o: len(jumps[o]) for o in refine_obs},
+        "n_refined": len(chosen),
         "n_located": len(located),
         "n_jump": sum(b.kind == "jump" for b in located),
         "n_crossing": sum(b.kind == "crossing" for b in located),
         "solves": int(sum(b.n_solves for b in located)),
         "uniform_grid_solves": int(sum(b.n_uniform for b in located)),
+        "refine_n_save": args.refine_n_save,
         "wall_s": time.perf_counter() - t0,
     }
     print(f"  locate: {rec['locate_summary']}", flush=True)
@@ -215,43 +263,50 @@ def main(argv=None):
         if bad.any():
             ax.plot(mus[bad], np.zeros(bad.sum()), "rx", ms=4, label="failed")
         for b in located:
-            ax.axvline(b.value, color="C3", lw=0.8, alpha=0.7)
+            ax.axvline(b.value, color="C3" if b.kind == "jump" else "0.6", lw=0.6, alpha=0.7)
+        ax.axvline(ramp.value, color="C2", lw=0.8, ls="--")
         ax.set_ylabel(f"{label} [{unit}]")
     for ax in axes[-1]:
         ax.set_xlabel("friction coefficient μ [-]")
     fig.suptitle(
-        f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s); red lines: located μ*"
+        f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s); located μ*: red = jump, "
+        f"grey = continuous crossing; green dashed: steepest change of ψ"
     )
     fig.tight_layout()
     fig.savefig(out / "observables_vs_mu.png", dpi=110)
     plt.close(fig)
 
-    # 4b. zoom around each μ* and 4c. histories across it (Figs 10-12 analogue)
-    detail = sorted(located, key=lambda b: -abs(_initial_change(b)))[: args.detail]
-    rec["detail"] = [b.value for b in detail]
+    # 4b. zoom around each μ* and 4c. histories across it (Figs 10-12 analogue): the steepest change of ψ
+    #     and the located jumps with the highest scores
+    ranked = sorted((b for b in located if b.kind == "jump"), key=lambda b: -score_of[id(b)])
+    detail = [ramp] + ranked[: max(0, args.detail - 1)]
+    rec["detail"] = [{"mu_star": b.value, "observable": b.observable, "kind": b.kind} for b in detail]
     for i, b in enumerate(detail):
         lo, hi = b.bracket
-        half = max(50 * tol, 20 * (hi - lo))
+        name = b.observable
+        label, unit, scale = LABELS.get(name, (name, "", 1.0))
+        is_ramp = b is ramp
+        half = 4e-3 if is_ramp else max(50 * tol, 20 * (hi - lo))
         zoom = scan(
             sc,
             {MU: np.linspace(b.value - half, b.value + half, 32)},
             t1,
-            observables=["final_psi"],
+            observables=[name],
             lanes=16,
-            **solve_kw,
+            **refine_kw,
         )
         fig, ax = plt.subplots(figsize=(7, 4))
-        ax.plot(zoom.coords[MU], np.degrees(zoom["final_psi"]), "o-", ms=3)
+        ax.plot(zoom.coords[MU], zoom[name] * scale, "o-", ms=3)
         ax.axvline(b.value, color="C3", lw=0.8)
         ax.set_xlabel("μ [-]")
-        ax.set_ylabel("ψ(t1) [deg]")
-        ax.set_title(f"zoom around μ* = {b.value:.7f} (bracket width {b.width:.1e})")
+        ax.set_ylabel(f"{label} [{unit}]")
+        ax.set_title(f"zoom around μ* = {b.value:.7f} ({b.kind}; bracket width {b.width:.1e})")
         fig.tight_layout()
         fig.savefig(out / f"zoom_{i}.png", dpi=110)
         plt.close(fig)
 
-        d = max(2 * tol, b.width)
-        across = np.array([b.value - 100 * d, b.value - d, b.value + d, b.value + 100 * d])
+        d = 2.5e-4 if is_ramp else max(2 * tol, b.width)
+        across = np.array([b.value - 10 * d, b.value - d, b.value + d, b.value + 10 * d])
         hist = scan(
             sc,
             {MU: across},
@@ -284,7 +339,9 @@ def main(argv=None):
             ax.set_ylabel(f"{name} [{unit}]")
         axes[0].legend(fontsize=7)
         axes[-1].set_xlabel("t [s]")
-        fig.suptitle(f"{sc.name}: histories across μ* = {b.value:.7f} (cf. the paper's Figs 10-12)")
+        fig.suptitle(
+            f"{sc.name}: histories across μ* = {b.value:.7f} ({name}, {b.kind}; cf. the paper's Figs 10-12)"
+        )
         fig.tight_layout()
         fig.savefig(out / f"histories_across_mu_star_{i}.png", dpi=110)
         plt.close(fig)
@@ -296,7 +353,7 @@ def main(argv=None):
         speeds = np.linspace(float(a_), float(b_), int(k_))
         v0 = float(sc.hoist.speed)
         speeds = np.concatenate([[v0], speeds[speeds != v0]])  # start where μ* is known
-        b0 = located[0]
+        b0 = (ranked or located)[0]
         t0 = time.perf_counter()
         tr = trace_boundary(
             sc,
@@ -304,7 +361,7 @@ def main(argv=None):
             b0.bracket,
             "hoist.speed",
             speeds,
-            "final_psi",
+            b0.observable,
             tol=tol,
             method="bisection",
             initial_half_width=max(10 * tol, 0.002),
@@ -312,6 +369,7 @@ def main(argv=None):
             **solve_kw,
         )
         rec["trace"] = {
+            "observable": b0.observable,
             "hoist_speed": tr.along_values.tolist(),
             "mu_star": tr.values.tolist(),
             "widths": tr.widths.tolist(),
@@ -336,15 +394,6 @@ def main(argv=None):
 
     write("done")
     print(f"wrote {path} and PNGs in {out} ({rec['wall_total_s']:.0f} s in all)")
-
-
-def _initial_change(b) -> float:
-    """Change of the observable across the bracket the locator started from (its first two evaluations)."""
-    h = b.history
-    if b.method == "multisection":
-        ends = [x for x in h if x[3] == "multisection"][:16]
-        return float(ends[-1][1] - ends[0][1]) if ends else 0.0
-    return float(h[1][1] - h[0][1]) if len(h) >= 2 else 0.0
 
 
 if __name__ == "__main__":
