@@ -1,12 +1,13 @@
 """Bifurcation map of paper-4.2 in the friction coefficient μ (the paper's §4.3, Figs 10-12).
 
-1. scan μ over [0.1, 0.6] (4000 points; resumable: the chunks go to DIR/scan) and record final position
-   and Euler angles, maximum tilt, lift-off time, the corner that leaves first and the impact count;
+1. scan μ over [0.1, 0.6] (4000 points, 2501 saved times; resumable: the chunks go to DIR/scan-s2501) and
+   record final position and Euler angles, maximum tilt, lift-off time, the corner that leaves first and
+   the impact count;
 2. find candidate jumps of every observable on the grid (`find_jumps`);
 3. refine every candidate jump of the continuous observables (lift-off time, final position and Euler
-   angles, maximum tilt; one per grid cell) to |Δμ| <= 1e-6, value-only bisection by default, saving 2501
-   times instead of the scan's 251 (a jump made by the coarse grid alone comes out as a "crossing"); and
-   the level crossing in the cell where ψ(t1) changes most steeply (a steep ramp need not be a jump);
+   angles, maximum tilt; one per grid cell) to |Δμ| <= 1e-6, value-only bisection by default (a candidate
+   that is not a discontinuity comes out as a "crossing"); and the level crossing in the cell where ψ(t1)
+   changes most steeply (a steep ramp need not be a jump);
 4. plot every observable against μ with the located μ* marked, a zoom and the time histories x, y, φ, ϑ, ψ
    across the steepest change of ψ (μ* ± 0.25e-3, ± 2.5e-3: the Figs 10-12 analogue) and across the
    located jumps with the highest scores (`--detail`);
@@ -73,7 +74,14 @@ def main(argv=None):
     p.add_argument("--quick", action="store_true", help="48 μ over 4 s, tolerance 1e-4: a smoke run")
     p.add_argument("--n", type=int, default=None, help="μ values in the scan (default 4000; quick 48)")
     p.add_argument("--t1", type=float, default=None, help="horizon [s] (default 25; quick 4)")
-    p.add_argument("--n-save", type=int, default=None, help="saved times (default 251; quick 101)")
+    p.add_argument(
+        "--n-save",
+        type=int,
+        default=None,
+        help="saved times (default 2501, every 10 ms: event times such as lift-off are read on this grid, "
+        "and "
+        "a 0.1 s grid misses corner hops shorter than 0.1 s; quick 101)",
+    )
     p.add_argument(
         "--tol", type=float, default=None, help="|Δμ| of the located μ* (default 1e-6; quick 1e-4)"
     )
@@ -98,7 +106,10 @@ def main(argv=None):
         help="observables whose candidate jumps are refined (comma-separated)",
     )
     p.add_argument(
-        "--refine-n-save", type=int, default=2501, help="saved times in the refining solves (default 2501)"
+        "--refine-n-save",
+        type=int,
+        default=None,
+        help="saved times in the refining solves (default: as the scan)",
     )
     p.add_argument("--lanes", type=int, default=16)
     p.add_argument(
@@ -113,7 +124,7 @@ def main(argv=None):
     q = args.quick
     n = args.n or (48 if q else 4000)
     t1 = args.t1 or (4.0 if q else 25.0)
-    n_save = args.n_save or (101 if q else 251)
+    n_save = args.n_save or (101 if q else 2501)
     tol = args.tol or (1e-4 if q else 1e-6)
     n_jumps = args.jumps if args.jumps is not None else (1 if q else None)
     wall_start = time.perf_counter()
@@ -147,7 +158,7 @@ def main(argv=None):
         t1,
         observables=OBSERVABLES,
         lanes=args.lanes,
-        out_dir=out / "scan",
+        out_dir=out / f"scan-s{n_save}",
         progress=True,
         **solve_kw,
     )
@@ -187,7 +198,8 @@ def main(argv=None):
         if all(j.hi < c.lo or j.lo > c.hi for c in chosen):
             chosen.append(j)
     chosen = chosen[:n_jumps]
-    refine_kw = dict(solve_kw, n_save=args.refine_n_save)
+    refine_n_save = args.refine_n_save or n_save
+    refine_kw = dict(solve_kw, n_save=refine_n_save)
     located = []
     score_of: dict = {}
     not_refined = []
@@ -248,7 +260,7 @@ def main(argv=None):
         "n_crossing": sum(b.kind == "crossing" for b in located),
         "solves": int(sum(b.n_solves for b in located)),
         "uniform_grid_solves": int(sum(b.n_uniform for b in located)),
-        "refine_n_save": args.refine_n_save,
+        "refine_n_save": refine_n_save,
         "wall_s": time.perf_counter() - t0,
     }
     print(f"  locate: {rec['locate_summary']}", flush=True)
