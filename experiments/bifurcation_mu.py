@@ -364,7 +364,7 @@ def main(argv=None):
         a_, b_, k_ = trace_spec.split(":")
         speeds = np.linspace(float(a_), float(b_), int(k_))
         v0 = float(sc.hoist.speed)
-        speeds = np.concatenate([[v0], speeds[speeds != v0]])  # start where μ* is known
+        speeds = np.concatenate([[v0], speeds[~np.isclose(speeds, v0, rtol=0, atol=1e-12)]])  # start at μ*
         b0 = (ranked or located)[0]
         t0 = time.perf_counter()
         tr = trace_boundary(
