@@ -92,7 +92,11 @@ def main(argv=None):
         help="how many candidate jumps to refine, highest score first (default: every one; quick 1)",
     )
     p.add_argument(
-        "--detail", type=int, default=3, help="zooms and histories for the largest N located jumps (3)"
+        "--detail",
+        type=int,
+        default=3,
+        help="zooms and histories for the steepest change of ψ and the N - 1 highest-scoring jumps "
+        "(3; 0: none)",
     )
     p.add_argument(
         "--method",
@@ -291,7 +295,7 @@ def main(argv=None):
     # 4b. zoom around each μ* and 4c. histories across it (Figs 10-12 analogue): the steepest change of ψ
     #     and the located jumps with the highest scores
     ranked = sorted((b for b in located if b.kind == "jump"), key=lambda b: -score_of[id(b)])
-    detail = [ramp] + ranked[: max(0, args.detail - 1)]
+    detail = ([ramp] + ranked[: args.detail - 1]) if args.detail > 0 else []
     rec["detail"] = [{"mu_star": b.value, "observable": b.observable, "kind": b.kind} for b in detail]
     for i, b in enumerate(detail):
         lo, hi = b.bracket
