@@ -342,7 +342,7 @@ def main(argv=None):
             ("ϑ", hist["euler"][..., 2], "deg", 180 / np.pi),
             ("ψ", hist["euler"][..., 1], "deg", 180 / np.pi),
         ]
-        for ax, (name, val, unit, scale) in zip(axes, series, strict=True):
+        for ax, (sym, val, unit, scale) in zip(axes, series, strict=True):
             for k, mu in enumerate(across):
                 side = "below" if mu < b.value else "above"
                 ax.plot(
@@ -352,7 +352,7 @@ def main(argv=None):
                     ls="-" if side == "below" else "--",
                     label=f"μ = {mu:.7f} ({side} μ*)",
                 )
-            ax.set_ylabel(f"{name} [{unit}]")
+            ax.set_ylabel(f"{sym} [{unit}]")
         axes[0].legend(fontsize=7)
         axes[-1].set_xlabel("t [s]")
         fig.suptitle(
