@@ -199,7 +199,7 @@ def main(argv=None):
     )
     chosen: list = []
     for j in cands:
-        if all(j.hi < c.lo or j.lo > c.hi for c in chosen):
+        if all(j.hi <= c.lo or j.lo >= c.hi for c in chosen):  # cells may share an end
             chosen.append(j)
     chosen = chosen[:n_jumps]
     refine_n_save = args.refine_n_save or n_save
