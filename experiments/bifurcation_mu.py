@@ -1,17 +1,24 @@
 """Bifurcation map of paper-4.2 in the friction coefficient μ (the paper's §4.3, Figs 10-12).
 
-1. scan μ over [0.1, 0.6] (4000 points; resumable: the chunks go to DIR/scan) and record final position
-   and Euler angles, maximum tilt, lift-off time, the corner that leaves first and the impact count;
-2. find candidate jumps of the final yaw ψ (and the other observables) on the grid;
-3. refine the largest ones to |Δμ| <= 1e-6 (multisection: 16 μ per vmapped round);
-4. plot every observable against μ with the located μ* marked, a zoom around each μ*, and the time
-   histories x, y, φ, ϑ, ψ for μ values just below and just above a located μ* (Figs 10-12 analogue);
-5. continue the first μ* along the hoist speed v_l (the two-parameter boundary μ*(v_l), by continuation).
+1. scan μ over [0.1, 0.6] (4000 points, 2501 saved times; resumable: the chunks go to DIR/scan-s2501) and
+   record final position and Euler angles, maximum tilt, lift-off time, the corner that leaves first and
+   the impact count;
+2. find candidate jumps of every observable on the grid (`find_jumps`);
+3. refine every candidate jump of the continuous observables (lift-off time, final position and Euler
+   angles, maximum tilt; one per grid cell) to |Δμ| <= 1e-6, value-only bisection by default (a candidate
+   that is not a discontinuity comes out as a "crossing"); and the level crossing in the cell where ψ(t1)
+   changes most steeply (a steep ramp need not be a jump);
+4. plot every observable against μ with the located μ* marked, a zoom and the time histories x, y, φ, ϑ, ψ
+   across the steepest change of ψ (μ* ± 0.25e-3, ± 2.5e-3: the Figs 10-12 analogue) and across the
+   located jumps with the highest scores (`--detail`);
+5. continue the highest-scoring jump along the hoist speed v_l (μ*(v_l), by continuation).
 
     python experiments/bifurcation_mu.py --out out/bifurcation-mu            # full: 4000 μ over 25 s
     python experiments/bifurcation_mu.py --out out/bifurcation-mu --quick    # 48 μ over 4 s, tol 1e-4
 
-Writes DIR/bifurcation_mu.json (jumps, located μ*, solves used vs a uniform grid, timings) and PNGs.
+Writes DIR/bifurcation_mu.json (jumps, located μ*, solves used vs a uniform grid, timings; rewritten after
+every stage, so an interrupted run leaves what it had) and PNGs. The scan resumes from its chunks if the
+command is rerun.
 """
 
 from __future__ import annotations
@@ -67,12 +74,46 @@ def main(argv=None):
     p.add_argument("--quick", action="store_true", help="48 μ over 4 s, tolerance 1e-4: a smoke run")
     p.add_argument("--n", type=int, default=None, help="μ values in the scan (default 4000; quick 48)")
     p.add_argument("--t1", type=float, default=None, help="horizon [s] (default 25; quick 4)")
-    p.add_argument("--n-save", type=int, default=None, help="saved times (default 251; quick 101)")
+    p.add_argument(
+        "--n-save",
+        type=int,
+        default=None,
+        help="saved times (default 2501, every 10 ms: event times such as lift-off are read on this grid, "
+        "and "
+        "a 0.1 s grid misses corner hops shorter than 0.1 s; quick 101)",
+    )
     p.add_argument(
         "--tol", type=float, default=None, help="|Δμ| of the located μ* (default 1e-6; quick 1e-4)"
     )
     p.add_argument(
-        "--jumps", type=int, default=None, help="how many jumps of ψ to refine (default 3; quick 1)"
+        "--jumps",
+        type=int,
+        default=None,
+        help="how many candidate jumps to refine, highest score first (default: every one; quick 1)",
+    )
+    p.add_argument(
+        "--detail",
+        type=int,
+        default=3,
+        help="zooms and histories for the steepest change of ψ and the N - 1 highest-scoring jumps "
+        "(3; 0: none)",
+    )
+    p.add_argument(
+        "--method",
+        choices=("bisection", "multisection", "newton"),
+        default="bisection",
+        help="locator (default bisection: ~log2(Δμ/tol)+2 value-only solves per jump)",
+    )
+    p.add_argument(
+        "--refine",
+        default="liftoff_time,final_psi,final_x,final_y,final_phi,final_theta,max_tilt",
+        help="observables whose candidate jumps are refined (comma-separated)",
+    )
+    p.add_argument(
+        "--refine-n-save",
+        type=int,
+        default=None,
+        help="saved times in the refining solves (default: as the scan)",
     )
     p.add_argument("--lanes", type=int, default=16)
     p.add_argument(
@@ -87,9 +128,10 @@ def main(argv=None):
     q = args.quick
     n = args.n or (48 if q else 4000)
     t1 = args.t1 or (4.0 if q else 25.0)
-    n_save = args.n_save or (101 if q else 251)
+    n_save = args.n_save or (101 if q else 2501)
     tol = args.tol or (1e-4 if q else 1e-6)
-    n_jumps = args.jumps if args.jumps is not None else (1 if q else 3)
+    n_jumps = args.jumps if args.jumps is not None else (1 if q else None)
+    wall_start = time.perf_counter()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sc = jh.load_scenario("paper-4.2")
@@ -102,7 +144,14 @@ def main(argv=None):
         "tol": tol,
         "quick": q,
         "command": [sys.executable, *sys.argv],
+        "devices": [str(d) for d in jax.devices()],
     }
+    path = out / "bifurcation_mu.json"
+
+    def write(stage):
+        rec["stage"] = stage
+        rec["wall_total_s"] = time.perf_counter() - wall_start
+        path.write_text(json.dumps(rec, indent=1, default=float) + "\n")
 
     # 1. the scan
     mus = np.linspace(0.1, 0.6, n)
@@ -113,7 +162,7 @@ def main(argv=None):
         t1,
         observables=OBSERVABLES,
         lanes=args.lanes,
-        out_dir=out / "scan",
+        out_dir=out / f"scan-s{n_save}",
         progress=True,
         **solve_kw,
     )
@@ -131,35 +180,95 @@ def main(argv=None):
         flush=True,
     )
 
+    write("scan")
+
     # 2. candidate jumps
     jumps = {name: find_jumps(res, name) for name in OBSERVABLES}
     rec["candidate_jumps"] = {k: [vars(j) for j in v] for k, v in jumps.items()}
     for k, v in jumps.items():
         print(f"  {k}: {len(v)} candidate jumps", flush=True)
 
-    # 3. refine the largest jumps of the final yaw ψ
-    psi_jumps = sorted(jumps["final_psi"], key=lambda j: -abs(j.size))[:n_jumps]
+    # 3. refine every candidate jump of the continuous observables (event counts and the first corner are
+    #    read on the saved grid and are not refined), one per grid cell: where several observables jump in
+    #    the same cells, the one with the highest score is refined. The refinement saves `--refine-n-save`
+    #    times, finer than the scan: a jump that only the coarse grid produced comes out as a "crossing".
+    refine_obs = [o for o in args.refine.split(",") if o]
+    cands = sorted(
+        (j for o in refine_obs for j in jumps[o]),
+        key=lambda j: -j.score if np.isfinite(j.score) else -np.inf,
+    )
+    chosen: list = []
+    for j in cands:
+        if all(j.hi <= c.lo or j.lo >= c.hi for c in chosen):  # cells may share an end
+            chosen.append(j)
+    chosen = chosen[:n_jumps]
+    refine_n_save = args.refine_n_save or n_save
+    refine_kw = dict(solve_kw, n_save=refine_n_save)
     located = []
-    for j in psi_jumps:
+    score_of: dict = {}
+    not_refined = []
+    t0 = time.perf_counter()
+    for k, j in enumerate(chosen):
         try:
             b = locate_bifurcation(
                 sc,
                 MU,
-                "final_psi",
+                j.observable,
                 (j.lo, j.hi),
                 tol=tol,
-                method="multisection",
+                method=args.method,
                 points_per_round=16,
                 lanes=16,
                 t1=t1,
-                **solve_kw,
+                **refine_kw,
             )
         except BifurcationError as e:
-            print(f"  jump at μ in [{j.lo:.6f}, {j.hi:.6f}]: not refined ({e})", flush=True)
+            print(f"  {j.observable} jump at μ in [{j.lo:.6f}, {j.hi:.6f}]: not refined ({e})", flush=True)
+            not_refined.append(
+                {"observable": j.observable, "lo": j.lo, "hi": j.hi, "size": j.size, "reason": str(e)}
+            )
             continue
         located.append(b)
-        print("  " + b.summary(), flush=True)
+        score_of[id(b)] = j.score
+        print(f"  [{k + 1}/{len(chosen)}] " + b.summary(), flush=True)
+        if (k + 1) % 5 == 0:
+            rec["located"] = [b.to_dict() for b in located]
+            write(f"locate {k + 1}/{len(chosen)}")
     rec["located"] = [b.to_dict() for b in located]
+    rec["not_refined"] = not_refined
+
+    # 3b. the steepest change of ψ on the grid (a steep ramp need not be a jump): its level crossing
+    psi = np.asarray(res["final_psi"])
+    steep = int(np.nanargmax(np.abs(np.diff(psi))))
+    ramp = locate_bifurcation(
+        sc, MU, "final_psi", (mus[steep], mus[steep + 1]), tol=tol, method=args.method, t1=t1, **refine_kw
+    )
+    slope = np.abs(np.diff(psi)) / np.diff(mus)
+    big = slope > 0.5 * slope[steep]
+    rec["steepest_psi"] = {
+        **ramp.to_dict(),
+        "max_slope_rad_per_unit_mu": float(slope[steep]),
+        "median_slope_rad_per_unit_mu": float(np.median(slope)),
+        "cells_above_half_max_slope": int(big.sum()),
+        "psi_deg_at": {
+            f"{m:.4f}": float(np.degrees(np.interp(m, mus, psi))) for m in (0.450, 0.452, 0.457, 0.460)
+        },
+    }
+    print("  steepest ψ: " + ramp.summary(), flush=True)
+    rec["locate_summary"] = {
+        "observables": refine_obs,
+        "n_candidates": {o: len(jumps[o]) for o in refine_obs},
+        "n_refined": len(chosen),
+        "n_located": len(located),
+        "n_jump": sum(b.kind == "jump" for b in located),
+        "n_crossing": sum(b.kind == "crossing" for b in located),
+        "solves": int(sum(b.n_solves for b in located)),
+        "uniform_grid_solves": int(sum(b.n_uniform for b in located)),
+        "refine_n_save": refine_n_save,
+        "wall_s": time.perf_counter() - t0,
+    }
+    print(f"  locate: {rec['locate_summary']}", flush=True)
+    write("located")
 
     # 4a. observables against μ, with the located μ* marked
     fig, axes = plt.subplots(3, 3, figsize=(13, 9), sharex=True)
@@ -170,41 +279,50 @@ def main(argv=None):
         if bad.any():
             ax.plot(mus[bad], np.zeros(bad.sum()), "rx", ms=4, label="failed")
         for b in located:
-            ax.axvline(b.value, color="C3", lw=0.8, alpha=0.7)
+            ax.axvline(b.value, color="C3" if b.kind == "jump" else "0.6", lw=0.6, alpha=0.7)
+        ax.axvline(ramp.value, color="C2", lw=0.8, ls="--")
         ax.set_ylabel(f"{label} [{unit}]")
     for ax in axes[-1]:
         ax.set_xlabel("friction coefficient μ [-]")
     fig.suptitle(
-        f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s); red lines: located μ*"
+        f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s); located μ*: red = jump, "
+        f"grey = continuous crossing; green dashed: steepest change of ψ"
     )
     fig.tight_layout()
     fig.savefig(out / "observables_vs_mu.png", dpi=110)
     plt.close(fig)
 
-    # 4b. zoom around each μ* and 4c. histories across it (Figs 10-12 analogue)
-    for i, b in enumerate(located):
+    # 4b. zoom around each μ* and 4c. histories across it (Figs 10-12 analogue): the steepest change of ψ
+    #     and the located jumps with the highest scores
+    ranked = sorted((b for b in located if b.kind == "jump"), key=lambda b: -score_of[id(b)])
+    detail = ([ramp] + ranked[: args.detail - 1]) if args.detail > 0 else []
+    rec["detail"] = [{"mu_star": b.value, "observable": b.observable, "kind": b.kind} for b in detail]
+    for i, b in enumerate(detail):
         lo, hi = b.bracket
-        half = max(50 * tol, 20 * (hi - lo))
+        name = b.observable
+        label, unit, scale = LABELS.get(name, (name, "", 1.0))
+        is_ramp = b is ramp
+        half = 4e-3 if is_ramp else max(50 * tol, 20 * (hi - lo))
         zoom = scan(
             sc,
             {MU: np.linspace(b.value - half, b.value + half, 32)},
             t1,
-            observables=["final_psi"],
+            observables=[name],
             lanes=16,
-            **solve_kw,
+            **refine_kw,
         )
         fig, ax = plt.subplots(figsize=(7, 4))
-        ax.plot(zoom.coords[MU], np.degrees(zoom["final_psi"]), "o-", ms=3)
+        ax.plot(zoom.coords[MU], zoom[name] * scale, "o-", ms=3)
         ax.axvline(b.value, color="C3", lw=0.8)
         ax.set_xlabel("μ [-]")
-        ax.set_ylabel("ψ(t1) [deg]")
-        ax.set_title(f"zoom around μ* = {b.value:.7f} (bracket width {b.width:.1e})")
+        ax.set_ylabel(f"{label} [{unit}]")
+        ax.set_title(f"zoom around μ* = {b.value:.7f} ({b.kind}; bracket width {b.width:.1e})")
         fig.tight_layout()
         fig.savefig(out / f"zoom_{i}.png", dpi=110)
         plt.close(fig)
 
-        d = max(2 * tol, b.width)
-        across = np.array([b.value - 100 * d, b.value - d, b.value + d, b.value + 100 * d])
+        d = 2.5e-4 if is_ramp else max(2 * tol, b.width)
+        across = np.array([b.value - 10 * d, b.value - d, b.value + d, b.value + 10 * d])
         hist = scan(
             sc,
             {MU: across},
@@ -224,7 +342,7 @@ def main(argv=None):
             ("ϑ", hist["euler"][..., 2], "deg", 180 / np.pi),
             ("ψ", hist["euler"][..., 1], "deg", 180 / np.pi),
         ]
-        for ax, (name, val, unit, scale) in zip(axes, series, strict=True):
+        for ax, (sym, val, unit, scale) in zip(axes, series, strict=True):
             for k, mu in enumerate(across):
                 side = "below" if mu < b.value else "above"
                 ax.plot(
@@ -234,10 +352,12 @@ def main(argv=None):
                     ls="-" if side == "below" else "--",
                     label=f"μ = {mu:.7f} ({side} μ*)",
                 )
-            ax.set_ylabel(f"{name} [{unit}]")
+            ax.set_ylabel(f"{sym} [{unit}]")
         axes[0].legend(fontsize=7)
         axes[-1].set_xlabel("t [s]")
-        fig.suptitle(f"{sc.name}: histories across μ* = {b.value:.7f} (cf. the paper's Figs 10-12)")
+        fig.suptitle(
+            f"{sc.name}: histories across μ* = {b.value:.7f} ({name}, {b.kind}; cf. the paper's Figs 10-12)"
+        )
         fig.tight_layout()
         fig.savefig(out / f"histories_across_mu_star_{i}.png", dpi=110)
         plt.close(fig)
@@ -248,8 +368,8 @@ def main(argv=None):
         a_, b_, k_ = trace_spec.split(":")
         speeds = np.linspace(float(a_), float(b_), int(k_))
         v0 = float(sc.hoist.speed)
-        speeds = np.concatenate([[v0], speeds[speeds != v0]])  # start where μ* is known
-        b0 = located[0]
+        speeds = np.concatenate([[v0], speeds[~np.isclose(speeds, v0, rtol=0, atol=1e-12)]])  # start at μ*
+        b0 = (ranked or located)[0]
         t0 = time.perf_counter()
         tr = trace_boundary(
             sc,
@@ -257,7 +377,7 @@ def main(argv=None):
             b0.bracket,
             "hoist.speed",
             speeds,
-            "final_psi",
+            b0.observable,
             tol=tol,
             method="bisection",
             initial_half_width=max(10 * tol, 0.002),
@@ -265,6 +385,7 @@ def main(argv=None):
             **solve_kw,
         )
         rec["trace"] = {
+            "observable": b0.observable,
             "hoist_speed": tr.along_values.tolist(),
             "mu_star": tr.values.tolist(),
             "widths": tr.widths.tolist(),
@@ -287,9 +408,8 @@ def main(argv=None):
         fig.savefig(out / "boundary_mu_vl.png", dpi=110)
         plt.close(fig)
 
-    path = out / "bifurcation_mu.json"
-    path.write_text(json.dumps(rec, indent=1, default=float) + "\n")
-    print(f"wrote {path} and PNGs in {out}")
+    write("done")
+    print(f"wrote {path} and PNGs in {out} ({rec['wall_total_s']:.0f} s in all)")
 
 
 if __name__ == "__main__":

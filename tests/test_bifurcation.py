@@ -232,6 +232,36 @@ def test_find_jumps_on_a_synthetic_scan():
     assert j2.lo < 0.9025 < j2.hi and np.isinf(j2.y_hi)
 
 
+def test_find_jumps_splits_a_one_cell_excursion():
+    """A count that steps 8 -> 7 -> 8 over two neighbouring cells is two jumps with different ends (merged,
+    they would have equal ends and no sign change to locate); a monotone ramp stays one candidate."""
+    x = np.linspace(0.0, 1.0, 101)
+    y = np.full(x.size, 8.0)
+    y[40] = 7.0
+    y[70:74] = [9.0, 10.0, 11.0, 12.0]
+    y[74:] = 12.0
+    res = ScanResult(
+        params=["p"],
+        mode="sweep",
+        coords={"p": x},
+        shape=(101,),
+        data={"n": y},
+        components={"n": None},
+        status=np.zeros(101, dtype=np.int32),
+        reasons={},
+        num_accepted_steps=np.zeros(101, dtype=np.int32),
+        num_rejected_steps=np.zeros(101, dtype=np.int32),
+        ts=None,
+        histories={},
+        units={"p": "-", "n": "-"},
+        descriptions={},
+        attrs={},
+    )
+    jumps = find_jumps(res, "n")
+    assert [(j.y_lo, j.y_hi) for j in jumps] == [(8.0, 7.0), (7.0, 8.0), (8.0, 12.0)]
+    assert jumps[0].hi == jumps[1].lo == x[40]
+
+
 def test_locator_refuses_a_bracket_without_a_sign_change():
     with pytest.raises(jh.ScenarioError, match="lo < hi"):
         locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.6, 0.4), **SYM_KW)

@@ -98,9 +98,10 @@ def find_jumps(
 
     A step between neighbouring (valid) members is a candidate when it is `factor` times larger than the
     median step of its `window` neighbours on either side, and larger than `min_size` (default 1e-6 of the
-    observable's range). Consecutive candidates are merged into one (a ramp steeper than its surroundings
-    spanning several grid cells). A step between a finite value and ±inf (an event that stops happening)
-    always counts.
+    observable's range). Consecutive candidates in the same direction are merged into one (a ramp steeper
+    than its surroundings spanning several grid cells); a step back starts a new one (a one-cell excursion
+    such as a count going 8 -> 7 -> 8 is two jumps). A step between a finite value and ±inf (an event that
+    stops happening) always counts, on its own.
 
     **Returns** the candidates sorted by parameter value.
     """
@@ -146,13 +147,23 @@ def find_jumps(
             cand[i] = True
             score[i] = d[i] / bg if bg > 0 else np.inf
     jumps = []
+    with np.errstate(invalid="ignore"):
+        direction = np.sign(np.diff(y))  # NaN where a step involves ±inf on both sides
     i = 0
     while i < d.size:
         if not cand[i]:
             i += 1
             continue
         j = i
-        while j + 1 < d.size and cand[j + 1]:
+        # merge a run of candidate steps in one direction (a steep ramp); a step back (a one-cell blip
+        # 8 -> 7 -> 8 of a count, say) starts a new candidate, or the merged one would have equal ends
+        while (
+            j + 1 < d.size
+            and cand[j + 1]
+            and np.isfinite(d[j + 1])
+            and np.isfinite(d[i])
+            and direction[j + 1] == direction[i]
+        ):
             j += 1
         with np.errstate(invalid="ignore"):
             size = abs(y[j + 1] - y[i])
