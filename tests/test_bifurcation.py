@@ -308,8 +308,27 @@ def test_scan_and_bifurcation_commands(tmp_path):
     path = tmp_path / "sym.toml"
     path.write_text(SYMMETRIC_TOML)
     out = tmp_path / "scan"
-    rc = main(["scan", str(path), "--param", XI, "--values", "0.45,0.55", "--observable", "first_corner",
-               "--t1", "0.2", "--n-save", "101", "--set", "hoist.speed=0.05", "--out", str(out), "--quiet"])
+    rc = main(
+        [
+            "scan",
+            str(path),
+            "--param",
+            XI,
+            "--values",
+            "0.45,0.55",
+            "--observable",
+            "first_corner",
+            "--t1",
+            "0.2",
+            "--n-save",
+            "101",
+            "--set",
+            "hoist.speed=0.05",
+            "--out",
+            str(out),
+            "--quiet",
+        ]
+    )
     assert rc == 0
     res = ScanResult.load(out / "scan")
     np.testing.assert_array_equal(res.coords[XI], [0.45, 0.55])
@@ -319,12 +338,59 @@ def test_scan_and_bifurcation_commands(tmp_path):
     first = [int(x) for x in res["first_corner"]]
     assert first[0] in (1, 2) and first[1] in (0, 3)
 
-    rc = main(["bifurcation", str(path), "--param", XI, "--bracket", "0.46", "0.57", "--observable",
-               "detach:E-D", "--level", "0", "--method", "bisection", "--tol", "1e-4", "--t1", "0.2",
-               "--n-save", "101",
-               "--set", "hoist.speed=0.05", "--out", str(tmp_path / "bif")])
+    rc = main(
+        [
+            "bifurcation",
+            str(path),
+            "--param",
+            XI,
+            "--bracket",
+            "0.46",
+            "0.57",
+            "--observable",
+            "detach:E-D",
+            "--level",
+            "0",
+            "--method",
+            "bisection",
+            "--tol",
+            "1e-4",
+            "--t1",
+            "0.2",
+            "--n-save",
+            "101",
+            "--set",
+            "hoist.speed=0.05",
+            "--out",
+            str(tmp_path / "bif"),
+        ]
+    )
     assert rc == 0
     found = json.loads((tmp_path / "bif" / "bifurcation.json").read_text())
     assert found["overrides"] == {"hoist.speed": 0.05}
     (b,) = found["bifurcations"]
     assert abs(b["value"] - 0.5) <= 1e-4
+
+
+def test_trace_reports_a_vanished_jump_as_lost(monkeypatch):
+    """With the level re-estimated per bracket the corrector always finds some crossing; where the change
+    across the final bracket is a small fraction of the first point's jump, the boundary is reported lost
+    (NaN, with a note), not followed onto a level crossing of a flat observable. The locator is replaced by
+    a stand-in (no solves): a jump of size 1 at q = 0 and 0.9, of size 1e-4 at q = 0.5."""
+    import types
+
+    import jaxhoist.apps.bifurcation as B
+
+    def fake_locate(sc, param, obs, br, level=None, tol=1e-6, method="newton", **kw):
+        q = float(sc.hoist.speed)
+        size = 1e-4 if abs(q - 0.5) < 1e-9 else 1.0
+        return types.SimpleNamespace(
+            value=0.5 * sum(br), y_lo=0.0, y_hi=size, n_solves=3, width=tol, notes=[]
+        )
+
+    monkeypatch.setattr(B, "locate_bifurcation", fake_locate)
+    tr = B.trace_boundary(
+        symmetric_lift(), "load.mass_centre[0]", (0.4, 0.6), "hoist.speed", [0.1, 0.5, 0.9], "final_psi"
+    )
+    assert np.isfinite(tr.values[0]) and np.isnan(tr.values[1]) and np.isfinite(tr.values[2])
+    assert "lost" in tr.points[1].notes[0]

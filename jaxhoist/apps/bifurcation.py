@@ -667,10 +667,11 @@ class Boundary:
     """A boundary p*(q) traced by continuation.
 
     - `param`, `along`: the located parameter p and the continuation parameter q (paths).
-    - `along_values`, `values`: q_k and p*(q_k) (NaN where the corrector failed); `widths`: final brackets.
+    - `along_values`, `values`: q_k and p*(q_k) (NaN where the corrector failed or lost the jump);
+      `widths`: final brackets.
     - `n_solves`: solves used in all; `n_dense`: solves a dense grid at spacing `tol` in p, over the initial
       bracket and every located p*, at the same q values would need.
-    - `points`: the `Bifurcation` of each q (None where it failed).
+    - `points`: the `Bifurcation` of each q (None where it failed; kept, with a note, where it was lost).
     """
 
     param: str
@@ -697,6 +698,7 @@ def trace_boundary(
     method: str = "newton",
     initial_half_width: float | None = None,
     max_expansions: int = 8,
+    min_jump_fraction: float = 0.1,
     **solve_kw,
 ) -> Boundary:
     """Follow the boundary p*(q) in the (p, q) plane by continuation, not a dense grid.
@@ -704,7 +706,11 @@ def trace_boundary(
     At `along_values[0]`, p* is located in `bracket`. At each next q the predictor extrapolates the last two
     points linearly (a secant along the boundary), and the corrector brackets the prediction by
     ±w (w = half the last change of p*, at least 20 tol; doubled until the indicator changes sign) and
-    refines it with `locate_bifurcation`. With `level=None` the level is re-estimated in each bracket.
+    refines it with `locate_bifurcation`. With `level=None` the level is re-estimated in each bracket, so
+    the corrector always finds *some* crossing; a point whose change across its final bracket is below
+    `min_jump_fraction` of the first point's is therefore reported as lost (NaN, with a note on the point):
+    the jump has vanished or moved out of reach there, and a level crossing of a nearly flat observable is
+    not the boundary.
 
     **Returns** a `Boundary`.
     """
@@ -718,6 +724,7 @@ def trace_boundary(
     ps: list[float] = []
     points: list = []
     n_solves = 0
+    ref_size = None
     for k, q in enumerate(qs):
         sc = set_param(scenario, along, q)
         good = [(qq, pp) for qq, pp in zip(qs[:k], ps, strict=True) if np.isfinite(pp)]
@@ -741,9 +748,19 @@ def trace_boundary(
                 n_solves += e.n_solves
             except ScenarioError:  # the widened bracket left the valid range of the parameter
                 break
+        lost = False
         if pt is not None:
             n_solves += pt.n_solves
-        ps.append(pt.value if pt is not None else np.nan)
+            size = abs(pt.y_hi - pt.y_lo)
+            if level is None and ref_size is None:
+                ref_size = size
+            elif level is None and not size >= min_jump_fraction * ref_size:
+                lost = True
+                pt.notes.append(
+                    f"lost: the change across the final bracket, {size:.3g}, is below "
+                    f"{min_jump_fraction:g} x the first point's {ref_size:.3g}; not the traced jump"
+                )
+        ps.append(pt.value if pt is not None and not lost else np.nan)
         points.append(pt)
     vals = np.asarray(ps)
     fin = vals[np.isfinite(vals)]
