@@ -75,7 +75,8 @@ class SolverOptions:
     """Numerical settings (static: a change recompiles).
 
     - `solver`: a diffrax solver (default Tsit5).
-    - `rtol`, `atol`: tolerances of the adaptive step-size controller; `dt0`: first step [s] (None: automatic).
+    - `rtol`, `atol`: tolerances of the adaptive step-size controller; `dt0`: first step [s] (None:
+      automatic).
     - `fixed_step`: take constant steps of `dt0` instead (no error control, no rejected steps: every member
       of a vmapped batch takes the same steps, which removes lock-step waste in scans; check the accuracy
       against an adaptive solve).

@@ -86,7 +86,8 @@ class Load(eqx.Module):
     - `size`: (a, b, c), edge lengths along ξ, η, ζ [m].
     - `mass`: m [kg] (give `mass` or `density` ρ [kg/m³] to the constructor; m = ρabc, computed once:
       replacing `size` later keeps the mass, so change both if you mean a bigger box of the same material).
-    - `mass_centre`: C = (ξ_C, η_C, ζ_C) in the body frame, measured from corner D [m]; default the box centre.
+    - `mass_centre`: C = (ξ_C, η_C, ζ_C) in the body frame, measured from corner D [m]; default the box
+      centre.
     - `inertia`: J, the inertia tensor about C in body axes [kg m²] with the sign convention of (2.11)
       (off-diagonal entries are -J_ξη etc.), or None: then the uniform-box tensor about its centre,
       carried to C by the parallel-axis theorem (our choice; give J explicitly for a measured load).
@@ -529,7 +530,8 @@ class Scenario(eqx.Module):
             )
 
     def replace(self, **leaves) -> Scenario:
-        """A copy with leaves replaced by dotted path, e.g. `replace(**{"foundation.friction_coefficient": 0.3})`."""
+        """A copy with leaves replaced by dotted path, e.g.
+        `replace(**{"foundation.friction_coefficient": 0.3})`."""
         out = self
         for path, value in leaves.items():
             out = eqx.tree_at(leaf_getter(path), out, _f64(value))
