@@ -479,51 +479,24 @@ class _Driver:
         speed = np.linalg.norm(vh, axis=1)
         slipping = speed >= self.tol["v"] * self.V
         dirs = np.where(slipping[:, None], vh / np.maximum(speed, 1e-300)[:, None], 0.0)
-        options = [[FREE, SLIDE, STICK] if i in involved else [FREE] for i in range(4)]
-        combos = [np.array(cb) for cb in itertools.product(*options)]
+        mask = np.isin(np.arange(4), involved)
+        combos = _impulse_combinations(mask)
         # Sliding impulses need a direction: the pre-impact slip, else the opposite of the sticking impulse.
-        modes = np.zeros((81, 4), dtype=np.int32)
-        sd = np.zeros((81, 4, 2))
-        for k, cb in enumerate(combos):
-            modes[k] = np.where(cb == SLIDE, STICK, cb)  # first pass: sticking impulses
-        _, _, imp0, _ = map(_np, _eval_impulses(y, self.sc, self.c, jnp.asarray(modes), jnp.asarray(sd),
+        sticking = _modes([np.where(cb == SLIDE, STICK, cb) for cb in combos])
+        _, _, imp0, _ = map(_np, _eval_impulses(y, self.sc, self.c, jnp.asarray(sticking),
+                                                jnp.asarray(np.zeros((81, 4, 2))),
                                                 jnp.asarray(normal_target), self.settings.rcond))
-        for k, cb in enumerate(combos):
-            modes[k] = cb
-            for i in range(4):
-                if cb[i] == SLIDE:
-                    if slipping[i]:
-                        sd[k, i] = dirs[i]
-                    else:
-                        p = -imp0[k, i, :2]
-                        n = np.linalg.norm(p)
-                        sd[k, i] = p / n if n > 0 else 0.0
+        sd = _slide_directions(combos, slipping, dirs, imp0)
+        modes = _modes(combos)
         v1, w1, imp, cv1 = map(_np, _eval_impulses(y, self.sc, self.c, jnp.asarray(modes), jnp.asarray(sd),
                                                    jnp.asarray(normal_target), self.settings.rcond))
         tP = self.tol["force"] * self.G * 1e-3  # impulses [N s]
         tV = self.tol["v"] * self.V
-        consistent = []
-        for k, cb in enumerate(combos):
-            ok = True
-            for i in range(4):
-                Pz, Ph = imp[k, i, 2], np.linalg.norm(imp[k, i, :2])
-                if cb[i] != FREE and Pz < -tP:
-                    ok = False
-                elif cb[i] == STICK and Ph > self.mu * Pz + tP:
-                    ok = False
-                elif cb[i] == SLIDE and float(cv1[k, i, :2] @ sd[k, i]) < -tV:
-                    ok = False  # the friction impulse would reverse the slip: it sticks instead
-                elif cb[i] == FREE and i in involved and cv1[k, i, 2] < -tV:
-                    ok = False
-                if not ok:
-                    break
-            if ok:
-                consistent.append(k)
+        consistent = _consistent_impulses(combos, imp, cv1, sd, mask, self.mu, tP, tV)
         if not consistent:
             raise RigidContactError(
                 f"t = {t:.9g} s: impact of corner(s) {[rigid.CORNERS[i] for i in striking]} has no "
                 f"consistent impulse (Painlevé-type impact inconsistency)")
-        consistent.sort(key=lambda k: (-int(np.sum(combos[k] != FREE)), -int(np.sum(combos[k] == STICK))))
         best = consistent[0]
         u_best = np.concatenate([v1[best], w1[best]])
         for k in consistent[1:]:
@@ -548,6 +521,58 @@ class _Driver:
         return y1, loss
 
 
+def _impulse_combinations(involved: np.ndarray) -> list[np.ndarray]:
+    """Every assignment of FREE / SLIDE / STICK to the `involved` corners (the others FREE)."""
+    options = [[FREE, SLIDE, STICK] if involved[i] else [FREE] for i in range(4)]
+    return [np.array(cb) for cb in itertools.product(*options)]
+
+
+def _modes(combos) -> np.ndarray:
+    """The combinations as a (81, 4) mode array (padded with FREE rows: one compiled evaluation serves
+    every number of involved corners)."""
+    out = np.zeros((81, 4), dtype=np.int32)
+    out[: len(combos)] = combos
+    return out
+
+
+def _slide_directions(combos, slipping, dirs, sticking_impulses) -> np.ndarray:
+    """Per combination and corner, the direction (4, 2) a sliding impulse opposes: the pre-impact slip
+    `dirs` where the corner slips, else the opposite of its impulse in the all-sticking first pass
+    (padded to 81 combinations like `_modes`)."""
+    sd = np.zeros((81, 4, 2))
+    for k, cb in enumerate(combos):
+        for i in range(4):
+            if cb[i] == SLIDE:
+                if slipping[i]:
+                    sd[k, i] = dirs[i]
+                else:
+                    p = -sticking_impulses[k, i, :2]
+                    n = np.linalg.norm(p)
+                    sd[k, i] = p / n if n > 0 else 0.0
+    return sd
+
+
+def _consistent_impulses(combos, imp, cv1, sd, involved, mu, tP, tV) -> list[int]:
+    """The combinations whose impulses `imp` and post-impact corner velocities `cv1` are consistent with
+    Coulomb's law: normal impulses >= 0, sticking ones inside the friction cone, sliding ones not reversing
+    the slip (it would stick instead), free involved corners not driven into the ground; sorted with the
+    most contacts first, then the most sticking ones."""
+    consistent = []
+    for k, cb in enumerate(combos):
+        ok = True
+        for i in range(4):
+            Pz, Ph = imp[k, i, 2], np.linalg.norm(imp[k, i, :2])
+            if (cb[i] != FREE and Pz < -tP) or (cb[i] == STICK and Ph > mu * Pz + tP) or (
+                    cb[i] == SLIDE and float(cv1[k, i, :2] @ sd[k, i]) < -tV) or (
+                    cb[i] == FREE and involved[i] and cv1[k, i, 2] < -tV):
+                ok = False
+                break
+        if ok:
+            consistent.append(k)
+    consistent.sort(key=lambda k: (-int(np.sum(combos[k] != FREE)), -int(np.sum(combos[k] == STICK))))
+    return consistent
+
+
 def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None, t_rate=None):
     """The inextensible rope snapping taut (or the hoist starting with a speed jump): a plastic jerk that
     sets d|AB|/dt = dl/dt, with the corners on the ground taking impulses as in `_Driver.impact` (every
@@ -567,51 +592,25 @@ def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None
     speed = np.linalg.norm(vh, axis=1)
     slipping = speed >= drv.tol["v"] * drv.V
     dirs = np.where(slipping[:, None], vh / np.maximum(speed, 1e-300)[:, None], 0.0)
-    options = [[FREE, SLIDE, STICK] if near[i] else [FREE] for i in range(4)]
-    combos = [np.array(cb) for cb in itertools.product(*options)]
-    n = len(combos)
-    modes = np.zeros((n, 4), dtype=np.int32)
-    sd = np.zeros((n, 4, 2))
-    for k, cb in enumerate(combos):
-        modes[k] = np.where(cb == SLIDE, STICK, cb)  # first pass: sticking impulses give the slide directions
+    combos = _impulse_combinations(near)
+    # First pass: sticking impulses give the slide directions.
+    sticking = _modes([np.where(cb == SLIDE, STICK, cb) for cb in combos])
     tj = jnp.asarray(t if t_rate is None else t_rate, dtype=jnp.float64)
-    out0 = map(_np, _eval_rope_impulses(tj, y, drv.sc, drv.c, jnp.asarray(modes), jnp.asarray(sd),
+    out0 = map(_np, _eval_rope_impulses(tj, y, drv.sc, drv.c, jnp.asarray(sticking),
+                                        jnp.asarray(np.zeros((81, 4, 2))),
                                         jnp.asarray(normal_target), drv.settings.rcond))
     imp0 = list(out0)[3]
-    for k, cb in enumerate(combos):
-        modes[k] = cb
-        for i in range(4):
-            if cb[i] == SLIDE:
-                if slipping[i]:
-                    sd[k, i] = dirs[i]
-                else:
-                    pv = -imp0[k, i, :2]
-                    nv = np.linalg.norm(pv)
-                    sd[k, i] = pv / nv if nv > 0 else 0.0
+    sd = _slide_directions(combos, slipping, dirs, imp0)
+    modes = _modes(combos)
     v1, w1, tip1, imp, P, cv1 = map(_np, _eval_rope_impulses(tj, y, drv.sc, drv.c, jnp.asarray(modes),
                                                               jnp.asarray(sd), jnp.asarray(normal_target),
                                                               drv.settings.rcond))
     tP = drv.tol["force"] * drv.G * 1e-3  # impulses [N s]
     tV = drv.tol["v"] * drv.V
-    consistent = []
-    for k, cb in enumerate(combos):
-        ok = P[k] >= -tP
-        for i in range(4):
-            Pz, Ph = imp[k, i, 2], np.linalg.norm(imp[k, i, :2])
-            if cb[i] != FREE and Pz < -tP:
-                ok = False
-            elif cb[i] == STICK and Ph > drv.mu * Pz + tP:
-                ok = False
-            elif cb[i] == SLIDE and float(cv1[k, i, :2] @ sd[k, i]) < -tV:
-                ok = False
-            elif cb[i] == FREE and near[i] and cv1[k, i, 2] < -tV:
-                ok = False
-        if ok:
-            consistent.append(k)
+    consistent = [k for k in _consistent_impulses(combos, imp, cv1, sd, near, drv.mu, tP, tV) if P[k] >= -tP]
     if not consistent:
         raise _RopeWouldPush(f"t = {t:.9g} s: the jerk of the inextensible rope has no consistent impulse "
                              "(Painlevé-type impact inconsistency)")
-    consistent.sort(key=lambda k: (-int(np.sum(combos[k] != FREE)), -int(np.sum(combos[k] == STICK))))
     best = consistent[0]
     _, _, s_dot = map(float, _rope_state(tj, y, drv.sc, drv.c))
     m0 = float(drv.sc.boom.tip_mass)

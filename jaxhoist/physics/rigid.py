@@ -491,21 +491,32 @@ def _motion_contact_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Pha
                         phase, settings)
 
 
-def _motion_contact_free(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
-                         settings: Settings) -> Contact:
-    mu, m = scenario.foundation.friction_coefficient, scenario.load.mass
+def _contact_problem(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
+    """M⁻¹, the sliding directions t̂_i, the force maps P_i and row selectors of `_maps`, and the corner
+    accelerations the contact forces must add (Baumgarte target minus the unconstrained ones)."""
     Minv = _mass_inverse(scenario, c)
     tdir = slip_directions(ld.corner_velocity, phase.slip_hint, settings.slip_velocity)
-    P, s_rows = _maps(phase.contact, tdir, mu)
+    P, s_rows = _maps(phase.contact, tdir, scenario.foundation.friction_coefficient)
     beta = settings.baumgarte
     z_only = jnp.array([0.0, 0.0, 1.0])
     a_free = jnp.einsum("kij,j->ki", ld.jacobians, Minv @ ld.generalised_force) + ld.bias
     a_target = -2.0 * beta * ld.corner_velocity - beta**2 * ld.corners[:, 2:3] * z_only
-    lam = solve_contact_system(ld.jacobians, Minv, P, s_rows, a_target - a_free, m, settings.rcond)
+    return Minv, tdir, P, s_rows, a_target - a_free
+
+
+def _contact_from_multipliers(ld: Loads, Minv, tdir, P, lam) -> Contact:
+    """Corner forces F_i = P_i λ_i and the resulting body and corner accelerations."""
     F = jnp.einsum("kij,kj->ki", P, lam.reshape(4, 3))
     accel = Minv @ (ld.generalised_force + jnp.einsum("kij,ki->j", ld.jacobians, F))
     corner_accel = jnp.einsum("kij,j->ki", ld.jacobians, accel) + ld.bias
     return Contact(accel=accel, force=F, corner_accel=corner_accel, slip_direction=tdir, loads=ld)
+
+
+def _motion_contact_free(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
+                         settings: Settings) -> Contact:
+    Minv, tdir, P, s_rows, target = _contact_problem(ld, scenario, c, phase, settings)
+    lam = solve_contact_system(ld.jacobians, Minv, P, s_rows, target, scenario.load.mass, settings.rcond)
+    return _contact_from_multipliers(ld, Minv, tdir, P, lam)
 
 
 def _motion_contact_taut(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
@@ -513,26 +524,14 @@ def _motion_contact_taut(ld: Loads, scenario: Scenario, c: Constants, phase: Pha
     """The moving load with a taut inextensible rope: unknowns λ (12) and the tension S, from "constrained
     corner accelerations vanish" (Baumgarte-stabilised) and d²|AB|/dt² = `rope_accel_target`, with the
     boom tip's acceleration (2.13) m_0 a_A = boom force - S e - m_0 g."""
-    mu, m = scenario.foundation.friction_coefficient, scenario.load.mass
-    m0 = scenario.boom.tip_mass
-    Minv = _mass_inverse(scenario, c)
-    tdir = slip_directions(ld.corner_velocity, phase.slip_hint, settings.slip_velocity)
-    P, s_rows = _maps(phase.contact, tdir, mu)
-    beta = settings.baumgarte
-    z_only = jnp.array([0.0, 0.0, 1.0])
-    a_free = jnp.einsum("kij,j->ki", ld.jacobians, Minv @ ld.generalised_force) + ld.bias
-    a_target = -2.0 * beta * ld.corner_velocity - beta**2 * ld.corners[:, 2:3] * z_only
+    Minv, tdir, P, s_rows, target = _contact_problem(ld, scenario, c, phase, settings)
     e = ld.rope_direction
     a_B_free = ld.rope_jacobian @ (Minv @ ld.generalised_force) + ld.rope_bias
     rhs_s = (jnp.dot(e, _tip_free_accel(ld, scenario)) - jnp.dot(e, a_B_free) + ld.rope_curvature
              - rope_accel_target(ld, settings))
-    lam, S = solve_rope_contact_system(ld.jacobians, Minv, P, s_rows, a_target - a_free,
-                                       ld.rope_generalised, m0, rhs_s, m, settings.rcond)
-    ld = with_tension(ld, S, True)
-    F = jnp.einsum("kij,kj->ki", P, lam.reshape(4, 3))
-    accel = Minv @ (ld.generalised_force + jnp.einsum("kij,ki->j", ld.jacobians, F))
-    corner_accel = jnp.einsum("kij,j->ki", ld.jacobians, accel) + ld.bias
-    return Contact(accel=accel, force=F, corner_accel=corner_accel, slip_direction=tdir, loads=ld)
+    lam, S = solve_rope_contact_system(ld.jacobians, Minv, P, s_rows, target, ld.rope_generalised,
+                                       scenario.boom.tip_mass, rhs_s, scenario.load.mass, settings.rcond)
+    return _contact_from_multipliers(with_tension(ld, S, True), Minv, tdir, P, lam)
 
 
 def contact_dynamics(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
