@@ -197,6 +197,28 @@ def test_slide_or_tip_first_flips_at_the_static_friction_coefficient():
     assert abs(b.value - 0.5 / r_s) > 6e-3  # the rigid-ground value is excluded
 
 
+def _sweep(x, name, y, status=None, reasons=None) -> ScanResult:
+    """A synthetic one-parameter scan result: parameter "p" at `x`, observable `name` with values `y`."""
+    n = x.size
+    return ScanResult(
+        params=["p"],
+        mode="sweep",
+        coords={"p": x},
+        shape=(n,),
+        data={name: y},
+        components={name: None},
+        status=np.zeros(n, dtype=np.int32) if status is None else status,
+        reasons={} if reasons is None else reasons,
+        num_accepted_steps=np.zeros(n, dtype=np.int32),
+        num_rejected_steps=np.zeros(n, dtype=np.int32),
+        ts=None,
+        histories={},
+        units={"p": "-", name: "-"},
+        descriptions={},
+        attrs={},
+    )
+
+
 def test_find_jumps_on_a_synthetic_scan():
     """A smooth background with a jump, a steep ramp over a few cells, an event that stops happening, and
     a failed member: three candidates, each bracketing its feature."""
@@ -206,23 +228,7 @@ def test_find_jumps_on_a_synthetic_scan():
     status = np.zeros(x.size, dtype=np.int32)
     status[50] = 1
     y[50] = np.nan
-    res = ScanResult(
-        params=["p"],
-        mode="sweep",
-        coords={"p": x},
-        shape=(201,),
-        data={"y": y},
-        components={"y": None},
-        status=status,
-        reasons={50: "max_steps"},
-        num_accepted_steps=np.zeros(201, dtype=np.int32),
-        num_rejected_steps=np.zeros(201, dtype=np.int32),
-        ts=None,
-        histories={},
-        units={"p": "-", "y": "-"},
-        descriptions={},
-        attrs={},
-    )
+    res = _sweep(x, "y", y, status=status, reasons={50: "max_steps"})
     jumps = find_jumps(res, "y")
     assert len(jumps) == 3
     j0, j1, j2 = jumps
@@ -240,23 +246,7 @@ def test_find_jumps_splits_a_one_cell_excursion():
     y[40] = 7.0
     y[70:74] = [9.0, 10.0, 11.0, 12.0]
     y[74:] = 12.0
-    res = ScanResult(
-        params=["p"],
-        mode="sweep",
-        coords={"p": x},
-        shape=(101,),
-        data={"n": y},
-        components={"n": None},
-        status=np.zeros(101, dtype=np.int32),
-        reasons={},
-        num_accepted_steps=np.zeros(101, dtype=np.int32),
-        num_rejected_steps=np.zeros(101, dtype=np.int32),
-        ts=None,
-        histories={},
-        units={"p": "-", "n": "-"},
-        descriptions={},
-        attrs={},
-    )
+    res = _sweep(x, "n", y)
     jumps = find_jumps(res, "n")
     assert [(j.y_lo, j.y_hi) for j in jumps] == [(8.0, 7.0), (7.0, 8.0), (8.0, 12.0)]
     assert jumps[0].hi == jumps[1].lo == x[40]
