@@ -62,16 +62,13 @@ import numpy as np  # noqa: E402
 import jaxhoist as jh  # noqa: E402
 from jaxhoist.apps.bifurcation import locate_bifurcation, trace_boundary  # noqa: E402
 from jaxhoist.numerics.observables import Observable, contact_function  # noqa: E402
+from jaxhoist.numerics.observables import get as get_observable  # noqa: E402
 from jaxhoist.numerics.scan import scan, set_param  # noqa: E402
 
 MU = "foundation.friction_coefficient"
 EPS = "foundation.friction.regularisation_velocity"
 DELTA = "foundation.friction.deflection"
 E = 1  # corner order D, E, F, H
-
-
-def _margin(traj, sc):
-    return jnp.min(contact_function(traj, sc)[:, E]) / sc.foundation.stiffness
 
 
 def _t_margin(traj, sc):
@@ -82,9 +79,7 @@ def _f_e(traj, sc):
     return contact_function(traj, sc)[:, E] / sc.foundation.stiffness
 
 
-MARGIN = Observable(
-    "E_margin", _margin, "m", "min over the saved times of E's contact function / k (<= 0: E left the ground)"
-)
+MARGIN = get_observable("contact_margin[E]")  # min over the saved times of f_E / k [m]
 T_MARGIN = Observable("E_margin_time", _t_margin, "s", "saved time at which E's contact function is smallest")
 F_E = Observable("f_E_over_k", _f_e, "m", "E's contact function / k at every saved time")
 
@@ -365,31 +360,14 @@ def main(argv=None):
     tr = trace_boundary(
         base, MU, bracket, EPS, eps_list, MARGIN, level=0.0, tol=tol, method=args.method, **kw
     )
-    rows = []
-    for e, pt in zip(eps_list, tr.points, strict=True):
-        row = {"eps": e, "mu_star": None}
-        if pt is not None:
-            row.update(
-                mu_star=pt.value,
-                bracket=list(pt.bracket),
-                width=pt.width,
-                g_lo=pt.y_lo,
-                g_hi=pt.y_hi,
-                n_solves=pt.n_solves,
-                n_derivative_solves=pt.n_derivative_solves,
-                steps=pt.steps,
-                wall_s=pt.wall_time,
-                compile_s=pt.compile_time,
-                converged=pt.converged,
-                kind=pt.kind,
-                notes=pt.notes,
-            )
-        rows.append(row)
-        print(
-            f"ε = {e:g} m/s: μ* = {row['mu_star']!r}"
-            + (f" ({pt.n_solves} solves, {pt.steps} steps, {pt.wall_time:.1f} s)" if pt else ""),
-            flush=True,
+    rows = [{"eps": r["along_value"], "mu_star": r["value"], **r} for r in tr.rows()]
+    for r in rows:
+        extra = (
+            f" ({r['n_solves']} solves, {r['steps']} steps, {r['wall_time']:.1f} s)"
+            if "n_solves" in r
+            else ""
         )
+        print(f"ε = {r['eps']:g} m/s: μ* = {r['mu_star']!r}{extra}", flush=True)
     rec["regularised"] = {
         "rows": rows,
         "n_solves": tr.n_solves,
@@ -442,28 +420,18 @@ def main(argv=None):
         method=args.method,
         **kw,
     )
-    brows = []
-    for d, pt in zip(delta_list, trb.points, strict=True):
-        row = {
-            "deflection": d,
+    brows = [
+        {
+            "deflection": r["along_value"],
             "breakaway_ratio": float(bristle.breakaway_ratio),
             "relaxation_time": float(bristle.relaxation_time),
-            "mu_star": None,
+            "mu_star": r["value"],
+            **r,
         }
-        if pt is not None:
-            row.update(
-                mu_star=pt.value,
-                bracket=list(pt.bracket),
-                width=pt.width,
-                n_solves=pt.n_solves,
-                n_derivative_solves=pt.n_derivative_solves,
-                steps=pt.steps,
-                wall_s=pt.wall_time,
-                converged=pt.converged,
-                notes=pt.notes,
-            )
-        brows.append(row)
-        print(f"bristle δ = {d:g} m: μ* = {row['mu_star']!r}", flush=True)
+        for r in trb.rows()
+    ]
+    for r in brows:
+        print(f"bristle δ = {r['deflection']:g} m: μ* = {r['mu_star']!r}", flush=True)
     rec["bristle"] = {"rows": brows, "n_solves": trb.n_solves, "wall_s": time.perf_counter() - t0}
     if len(brows) >= 2:
         rec["bristle"]["limit"] = _limit(brows, "deflection")

@@ -116,6 +116,10 @@ def test_multisection_and_continuation_along_the_hoist_speed():
     np.testing.assert_allclose(tr.values, 0.5, atol=1e-6)
     assert np.all(tr.widths <= 1e-6)
     assert tr.n_solves < 40 and tr.n_dense > 3e5
+    rows = tr.rows()  # the table form: one plain dict per point
+    assert [r["along_value"] for r in rows] == [0.05, 0.06, 0.07]
+    np.testing.assert_array_equal([r["value"] for r in rows], tr.values)
+    assert all(r["kind"] == "crossing" and "history" not in r and r["param"] == XI for r in rows)
 
 
 def test_slide_or_tip_first_flips_at_the_static_friction_coefficient():

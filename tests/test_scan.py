@@ -22,7 +22,14 @@ MU = "foundation.friction_coefficient"
 MUS = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
 T1 = 0.3
 KW = dict(
-    observables=["final_position", "liftoff_time", "detachment_times", "contact_time", "max_tilt"],
+    observables=[
+        "final_position",
+        "liftoff_time",
+        "detachment_times",
+        "contact_margin",
+        "contact_time",
+        "max_tilt",
+    ],
     n_save=31,
     lanes=2,
     max_steps=3000,
@@ -65,6 +72,14 @@ def test_scan_physics(clean):
     np.testing.assert_allclose(t[:, 0], t[:, 3], rtol=1e-9)
     np.testing.assert_allclose(t[:, 1], t[:, 2], rtol=1e-9)
     assert np.all(t[:, 0] < t[:, 1])
+    # contact_margin (min of f_i / k over the saved times) is <= 0 exactly for the corners that left the
+    # ground, mirror-symmetric like the detachment times, and no larger than the static compression at
+    # t = 0 (rope just taut: m g / (4 k) per corner) [m].
+    g_min = clean["contact_margin"]
+    np.testing.assert_array_equal(g_min <= 0.0, np.isfinite(t))
+    np.testing.assert_allclose(g_min[:, 0], g_min[:, 3], rtol=1e-9)
+    np.testing.assert_allclose(g_min[:, 1], g_min[:, 2], rtol=1e-9)
+    assert np.all(g_min <= 1000.0 * 9.81 / (4 * 1.5e7) * (1 + 1e-6))
     # Lift-off (all four N_i = 0) cannot come before the last corner's first detachment.
     assert np.all(clean["liftoff_time"] >= t.max(axis=1) - 1e-12)
     # Time spent in the five contact configurations adds up to the horizon.

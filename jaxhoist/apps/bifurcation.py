@@ -319,9 +319,14 @@ class Bifurcation:
             f"{self.tol:g}"
         )
 
-    def to_dict(self) -> dict[str, Any]:
+    def to_dict(self, history: bool = True) -> dict[str, Any]:
+        """Every field as plain Python values (`history` left out with `history=False`), plus `kind`."""
         d = dataclasses.asdict(self)
-        d["history"] = [list(h) for h in self.history]
+        if history:
+            d["history"] = [list(h) for h in self.history]
+        else:
+            del d["history"]
+        d["kind"] = self.kind
         return d
 
 
@@ -683,6 +688,17 @@ class Boundary:
     n_dense: int
     points: list
     tol: float
+
+    def rows(self) -> list[dict[str, Any]]:
+        """One dict per continuation point, for tables and JSON: its `Bifurcation` fields (no history;
+        none where the corrector failed), then `along_value` = q and `value` = p* (None where failed or
+        lost)."""
+        out = []
+        for q, v, pt in zip(self.along_values, self.values, self.points, strict=True):
+            d = pt.to_dict(history=False) if pt is not None else {}
+            d.update(along_value=float(q), value=float(v) if np.isfinite(v) else None)
+            out.append(d)
+        return out
 
 
 def trace_boundary(

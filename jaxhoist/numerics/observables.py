@@ -167,6 +167,10 @@ def _impact_counts(traj, scenario):
     return jnp.sum(~on[:-1] & on[1:], axis=0).astype(jnp.float64)
 
 
+def _contact_margin(traj, scenario):
+    return jnp.min(contact_function(traj, scenario), axis=0) / scenario.foundation.stiffness
+
+
 def _contact_time(traj, scenario):
     n = jnp.sum(contact_function(traj, scenario) > 0.0, axis=-1)
     dt = jnp.diff(traj.ts)
@@ -238,6 +242,16 @@ _register(
         _detachment_times,
         "s",
         "per corner D, E, F, H: first time N_i = 0 (interpolated; inf if never)",
+        CORNERS,
+    )
+)
+_register(
+    Observable(
+        "contact_margin",
+        _contact_margin,
+        "m",
+        "per corner: min over the saved times of f_i / k (> 0: never left the ground; continuous in the "
+        "parameters, so a grazing detachment is located where it crosses 0)",
         CORNERS,
     )
 )
