@@ -71,8 +71,9 @@ def main(argv=None):
         "final_position_m": np.asarray(tr.position[-1]).tolist(),
     }
     print(
-        f"{args.scenario} t1={t1} s, {rec['friction_law']} {rec['friction_params']}: first call (compile+run) "
-        f"{compile_s:.2f} s, run after compilation {rec['run_s_median'] * 1e3:.0f} ms (median of {args.repeats}), "
+        f"{args.scenario} t1={t1} s, {rec['friction_law']} {rec['friction_params']}: first call "
+        f"(compile+run) {compile_s:.2f} s, run after compilation {rec['run_s_median'] * 1e3:.0f} ms "
+        f"(median of {args.repeats}), "
         f"accepted {rec['accepted_steps']} rejected {rec['rejected_steps']} steps, "
         f"{rec['run_s_median'] / max(rec['accepted_steps'] + rec['rejected_steps'], 1) * 1e6:.1f} us/step"
     )
@@ -81,8 +82,9 @@ def main(argv=None):
             wall, nfev, pos = scipy_baseline(sc, t1, method)
             rec[f"scipy_{method}_s"] = wall
             print(
-                f"  scipy {method}: {wall:.2f} s, {nfev} RHS evaluations, final C {np.round(np.asarray(pos), 4)} "
-                f"(jaxhoist {np.round(np.asarray(tr.position[-1]), 4)}); ratio {wall / rec['run_s_median']:.0f}x"
+                f"  scipy {method}: {wall:.2f} s, {nfev} RHS evaluations, final C "
+                f"{np.round(np.asarray(pos), 4)} (jaxhoist {np.round(np.asarray(tr.position[-1]), 4)}); "
+                f"ratio {wall / rec['run_s_median']:.0f}x"
             )
     if args.out:
         out = Path(args.out)

@@ -83,8 +83,8 @@ def main(argv=None):
             flush=True,
         )
     lines = [
-        f"Friction laws on {args.scenario}, t1 = {t1} s, Tsit5 rtol 1e-6 atol 1e-8; reference: regularised Coulomb "
-        f"eps = {ref_eps:g} m/s at rtol 1e-8 ({int(ref.num_accepted_steps)} steps, {t_ref:.1f} s).",
+        f"Friction laws on {args.scenario}, t1 = {t1} s, Tsit5 rtol 1e-6 atol 1e-8; reference: regularised "
+        f"Coulomb eps = {ref_eps:g} m/s at rtol 1e-8 ({int(ref.num_accepted_steps)} steps, {t_ref:.1f} s).",
         "",
         "| law | accepted steps | rejected | wall [s] | wall / first row | dist. to ref. at 5 s [cm] "
         "| at t1 [cm] | max energy residual [J] |",

@@ -185,7 +185,7 @@ def test_free_swing_period(paper42):
     })
     J = float(sc.load.inertia_tensor()[1, 1])
     assert abs(J - m * 2 / 12) < 1e-9
-    l = l0 + m * G / k_stiff
+    l = l0 + m * G / k_stiff  # noqa: E741 (the rope length l of the docstring)
     M = np.array([[m * l * l, m * l * d], [m * l * d, m * d * d + J]])
     K = np.diag([m * G * l, m * G * d])
     w2, U = scipy.linalg.eigh(K, M)

@@ -48,7 +48,7 @@ import numpy as np
 from .._errors import ScenarioError, SolveStatus, require_x64
 from ..numerics import observables as obs_mod
 from ..numerics.scan import ScanResult, check_path, param_unit, scan, set_param
-from ..numerics.solve import SolverOptions, check_times, solve
+from ..numerics.solve import SolverOptions, saved_times, solve
 from ..physics.params import Scenario
 
 
@@ -330,27 +330,6 @@ class Bifurcation:
         return d
 
 
-def _options(solver, rtol, atol, dt0, max_steps):
-    return SolverOptions(
-        solver=diffrax.Tsit5() if solver is None else solver,
-        rtol=rtol,
-        atol=atol,
-        dt0=dt0,
-        max_steps=max_steps,
-    )
-
-
-def _times(scenario, t1, ts, n_save):
-    if t1 is None:
-        t1 = scenario.t1 if ts is None else float(np.asarray(ts)[-1])
-    check_times(t1, ts)
-    if ts is None:
-        if int(n_save) < 2:
-            raise ScenarioError(f"n_save must be >= 2, got {n_save}")
-        ts = np.linspace(0.0, 1.0, int(n_save)) * float(t1)
-    return jnp.asarray(ts, dtype=jnp.float64)
-
-
 def _resolve_one(observable) -> obs_mod.Observable:
     try:
         (o,) = obs_mod.resolve(observable)
@@ -427,8 +406,8 @@ def locate_bifurcation(
     if method not in ("newton", "bisection", "multisection"):
         raise ScenarioError(f"method must be 'newton', 'bisection' or 'multisection', got {method!r}")
     obs = _resolve_one(observable)
-    ts = _times(scenario, t1, ts, n_save)
-    options = _options(solver, rtol, atol, dt0, max_steps)
+    ts = jnp.asarray(saved_times(scenario, t1, ts, n_save)[1], dtype=jnp.float64)
+    options = SolverOptions(solver=solver, rtol=rtol, atol=atol, dt0=dt0, max_steps=max_steps)
     n_uniform = int(math.ceil((hi - lo) / tol)) + 1
     unit = param_unit(scenario, param)
 

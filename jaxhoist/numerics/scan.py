@@ -60,7 +60,7 @@ import numpy as np
 from .._errors import ScenarioError, SolveStatus, require_x64
 from ..physics.params import Scenario, get_leaf
 from . import fixed_step as fixed_mod
-from .solve import SolverOptions, check_times, solve
+from .solve import SolverOptions, saved_times, solve
 
 FORMAT = "jaxhoist-scan/1"
 MANIFEST = "manifest.json"
@@ -794,7 +794,7 @@ def scan(
                 f"history {h!r} is not a Trajectory output; choose from {sorted(_HISTORY_UNITS)}"
             )
     options = SolverOptions(
-        solver=diffrax.Tsit5() if solver is None else solver,
+        solver=solver,
         rtol=rtol,
         atol=atol,
         dt0=dt0,
@@ -802,13 +802,7 @@ def scan(
         adjoint="forward" if derivatives else "reverse",
         fixed_step=bool(fixed_step),
     )
-    if t1 is None:
-        t1 = scenario.t1 if ts is None else float(np.asarray(ts)[-1])
-    check_times(t1, ts)
-    if ts is None:
-        if int(n_save) < 2:
-            raise ScenarioError(f"n_save must be >= 2, got {n_save}")
-        ts = np.linspace(0.0, 1.0, int(n_save)) * float(t1)
+    t1, ts = saved_times(scenario, t1, ts, n_save)
     if fixed_step and fixed_mod.supports(options.solver):
         need = fixed_mod.steps_needed(ts, dt0)
         if need > int(max_steps):

@@ -74,7 +74,7 @@ class Trajectory(eqx.Module):
 class SolverOptions:
     """Numerical settings (static: a change recompiles).
 
-    - `solver`: a diffrax solver (default Tsit5).
+    - `solver`: a diffrax solver (None: Tsit5).
     - `rtol`, `atol`: tolerances of the adaptive step-size controller; `dt0`: first step [s] (None:
       automatic).
     - `fixed_step`: take constant steps of `dt0` instead (no error control, no rejected steps: every member
@@ -85,7 +85,7 @@ class SolverOptions:
     - `progress`: print the solve's progress (`diffrax.TextProgressMeter`); for single solves.
     """
 
-    solver: diffrax.AbstractSolver = dataclasses.field(default_factory=diffrax.Tsit5)
+    solver: diffrax.AbstractSolver | None = None
     rtol: float = 1e-6
     atol: float = 1e-8
     dt0: float | None = None
@@ -95,6 +95,8 @@ class SolverOptions:
     fixed_step: bool = False
 
     def __post_init__(self):
+        if self.solver is None:
+            object.__setattr__(self, "solver", diffrax.Tsit5())
         for name in ("rtol", "atol"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
@@ -220,6 +222,20 @@ def check_times(t1, ts) -> None:
             raise ScenarioError("ts must start at 0 s and be finite and strictly increasing")
 
 
+def saved_times(scenario: Scenario, t1, ts, n_save: int, xp=np):
+    """(t1, ts): the saved times `ts` as given, else `n_save` equally spaced in [0, t1]; t1 defaults to
+    `ts[-1]`, else the scenario's. Checked on the host. `xp` (numpy or jax.numpy) builds the grid: jax.numpy
+    keeps a traced t1 traced."""
+    if t1 is None:
+        t1 = scenario.t1 if ts is None else (ts[-1] if xp is jnp else float(np.asarray(ts)[-1]))
+    check_times(t1, ts)
+    if ts is None:
+        if int(n_save) < 2:
+            raise ScenarioError(f"n_save must be >= 2, got {n_save}")
+        ts = xp.linspace(0.0, 1.0, int(n_save)) * xp.asarray(t1, dtype=xp.float64)
+    return t1, ts
+
+
 def simulate(
     scenario: Scenario,
     t1: float | Float[ArrayLike, ""] | None = None,
@@ -282,7 +298,7 @@ def simulate(
     scenario.check()
     scenario = as_float64_leaves(scenario)
     options = SolverOptions(
-        solver=diffrax.Tsit5() if solver is None else solver,
+        solver=solver,
         rtol=rtol,
         atol=atol,
         dt0=dt0,
@@ -291,14 +307,7 @@ def simulate(
         progress=progress,
         fixed_step=fixed_step,
     )
-    if t1 is None:
-        t1 = scenario.t1 if ts is None else ts[-1]
-    check_times(t1, ts)
-    if ts is None:
-        if int(n_save) < 2:
-            raise ScenarioError(f"n_save must be >= 2, got {n_save}")
-        ts = jnp.linspace(0.0, 1.0, int(n_save)) * jnp.asarray(t1, dtype=jnp.float64)
-    else:
-        ts = jnp.asarray(ts, dtype=jnp.float64)
+    t1, ts = saved_times(scenario, t1, ts, n_save, jnp)
+    ts = jnp.asarray(ts, dtype=jnp.float64)
     traj = _solve_jit(scenario, ts, options)
     return _raise_on_failure(traj) if throw else traj
