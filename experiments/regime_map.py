@@ -19,7 +19,9 @@ map (it happens at ~0.2 s at v_l = 0.42 m/s and ~0.4 s at 0.2 m/s) and ends long
    speeds, so that each traced point can be checked against its row of the map;
 3. the check: in each row, every grid cell below the traced μ* must have g > 0 and every one above it g <= 0;
    and the solves the trace used against a dense grid at the same resolution;
-4. the picture: g over (μ, v_l) with the grid's zero contour and the traced points.
+4. the same boundary point located in other parameters (v_l, k, c_l, ξ_C): at μ = μ*(0.3 m/s) the boundary
+   must pass through the preset's value of each, within the error that μ*'s bracket implies there;
+5. the picture: g over (μ, v_l) with the grid's zero contour and the traced points.
 
     python experiments/regime_map.py --out out/regime-map            # ~5 min on 2 shared cores
     python experiments/regime_map.py --out out/regime-map --quick    # 11 x 5 grid
@@ -44,10 +46,25 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.apps.bifurcation import trace_boundary  # noqa: E402
+from jaxhoist.apps.bifurcation import BifurcationError, locate_bifurcation, trace_boundary  # noqa: E402
+from jaxhoist.numerics.scan import get_param, set_param  # noqa: E402
 
 MU, VL = "foundation.friction_coefficient", "hoist.speed"
 MARGIN = "contact_margin[E]"
+# Other parameters to cross the boundary in, at the traced point (μ*, v_l = 0.3 m/s): (path, relative
+# half-width of the bracket around the preset's value)
+OTHERS = [
+    ("hoist.speed", 0.05),
+    ("foundation.stiffness", 0.2),
+    ("rope.stiffness", 0.2),
+    ("load.mass_centre[0]", 0.05),
+]
+
+
+def _slope(b):
+    """dg/dp at the evaluation nearest the located value (forward-mode, from the Newton history)."""
+    h = [e for e in b.history if e[2] is not None and np.isfinite(e[2])]
+    return min(h, key=lambda e: abs(e[0] - b.value))[2] if h else float("nan")
 
 
 def _sign_changes(g):
@@ -166,9 +183,53 @@ def main(argv=None) -> int:
         print(f"  v_l = {v:.4f} m/s: μ* = {m!r}, grid cells on the wrong side of it: {n_wrong}")
     rec["check"] = {"rows": checks, "ok": agree, "of": len(trace)}
     print(f"rows whose every grid cell is on the side of μ* that its g says: {agree} of {len(trace)}")
+
+    # 4. the same boundary point, located in other parameters: at μ = μ*(0.3 m/s) the boundary must pass
+    #    through the preset's value of each of them, up to the error that μ*'s bracket implies there,
+    #    |dμ*/dq|^-1 x half its width (slopes by forward mode), and the new bracket's half-width
+    start = trace[j0]
+    mu0, w_mu = start["mu_star"], start["width"]
+    d_mu = _slope(locate_bifurcation(sc, MU, MARGIN, start["bracket"], level=0.0, tol=args.tol, **kw))
+    sc0 = set_param(sc, MU, mu0)
+    others, n_ok = [], 0
+    for path, rel in OTHERS:
+        q0 = float(get_param(sc, path))
+        tol_q = args.tol * abs(q0)
+        try:
+            b = locate_bifurcation(
+                sc0, path, MARGIN, (q0 * (1 - rel), q0 * (1 + rel)), level=0.0, tol=tol_q, **kw
+            )
+        except BifurcationError as e:
+            others.append({"param": path, "preset": q0, "error": str(e)})
+            print(f"  {path}: {e}")
+            continue
+        d_q = _slope(b)
+        bound = abs(d_mu / d_q) * 0.5 * w_mu + 0.5 * b.width
+        ok = abs(b.value - q0) <= bound
+        n_ok += ok
+        others.append(
+            {
+                "param": path,
+                "unit": b.unit,
+                "preset": q0,
+                "located": b.value,
+                "difference": b.value - q0,
+                "bound": bound,
+                "ok": ok,
+                "dg_dq": d_q,
+                "n_solves": b.n_solves,
+                "n_uniform": b.n_uniform,
+            }
+        )
+        print(
+            f"  {path}: located {b.value:.9g} {b.unit} against the preset's {q0:.9g} (difference "
+            f"{b.value - q0:.2g}, allowed {bound:.2g}: {'ok' if ok else 'OFF'}); {b.n_solves} solves, "
+            f"{b.n_uniform} for a uniform grid"
+        )
+    rec["other_parameters"] = {"mu": mu0, "dg_dmu": d_mu, "rows": others, "ok": n_ok, "of": len(OTHERS)}
     (out / "regime_map.json").write_text(json.dumps(rec, indent=1, default=float) + "\n")
 
-    # 4. the picture
+    # 5. the picture
     import matplotlib
 
     matplotlib.use("Agg")
@@ -195,7 +256,7 @@ def main(argv=None) -> int:
     ax.set_title(f"paper-4.2: does corner E leave the ground within {args.t1:g} s?")
     fig.savefig(out / "regime_map.png", dpi=110)
     print(f"wrote {out}/regime_map.png, regime_map.json, regime_map.npz")
-    return 0 if agree == len(trace) else 1
+    return 0 if agree == len(trace) and n_ok == len(OTHERS) else 1
 
 
 if __name__ == "__main__":

@@ -16,7 +16,16 @@ import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist.numerics import observables as O  # noqa: E402
-from jaxhoist.numerics.scan import ScanResult, ScanStatus, _members, parse_path, parse_values, scan  # noqa: E402
+from jaxhoist.numerics.scan import (  # noqa: E402
+    ScanResult,
+    ScanStatus,
+    _members,
+    get_param,
+    parse_path,
+    parse_values,
+    scan,
+    set_param,
+)
 
 MU = "foundation.friction_coefficient"
 MUS = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
@@ -208,6 +217,15 @@ def test_member_layout_and_value_specs():
     np.testing.assert_allclose(parse_values("0.1:0.6:6"), MUS)
     np.testing.assert_array_equal(parse_values("1,2.5"), [1.0, 2.5])
     assert parse_path("load.mass_centre[2]") == ("load.mass_centre", 2)
+
+
+def test_get_param_reads_what_set_param_wrote(box):
+    moved = set_param(box, "load.mass_centre[0]", 0.42)
+    assert float(get_param(moved, "load.mass_centre[0]")) == 0.42
+    assert float(get_param(moved, "load.mass_centre[1]")) == 0.5  # the other components are kept
+    assert float(get_param(box, "hoist.speed")) == 0.3
+    with pytest.raises(jh.ScenarioError, match="index 3 out of range"):
+        get_param(box, "load.mass_centre[3]")
 
 
 def test_invalid_requests_fail_before_compiling(box):

@@ -138,6 +138,14 @@ def set_param(scenario: Scenario, path: str, value) -> Scenario:
     return eqx.tree_at(where, scenario, value)
 
 
+def get_param(scenario: Scenario, path: str):
+    """The value of the leaf (or leaf component) at `path`, the counterpart of `set_param`."""
+    check_path(scenario, path)
+    dotted, index = parse_path(path)
+    leaf = get_leaf(scenario, dotted)
+    return leaf if index is None else leaf[index]
+
+
 def param_unit(scenario: Scenario, path: str) -> str:
     """The SI unit of a parameter, read from the docstring of the class that owns the field."""
     dotted, _ = parse_path(path)
