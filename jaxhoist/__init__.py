@@ -5,6 +5,7 @@ from ._errors import Float64Error as Float64Error
 from ._errors import ScenarioError as ScenarioError
 from ._errors import SolveStatus as SolveStatus
 from .apps.bifurcation import Bifurcation as Bifurcation
+from .apps.bifurcation import find_crossings as find_crossings
 from .apps.bifurcation import find_jumps as find_jumps
 from .apps.bifurcation import locate_bifurcation as locate_bifurcation
 from .apps.bifurcation import trace_boundary as trace_boundary

@@ -14,6 +14,7 @@ import pytest  # noqa: E402
 import jaxhoist as jh  # noqa: E402
 from jaxhoist.apps.bifurcation import (  # noqa: E402
     BifurcationError,
+    find_crossings,
     find_jumps,
     locate_bifurcation,
     trace_boundary,
@@ -256,6 +257,68 @@ def test_find_jumps_splits_a_one_cell_excursion():
     assert jumps[0].hi == jumps[1].lo == x[40]
 
 
+def test_find_crossings_brackets_every_zero_of_a_continuous_indicator():
+    """A smooth indicator crossing 0.2 twice, with a failed member next to the first crossing: two brackets
+    of neighbouring valid members, which find_jumps (no jump anywhere) does not report."""
+    x = np.linspace(0.0, 1.0, 101)
+    y = 0.2 + (x - 0.3037) * (x - 0.8012)  # = 0.2 at x = 0.3037 and 0.8012
+    status = np.zeros(x.size, dtype=np.int32)
+    status[31] = 1  # the member at x = 0.31, just above the first crossing, failed
+    y[31] = np.nan
+    res = _sweep(x, "g", y, status=status, reasons={31: "max_steps"})
+    assert find_jumps(res, "g") == []
+    c0, c1 = find_crossings(res, "g", 0.2)
+    assert (c0.lo, c0.hi) == (x[30], x[32]) and c0.y_lo > 0.2 >= c0.y_hi
+    assert c1.lo < 0.8012 < c1.hi and c1.hi - c1.lo == pytest.approx(0.01)
+
+
+def test_scan_plots_show_the_data_failures_and_located_values(newton_result, tmp_path):
+    """The plots of a sweep (one panel per component, failed members ticked, located values as lines), of a
+    2-D grid (a colour map per component) and of the locator's convergence, built without solving."""
+    from jaxhoist.apps import scan_plots
+
+    x = np.linspace(0.0, 1.0, 21)
+    y = np.stack([x, x**2], axis=-1)
+    status = np.zeros(x.size, dtype=np.int32)
+    status[3] = 1
+    res = _sweep(x, "v", y, status=status)
+    res.components["v"] = ("a", "b")
+    fig = scan_plots.plot_sweep(res, "v", located=[0.5])
+    ax0, ax1 = fig.axes
+    assert ax1.get_xlabel() == "p" and ax0.get_ylabel() == "v[a]" and ax1.get_ylabel() == "v[b]"
+    labels = [t.get_text() for t in ax0.get_legend().get_texts()]
+    assert labels == ["p* = 0.5", "failed"]
+    drawn = ax0.lines[0].get_xydata()
+    assert drawn.shape == (20, 2) and 0.15 not in drawn[:, 0]  # the failed member is not drawn
+
+    grid = ScanResult(
+        params=["p", "q"],
+        mode="grid",
+        coords={"p": x[:4], "q": x[:3]},
+        shape=(4, 3),
+        data={"w": np.arange(12.0).reshape(4, 3)},
+        components={"w": None},
+        status=np.zeros((4, 3), dtype=np.int32),
+        reasons={},
+        num_accepted_steps=np.zeros((4, 3), dtype=np.int32),
+        num_rejected_steps=np.zeros((4, 3), dtype=np.int32),
+        ts=None,
+        histories={},
+        units={"p": "-", "q": "m/s", "w": "s"},
+        descriptions={},
+        attrs={},
+    )
+    fig = scan_plots.plot_grid(grid, "w")
+    assert fig.axes[0].get_ylabel() == "q [m/s]" and fig.axes[1].get_ylabel() == "w [s]"  # the colour bar
+    with pytest.raises(ValueError, match="grid of two"):
+        scan_plots.plot_grid(res, "v")
+
+    fig = scan_plots.plot_locator(newton_result)
+    assert "solves against" in fig.get_suptitle()
+    paths = scan_plots.save_scan_plots(grid, tmp_path) + scan_plots.save_scan_plots(res, tmp_path)
+    assert [p.name for p in paths] == ["scan_w.png", "scan_v.png"] and all(p.stat().st_size for p in paths)
+
+
 def test_locator_refuses_a_bracket_without_a_sign_change():
     with pytest.raises(jh.ScenarioError, match="lo < hi"):
         locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.6, 0.4), **SYM_KW)
@@ -364,6 +427,9 @@ def test_scan_and_bifurcation_commands(tmp_path):
     assert found["overrides"] == {"hoist.speed": 0.05}
     (b,) = found["bifurcations"]
     assert abs(b["value"] - 0.5) <= 1e-4
+    # and the plots: the scanned observable against ξ_C, how the locator converged
+    for png in (out / "scan_first_corner.png", tmp_path / "bif" / "locator_0.png"):
+        assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", png
 
 
 def test_trace_reports_a_vanished_jump_as_lost(monkeypatch):

@@ -85,6 +85,54 @@ class Jump:
     index: int
 
 
+def _series(result: ScanResult, observable: str, param: str | None, who: str):
+    """(param, x, y): a scalar observable of a 1-D scan against its parameter, valid members only, sorted."""
+    if len(result.params) != 1 and param is None:
+        raise ScenarioError(f"{who}: the scan has parameters {list(result.params)}; say which with param=")
+    param = result.params[0] if param is None else param
+    if result.mode == "grid" and len(result.params) > 1:
+        raise ScenarioError(f"{who} works along a 1-D scan; take a slice of the grid first")
+    y = np.asarray(result[observable], dtype=np.float64)
+    if y.shape != result.shape:
+        raise ScenarioError(
+            f"{who} needs a scalar observable; {observable!r} has shape {y.shape[1:]} per "
+            f"member (use e.g. '{observable}[0]' when scanning)"
+        )
+    x = np.asarray(result.values(param), dtype=np.float64).ravel()
+    y = y.ravel()
+    keep = result.ok.ravel() & ~np.isnan(y)
+    x, y = x[keep], y[keep]
+    order = np.argsort(x, kind="stable")
+    return param, x[order], y[order]
+
+
+def find_crossings(
+    result: ScanResult, observable: str, level: float = 0.0, *, param: str | None = None
+) -> list[Jump]:
+    """Neighbouring members of a 1-D scan on opposite sides of `level` (observable - level > 0 at one,
+    <= 0 at the other): the brackets of the zeros of a continuous indicator, such as an event-time
+    difference or a contact margin with level 0, which `find_jumps` does not see. `score` is inf.
+
+    **Returns** the brackets sorted by parameter value, as `Jump`s."""
+    param, x, y = _series(result, observable, param, "find_crossings")
+    above = y - float(level) > 0.0
+    idx = np.nonzero(above[:-1] != above[1:])[0]
+    return [
+        Jump(
+            param=param,
+            observable=observable,
+            lo=float(x[i]),
+            hi=float(x[i + 1]),
+            y_lo=float(y[i]),
+            y_hi=float(y[i + 1]),
+            size=float(abs(y[i + 1] - y[i])),
+            score=np.inf,
+            index=int(i),
+        )
+        for i in idx
+    ]
+
+
 def find_jumps(
     result: ScanResult,
     observable: str,
@@ -105,25 +153,7 @@ def find_jumps(
 
     **Returns** the candidates sorted by parameter value.
     """
-    if len(result.params) != 1 and param is None:
-        raise ScenarioError(
-            f"find_jumps: the scan has parameters {list(result.params)}; say which with param="
-        )
-    param = result.params[0] if param is None else param
-    if result.mode == "grid" and len(result.params) > 1:
-        raise ScenarioError("find_jumps works along a 1-D scan; take a slice of the grid first")
-    y = np.asarray(result[observable], dtype=np.float64)
-    if y.shape != result.shape:
-        raise ScenarioError(
-            f"find_jumps needs a scalar observable; {observable!r} has shape {y.shape[1:]} per "
-            f"member (use e.g. '{observable}[0]' when scanning)"
-        )
-    x = np.asarray(result.values(param), dtype=np.float64).ravel()
-    y = y.ravel()
-    keep = result.ok.ravel() & ~np.isnan(y)
-    x, y = x[keep], y[keep]
-    order = np.argsort(x, kind="stable")
-    x, y = x[order], y[order]
+    param, x, y = _series(result, observable, param, "find_jumps")
     if x.size < 2:
         return []
     finite = np.isfinite(y)
@@ -625,13 +655,16 @@ def _raise_failed(r: ScanResult, param):
 def locate_jumps(
     scenario: Scenario, result: ScanResult, observable: str, *, max_jumps: int | None = None, **kw
 ) -> list[Bifurcation]:
-    """`find_jumps` on a 1-D scan, then `locate_bifurcation` in every candidate bracket (largest first).
-    Keyword arguments go to both (`factor`, `window`, `min_size` to `find_jumps`, the rest to the locator);
-    a candidate whose refinement fails is skipped."""
+    """`find_jumps` on a 1-D scan (and, with `level=` given, `find_crossings` of that level), then
+    `locate_bifurcation` in every candidate bracket (largest first). Keyword arguments go to both
+    (`factor`, `window`, `min_size` to `find_jumps`, the rest to the locator); a candidate whose refinement
+    fails is skipped."""
     fj = {k: kw.pop(k) for k in ("factor", "window", "min_size") if k in kw}
-    jumps = sorted(
-        find_jumps(result, observable, **fj), key=lambda j: -j.size if np.isfinite(j.size) else -np.inf
-    )
+    cands = find_jumps(result, observable, **fj)
+    if kw.get("level") is not None:
+        seen = {(j.lo, j.hi) for j in cands}
+        cands += [c for c in find_crossings(result, observable, kw["level"]) if (c.lo, c.hi) not in seen]
+    jumps = sorted(cands, key=lambda j: -j.size if np.isfinite(j.size) else -np.inf)
     if max_jumps is not None:
         jumps = jumps[:max_jumps]
     out = []
@@ -814,7 +847,13 @@ def configure_parser(subparsers) -> None:
     p.add_argument("--atol", type=float, default=1e-8)
     p.add_argument("--max-steps", type=int, default=200_000)
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
-    p.add_argument("--out", default=None, help="folder for bifurcation.json (and the scan, with --scan)")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="folder for bifurcation.json, locator_<k>.png per located value (and, with --scan, the scan "
+        "and scan_<observable>.png with the located values marked)",
+    )
+    p.add_argument("--no-plots", action="store_true", help="write no PNGs")
     p.set_defaults(func=run_cli)
 
 
@@ -846,8 +885,9 @@ def run_cli(args) -> int:
         )
         found = locate_jumps(scenario, res, name, level=args.level, tol=args.tol, method=args.method, **kw)
         print(
-            f"{len(find_jumps(res, name))} candidate jumps of {name} in {args.scan} points; "
-            f"located {len(found)}:"
+            f"{len(find_jumps(res, name))} candidate jumps"
+            + ("" if args.level is None else f" and {len(find_crossings(res, name, args.level))} crossings")
+            + f" of {name} in {args.scan} points; located {len(found)}:"
         )
     else:
         found = [
@@ -880,4 +920,12 @@ def run_cli(args) -> int:
             + "\n"
         )
         print(f"wrote {out / 'bifurcation.json'}")
+        if not args.no_plots:
+            from .plots import save_figure
+            from .scan_plots import plot_locator, save_scan_plots
+
+            pngs = [save_figure(plot_locator(b), out / f"locator_{k}.png") for k, b in enumerate(found)]
+            if args.scan:
+                pngs += save_scan_plots(res, out, located=found)
+            print(f"wrote {len(pngs)} PNGs in {out}")
     return 0 if all(b.converged for b in found) else 1

@@ -1190,6 +1190,11 @@ def configure_parser(subparsers) -> None:
     )
     p.add_argument("--no-resume", action="store_true", help="recompute even if --out holds finished chunks")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument(
+        "--no-plots",
+        action="store_true",
+        help="do not write scan_<observable>.png (written for a sweep of one parameter or a 2-D grid)",
+    )
     p.set_defaults(func=run_cli)
 
 
@@ -1236,5 +1241,13 @@ def run_cli(args) -> int:
         f"wall time     compile {t['compile']:.3g} s, solve {t['compute']:.3g} s "
         f"({1e3 * t['compute'] / max(1, t['members_computed']):.3g} ms per member), total {t['total']:.3g} s"
     )
-    print(f"wrote         {out / 'scan.npz'}, {out / 'scan.json'}")
+    pngs = []
+    if not args.no_plots:
+        from ..apps.scan_plots import save_scan_plots
+
+        pngs = save_scan_plots(res, out)
+    print(
+        f"wrote         {out / 'scan.npz'}, {out / 'scan.json'}"
+        + (f", {len(pngs)} PNGs (scan_<observable>.png)" if pngs else "")
+    )
     return 0 if n_fail == 0 else 1

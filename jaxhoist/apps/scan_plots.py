@@ -1,0 +1,199 @@
+"""Plots of parameter scans and located changes of character (matplotlib only, no pyplot state).
+
+- `plot_sweep`: an observable (each component in its own panel) against one swept parameter, failed
+  members marked, candidate jumps shaded and located critical values drawn as vertical lines.
+- `plot_grid`: an observable over a grid of two parameters, as a colour map per component.
+- `plot_locator`: the evaluations of `locate_bifurcation`: the indicator against the parameter, and the
+  bracket width against the solve count.
+- `save_scan_plots`: every observable of a scan as PNGs, as `jaxhoist scan` writes them.
+
+Every function returns a `matplotlib.figure.Figure`; `jaxhoist.apps.plots.save_figure` writes it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .plots import _figure, save_figure
+
+if TYPE_CHECKING:
+    from matplotlib.figure import Figure
+
+    from ..numerics.scan import ScanResult
+
+_MAX_PANELS = 6
+
+
+def _label(result: ScanResult, name: str) -> str:
+    unit = result.units.get(name, "?")
+    return name if unit in ("-", "") else f"{name} [{unit}]"
+
+
+def _components(result: ScanResult, name: str):
+    """(labels, values of shape (members..., k)) for every component of `name`."""
+    y = np.asarray(result.data[name], dtype=float)
+    comps = result.components.get(name)
+    extra = y.shape[len(result.shape) :]
+    if not extra:
+        return [name], y[..., None]
+    y = y.reshape(*result.shape, -1)
+    labels = list(comps) if comps else [str(i) for i in range(y.shape[-1])]
+    return [f"{name}[{c}]" for c in labels], y
+
+
+def plot_sweep(
+    result: ScanResult,
+    name: str,
+    *,
+    param: str | None = None,
+    jumps: Sequence = (),
+    located: Sequence = (),
+    title: str | None = None,
+) -> Figure:
+    """Observable `name` against the swept parameter (the first one unless `param` is given).
+
+    `jumps`: candidate `Jump`s from `find_jumps` (shaded); `located`: `Bifurcation`s or plain values of the
+    parameter (vertical lines). Failed members are marked by red ticks on the parameter axis; values of
+    +-inf (an event that never happened) are left out and counted in the panel title.
+    """
+    param = param or result.params[0]
+    x = np.asarray(result.coords[param], dtype=float).reshape(-1)
+    labels, y = _components(result, name)
+    y = y.reshape(x.size, -1)
+    ok = np.asarray(result.ok).reshape(-1)
+    order = np.argsort(x, kind="stable")
+    x, y, ok = x[order], y[order], ok[order]
+    n = min(len(labels), _MAX_PANELS)
+    fig, axes = _figure(n, 1, figsize=(7.0, 1.2 + 1.8 * n))
+    unit = result.units.get(param, "?")
+    for k in range(n):
+        ax = axes[k, 0]
+        yk = np.where(ok, y[:, k], np.nan)
+        fin = np.isfinite(yk)
+        ax.plot(x[fin], yk[fin], ".-", ms=2.5, lw=0.8, color="C0")
+        n_inf = int(np.sum(np.isinf(yk)))
+        ax.set_ylabel(labels[k] + ("" if n > 1 else f" [{result.units.get(name, '?')}]"), fontsize=8)
+        if n_inf:
+            ax.set_title(f"{n_inf} members: ±inf (event not reached), not drawn", fontsize=8, loc="right")
+        for j in jumps:
+            ax.axvspan(j.lo, j.hi, color="orange", alpha=0.3, lw=0)
+        for i, b in enumerate(located):
+            v = float(getattr(b, "value", b))
+            ax.axvline(v, color="C3", lw=0.9, ls="--", label=f"{param}* = {v:.7g}" if k == 0 else None)
+        if np.any(~ok):
+            ax.plot(
+                x[~ok],
+                np.full(np.sum(~ok), 0.0),
+                "|",
+                color="red",
+                ms=12,
+                mew=1.5,
+                transform=ax.get_xaxis_transform(),
+                label="failed" if k == 0 else None,
+            )
+    if located or np.any(~ok):
+        axes[0, 0].legend(fontsize=7, loc="best")
+    axes[-1, 0].set_xlabel(param if unit in ("-", "") else f"{param} [{unit}]")
+    what = f"{name} [{result.units.get(name, '?')}] against {param}"
+    fig.suptitle(what if title is None else title, fontsize=10)
+    return fig
+
+
+def plot_grid(result: ScanResult, name: str, *, title: str | None = None) -> Figure:
+    """Observable `name` over a grid scan of two parameters, one colour map per component (up to six)."""
+    if result.mode != "grid" or len(result.params) != 2:
+        raise ValueError(f"plot_grid needs a grid of two parameters, got {result.mode} of {result.params}")
+    p0, p1 = result.params
+    x0, x1 = (np.asarray(result.coords[p], dtype=float) for p in (p0, p1))
+    labels, y = _components(result, name)
+    ok = np.asarray(result.ok)
+    n = min(len(labels), _MAX_PANELS)
+    ncols = 1 if n == 1 else 2
+    nrows = -(-n // ncols)
+    fig, axes = _figure(nrows, ncols, figsize=(6.0 * ncols, 4.0 * nrows), sharex=False)
+    for k in range(nrows * ncols):
+        ax = axes.flat[k]
+        if k >= n:
+            ax.set_visible(False)
+            continue
+        z = np.where(ok, y[..., k], np.nan)
+        z = np.where(np.isfinite(z), z, np.nan)
+        pc = ax.pcolormesh(x0, x1, z.T, shading="nearest", cmap="viridis")
+        fig.colorbar(pc, ax=ax, label=_label(result, name) if n == 1 else labels[k])
+        if np.any(~ok):
+            i0, i1 = np.nonzero(~ok)
+            ax.plot(x0[i0], x1[i1], "x", color="red", ms=5, label="failed")
+            ax.legend(fontsize=7)
+        u0, u1 = result.units.get(p0, "?"), result.units.get(p1, "?")
+        ax.set_xlabel(p0 if u0 in ("-", "") else f"{p0} [{u0}]")
+        ax.set_ylabel(p1 if u1 in ("-", "") else f"{p1} [{u1}]")
+        if n > 1:
+            ax.set_title(labels[k], fontsize=9)
+    fig.suptitle(f"{_label(result, name)} over ({p0}, {p1})" if title is None else title, fontsize=10)
+    return fig
+
+
+def plot_locator(b, *, title: str | None = None) -> Figure:
+    """How `locate_bifurcation` got there: the indicator g = observable - level at every evaluation against
+    the parameter (numbered in order; Newton steps, bisections and bracket ends in different markers), and,
+    after each evaluation, the width of the smallest bracket with opposite signs of g at its ends and the
+    distance of the evaluated point from the final estimate."""
+    fig, axes = _figure(1, 2, figsize=(10.0, 4.0), sharex=False)
+    ax, aw = axes[0, 0], axes[0, 1]
+    hist = [h for h in b.history if np.isfinite(h[1])]
+    markers = {"end": ("s", "k"), "newton": ("o", "C0"), "bisect": ("v", "C1"), "multisection": ("d", "C2")}
+    for tag, (m, c) in markers.items():
+        pts = [(h[0], h[1]) for h in hist if h[3] == tag]
+        if pts:
+            px, py = zip(*pts, strict=True)
+            ax.plot(px, py, m, color=c, ms=5, ls="none", label=tag)
+    for i, h in enumerate(hist):
+        ax.annotate(str(i + 1), (h[0], h[1]), fontsize=6, xytext=(3, 3), textcoords="offset points")
+    ax.axhline(0.0, color="0.5", lw=0.7)
+    ax.axvline(b.value, color="C3", ls="--", lw=0.9, label=f"{b.param}* = {b.value:.9g}")
+    unit = "" if b.unit in ("-", "") else f" [{b.unit}]"
+    ax.set_xlabel(b.param + unit)
+    ax.set_ylabel(f"g = {b.observable} - level")
+    ax.legend(fontsize=7)
+    # Bracket width after each evaluation: the smallest interval between evaluations of opposite sign.
+    widths = []
+    for i in range(1, len(hist) + 1):
+        xs = np.array([h[0] for h in hist[:i]])
+        gs = np.array([h[1] for h in hist[:i]])
+        pos, neg = xs[gs > 0], xs[gs <= 0]
+        if pos.size and neg.size:
+            widths.append(float(np.min(np.abs(pos[:, None] - neg[None, :]))))
+        else:
+            widths.append(np.nan)
+    k = np.arange(1, len(widths) + 1)
+    aw.semilogy(k, widths, "o-", ms=4, label="bracket width")
+    dist = np.array([abs(h[0] - b.value) for h in hist])
+    aw.semilogy(k[dist > 0], dist[dist > 0], "x:", ms=5, label=f"|{b.param.split('.')[-1]} - estimate|")
+    aw.axhline(b.tol, color="0.5", ls=":", label=f"tol = {b.tol:g}")
+    aw.set_xlabel("solve")
+    aw.set_ylabel(f"distance{unit}")
+    aw.legend(fontsize=7)
+    what = f"{b.param}* = {b.value:.9g}{unit}: {b.n_solves} solves against {b.n_uniform} for a uniform grid"
+    fig.suptitle(what if title is None else title, fontsize=10)
+    return fig
+
+
+def save_scan_plots(result: ScanResult, out_dir: str | Path, *, located=(), dpi: int = 110) -> list[Path]:
+    """Write `<out_dir>/scan_<observable>.png` for every observable: against the parameter for a sweep of
+    one parameter (with `located` critical values drawn), a colour map for a grid of two. Other layouts
+    (points, three or more parameters) get no plots. Returns the paths."""
+    paths = []
+    for name in result.data:
+        if result.mode == "grid" and len(result.params) == 2:
+            fig = plot_grid(result, name)
+        elif len(result.params) == 1:
+            fig = plot_sweep(result, name, located=located)
+        else:
+            continue
+        safe = "".join(c if c.isalnum() or c in "-_" else "_" for c in name)
+        paths.append(save_figure(fig, Path(out_dir) / f"scan_{safe}.png", dpi=dpi))
+    return paths
