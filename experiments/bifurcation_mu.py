@@ -4,11 +4,11 @@
    record final position and Euler angles, maximum tilt, lift-off time, the corner that leaves first and
    the impact count;
 2. find candidate jumps of every observable on the grid (`find_jumps`);
-3. refine every candidate jump of the continuous observables (lift-off time, final position and Euler
-   angles, maximum tilt; one per grid cell) to |Δμ| <= 1e-6, value-only bisection by default (a candidate
+3. refine every candidate jump of the lift-off time, final position and Euler angles, maximum tilt and the
+   impact count (one per grid cell) to |Δμ| <= 1e-6, value-only bisection by default (a candidate
    that is not a discontinuity comes out as a "crossing"); and the level crossing in the cell where ψ(t1)
    changes most steeply (a steep ramp need not be a jump);
-4. plot every observable against μ with the located μ* marked, a zoom and the time histories x, y, φ, ϑ, ψ
+4. plot every observable against μ with its located μ* marked, a zoom and the time histories x, y, φ, ϑ, ψ
    across the steepest change of ψ (μ* ± 0.25e-3, ± 2.5e-3: the Figs 10-12 analogue) and across the
    located jumps with the highest scores (`--detail`);
 5. continue the highest-scoring jump along the hoist speed v_l (μ*(v_l), by continuation).
@@ -106,7 +106,7 @@ def main(argv=None):
     )
     p.add_argument(
         "--refine",
-        default="liftoff_time,final_psi,final_x,final_y,final_phi,final_theta,max_tilt",
+        default="liftoff_time,final_psi,final_x,final_y,final_phi,final_theta,max_tilt,impacts",
         help="observables whose candidate jumps are refined (comma-separated)",
     )
     p.add_argument(
@@ -278,15 +278,16 @@ def main(argv=None):
         bad = ~res.ok
         if bad.any():
             ax.plot(mus[bad], np.zeros(bad.sum()), "rx", ms=4, label="failed")
-        for b in located:
-            ax.axvline(b.value, color="C3" if b.kind == "jump" else "0.6", lw=0.6, alpha=0.7)
+        for b in located:  # each panel: the μ* located for its own observable
+            if b.observable == name:
+                ax.axvline(b.value, color="C3" if b.kind == "jump" else "0.6", lw=0.6, alpha=0.7)
         ax.axvline(ramp.value, color="C2", lw=0.8, ls="--")
         ax.set_ylabel(f"{label} [{unit}]")
     for ax in axes[-1]:
         ax.set_xlabel("friction coefficient μ [-]")
     fig.suptitle(
-        f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s); located μ*: red = jump, "
-        f"grey = continuous crossing; green dashed: steepest change of ψ"
+        f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s)\nin each panel its own "
+        f"located μ*: red = jump, grey = continuous crossing; green dashed: steepest change of ψ"
     )
     fig.tight_layout()
     fig.savefig(out / "observables_vs_mu.png", dpi=110)

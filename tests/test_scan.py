@@ -11,6 +11,7 @@ jax.config.update("jax_enable_x64", True)  # tests/conftest.py also does this, a
 
 import json  # noqa: E402
 
+import diffrax  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
@@ -36,7 +37,9 @@ KW = dict(
         "liftoff_time",
         "detachment_times",
         "contact_margin",
+        "impact_times",
         "contact_time",
+        "configuration_time",
         "max_tilt",
     ],
     n_save=31,
@@ -89,6 +92,19 @@ def test_scan_physics(clean):
     np.testing.assert_allclose(g_min[:, 0], g_min[:, 3], rtol=1e-9)
     np.testing.assert_allclose(g_min[:, 1], g_min[:, 2], rtol=1e-9)
     assert np.all(g_min <= 1000.0 * 9.81 / (4 * 1.5e7) * (1 + 1e-6))
+    # A corner's first impact comes after its first detachment (inf where it never left), mirror-symmetric.
+    t_imp = clean["impact_times"]
+    assert np.all(np.isinf(t_imp[np.isinf(t)])) and np.all(t_imp[np.isfinite(t)] > t[np.isfinite(t)])
+    np.testing.assert_allclose(t_imp[:, 0], t_imp[:, 3], rtol=1e-9)
+    # Time per contact configuration (16 subsets of D, E, F, H): the mirror keeps D with H and E with F, so
+    # only "none", "DH", "EF" and "DEFH" occur, and grouped by the number of corners down it is contact_time.
+    conf = clean["configuration_time"]
+    labels = clean.components["configuration_time"]
+    occurring = {labels[m] for m in range(16) if np.any(conf[:, m] > 0)}
+    assert occurring <= {"none", "DH", "EF", "DEFH"} and "DEFH" in occurring
+    n_down = np.array([bin(m).count("1") for m in range(16)])
+    by_count = np.stack([conf[:, n_down == c].sum(axis=1) for c in range(5)], axis=1)
+    np.testing.assert_allclose(by_count, clean["contact_time"], rtol=0, atol=1e-15)
     # Lift-off (all four N_i = 0) cannot come before the last corner's first detachment.
     assert np.all(clean["liftoff_time"] >= t.max(axis=1) - 1e-12)
     # Time spent in the five contact configurations adds up to the horizon.
@@ -112,10 +128,11 @@ def test_identical_for_any_chunk_size_and_device_count(box, clean):
 def test_poisoned_members_are_marked_and_the_rest_unchanged(box, clean):
     """μ = NaN is refused on the host (not solved); μ = 1e4 makes the regularised friction so stiff that
     the solve runs out of steps. Both are marked with their reason; every other member is bit-for-bit the
-    clean scan's, and no observable of a failed member is silently a number."""
+    clean scan's, and no observable of a failed member is silently a number. Unsorted, each failing member
+    shares its vmapped lock-step group with a healthy one (μ = 0.4 and 0.6), which must not notice."""
     mus = MUS.copy()
     mus[2], mus[4] = np.nan, 1e4
-    res = scan(box, {MU: mus}, T1, chunk_size=4, **KW)
+    res = scan(box, {MU: mus}, T1, chunk_size=4, sort=False, **KW)
     assert res.status[2] == ScanStatus.INVALID_PARAMETER and res.status[4] == ScanStatus.MAX_STEPS
     assert "friction_coefficient" in res.reason(2) and "must be finite" in res.reason(2)
     assert "max_steps" in res.reason(4)
@@ -124,6 +141,23 @@ def test_poisoned_members_are_marked_and_the_rest_unchanged(box, clean):
     keep = [0, 1, 3, 5]
     for k in clean.data:
         np.testing.assert_array_equal(res[k][keep], clean[k][keep], err_msg=k)
+
+
+def test_a_blown_up_member_is_marked_nonfinite_and_its_group_mate_kept(box):
+    """Fixed explicit steps of 0.2 ms: a boom tip of 500 kg on a vertical spring of 1e14 N/m
+    (ω = 4.5e5 rad/s, far beyond the step's stability limit ~1.2e4 rad/s) blows up to a non-finite state;
+    it is marked NONFINITE with its reason and NaN observables, and the member solved in the same vmapped
+    group, like every other one, is bit-for-bit what it is when that group holds a healthy member
+    instead."""
+    k = "boom.stiffness[2]"
+    kw = dict(KW, solver=diffrax.Bosh3(), dt0=2e-4, fixed_step=True, lanes=2, sort=False)
+    bad = scan(box, {k: [5e6, 1e14, 6e6, 7e6]}, T1, **kw)
+    ref = scan(box, {k: [5e6, 5.5e6, 6e6, 7e6]}, T1, **kw)
+    assert list(bad.status) == [ScanStatus.OK, ScanStatus.NONFINITE, ScanStatus.OK, ScanStatus.OK]
+    assert "non-finite" in bad.reason(1) and np.all(np.isnan(bad["final_position"][1]))
+    assert np.all(ref.ok)
+    for name in bad.data:
+        np.testing.assert_array_equal(bad[name][[0, 2, 3]], ref[name][[0, 2, 3]], err_msg=name)
 
 
 def test_resume_after_interruption(box, clean, tmp_path):
@@ -247,6 +281,14 @@ def test_first_down_crossing_is_interpolated():
     assert float(O.first_down_crossing(ts, 0.537 - ts)) == pytest.approx(0.537, abs=1e-14)
     assert float(O.first_down_crossing(ts, 1.0 + ts)) == np.inf
     assert float(O.first_down_crossing(ts, ts - 0.5)) == 0.0  # not in contact at t = 0
+    # A corner leaving at t = 0.25 and landing again at t = 0.75 (f = |t - 0.5| - 0.25, piecewise linear
+    # with its kink on a saved time): both crossings are exact.
+    f = jnp.abs(ts - 0.5) - 0.25
+    assert float(O.first_down_crossing(ts, f)) == pytest.approx(0.25, abs=1e-14)
+    assert float(O.first_return(ts, f)) == pytest.approx(0.75, abs=1e-14)
+    assert float(O.first_return(ts, 0.537 - ts)) == np.inf  # leaves and never returns
+    assert float(O.first_return(ts, 1.0 + ts)) == np.inf  # never leaves
+    assert float(O.first_return(ts, ts - 0.55)) == pytest.approx(0.55, abs=1e-14)  # off at t = 0, lands
 
 
 _WORKER = """
@@ -304,3 +346,83 @@ def test_several_processes_share_the_chunks(clean, tmp_path):
                 np.testing.assert_array_equal(got[k], clean[k], err_msg=f"process {pid}: {k}")
     back = ScanResult.load(tmp_path / "scan.npz")  # written by process 0
     np.testing.assert_array_equal(back["final_position"], clean["final_position"])
+
+
+_FOUR_DEVICES = """
+import os, signal, sys
+import jax
+jax.config.update("jax_num_cpu_devices", 4)
+jax.config.update("jax_enable_x64", True)
+import numpy as np
+tmp, here = sys.argv[1:3]
+sys.path.insert(0, here)
+# the same run-time type checking as under pytest (pyproject's --jaxtyping-packages): it rewrites the
+# library's bytecode, which the scan's fingerprint hashes for its observables
+from jaxtyping import install_import_hook
+install_import_hook("jaxhoist", "beartype.beartype")
+from test_scan import KW, MU, MUS, T1, oblique_box
+from jaxhoist.numerics.scan import scan
+assert len(jax.devices()) == 4
+save = lambda name, r: np.savez(f"{tmp}/{name}.npz", **{k: r[k] for k in r.data}, status=r.status)
+res = scan(oblique_box(), {MU: MUS}, T1, chunk_size=4, **KW)
+assert len(res.attrs["devices"]) == 4, res.attrs["devices"]
+save("four", res)
+# resume on four devices what two devices began (chunks of 4 members: 2 groups for 4 devices)
+save("resumed_on_four", scan(oblique_box(), {MU: MUS}, T1, chunk_size=4, out_dir=f"{tmp}/begun", **KW))
+mus12 = np.linspace(0.1, 0.6, 12)
+save("twelve", scan(oblique_box(), {MU: mus12}, T1, **KW))
+
+def kill_after_first_chunk(p):
+    if p.chunk == 0:
+        os.kill(os.getpid(), signal.SIGKILL)  # no clean-up, no flush: as if the machine went away
+
+scan(oblique_box(), {MU: mus12}, T1, chunk_size=8, out_dir=f"{tmp}/killed", progress=kill_after_first_chunk,
+     **KW)
+"""
+
+
+def test_four_devices_and_resumes_across_device_counts(clean, tmp_path):
+    """A fresh process with four CPU devices (the device count is fixed when JAX starts; this one has two):
+    - the reference scan gives, bit for bit, the same numbers (its one-device twin is checked in
+      `test_identical_for_any_chunk_size_and_device_count`);
+    - it resumes a scan begun here on two devices (stopped after its first chunk) to the reference result;
+    - a scan of 12 members (chunks of 8 = 4 devices x 2 lanes) is killed with SIGKILL once its first chunk
+      is written; resumed here, on two devices, it loads that chunk, solves the other and ends with
+      the result of the same scan run without interruption."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    def stop(p):
+        if p.chunk == 0:
+            raise KeyboardInterrupt
+
+    with pytest.raises(KeyboardInterrupt):
+        scan(oblique_box(), {MU: MUS}, T1, chunk_size=4, out_dir=tmp_path / "begun", progress=stop, **KW)
+    env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
+    run = subprocess.run(
+        [sys.executable, "-c", _FOUR_DEVICES, str(tmp_path), str(Path(__file__).parent)],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert run.returncode == -9, (run.stdout + run.stderr)[-3000:]  # killed, as planned
+    for name in ("four", "resumed_on_four"):
+        with np.load(tmp_path / f"{name}.npz") as got:
+            np.testing.assert_array_equal(got["status"], clean.status)
+            for k in clean.data:
+                np.testing.assert_array_equal(got[k], clean[k], err_msg=f"{name}: {k}")
+
+    killed = tmp_path / "killed"
+    manifest = json.loads((killed / "manifest.json").read_text())
+    assert list(manifest["chunks"]) == ["0"] and manifest["chunk_size"] == 8
+    reports = []
+    res = scan(
+        oblique_box(), {MU: np.linspace(0.1, 0.6, 12)}, T1, out_dir=killed, progress=reports.append, **KW
+    )
+    assert [p.loaded for p in reports] == [True, False]
+    with np.load(tmp_path / "twelve.npz") as want:
+        for k in res.data:
+            np.testing.assert_array_equal(res[k], want[k], err_msg=k)

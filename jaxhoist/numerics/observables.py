@@ -120,6 +120,24 @@ def _down_crossings(ts, F):
     return jax.vmap(first_down_crossing, in_axes=(None, 1))(ts, F)
 
 
+def first_return(ts, f):
+    """First time [s] at which `f` (n_t,) goes from <= 0 back to > 0 after it first went <= 0 (a corner's
+    first impact after its first detachment), interpolated linearly; `+inf` if it never does."""
+    on = f > 0.0
+    down = on[:-1] & ~on[1:]
+    up = ~on[:-1] & on[1:]
+    k = jnp.arange(down.size)
+    j_down = jnp.where(jnp.any(down), jnp.argmax(down), down.size)  # the detachment step, if any
+    j_down = jnp.where(on[0], j_down, -1)  # off the ground at t = 0: any return counts
+    after = up & (k > j_down)
+    found = jnp.any(after)
+    j = jnp.argmax(after)
+    f0, f1 = f[j], f[j + 1]
+    denom = jnp.where(found, f1 - f0, 1.0)  # > 0 where a return was found (f0 <= 0 < f1)
+    t = ts[j] + (-f0 / denom) * (ts[j + 1] - ts[j])
+    return jnp.where(found, t, jnp.inf)
+
+
 # ------------------------------------------------------------------------------------- observables
 
 
@@ -171,10 +189,24 @@ def _contact_margin(traj, scenario):
     return jnp.min(contact_function(traj, scenario), axis=0) / scenario.foundation.stiffness
 
 
+def _impact_times(traj, scenario):
+    return jax.vmap(first_return, in_axes=(None, 1))(traj.ts, contact_function(traj, scenario))
+
+
+def _configuration_time(traj, scenario):
+    on = contact_function(traj, scenario) > 0.0
+    code = jnp.sum(on * jnp.array([1, 2, 4, 8]), axis=-1)  # bit i: corner i (D, E, F, H) in contact
+    return jnp.stack([jnp.sum(jnp.where(code == m, _trapezoid_weights(traj.ts), 0.0)) for m in range(16)])
+
+
+def _trapezoid_weights(ts):
+    dt = jnp.diff(ts)
+    return jnp.concatenate([dt[:1] * 0.5, 0.5 * (dt[:-1] + dt[1:]), dt[-1:] * 0.5])
+
+
 def _contact_time(traj, scenario):
     n = jnp.sum(contact_function(traj, scenario) > 0.0, axis=-1)
-    dt = jnp.diff(traj.ts)
-    w = jnp.concatenate([dt[:1] * 0.5, 0.5 * (dt[:-1] + dt[1:]), dt[-1:] * 0.5])  # trapezoid weights
+    w = _trapezoid_weights(traj.ts)
     return jnp.stack([jnp.sum(jnp.where(n == m, w, 0.0)) for m in range(5)])
 
 
@@ -211,6 +243,15 @@ def _register(o: Observable) -> Observable:
 
 _register(Observable("final_position", _final_position, "m", "mass centre C at t1 (world x, y, z)", _XYZ))
 _register(Observable("final_velocity", _final_velocity, "m/s", "velocity of C at t1", _XYZ))
+_register(
+    Observable(
+        "final_angular_velocity",
+        lambda traj: traj.angular_velocity[-1],
+        "rad/s",
+        "angular velocity ω at t1 in body axes ξ, η, ζ",
+        ("xi", "eta", "zeta"),
+    )
+)
 _register(
     Observable(
         "final_euler",
@@ -257,6 +298,16 @@ _register(
 )
 _register(
     Observable(
+        "impact_times",
+        _impact_times,
+        "s",
+        "per corner: first time it returns to the ground after its first detachment (interpolated; inf "
+        "if never)",
+        CORNERS,
+    )
+)
+_register(
+    Observable(
         "impact_counts",
         _impact_counts,
         "-",
@@ -279,6 +330,16 @@ _register(
         "s",
         "time spent with 0, 1, 2, 3, 4 corners in contact (trapezoid rule on the saved grid)",
         ("0", "1", "2", "3", "4"),
+    )
+)
+_register(
+    Observable(
+        "configuration_time",
+        _configuration_time,
+        "s",
+        "time spent in each of the 16 contact configurations, labelled by the corners in contact "
+        "(trapezoid rule on the saved grid)",
+        tuple("".join(c for i, c in enumerate(CORNERS) if m >> i & 1) or "none" for m in range(16)),
     )
 )
 _register(

@@ -305,7 +305,9 @@ def _member(scenario, ts, row, spec: _Spec):
         _, (obs, traj) = run(row)
         jac = {}
     ok = traj.status == SolveStatus.OK
-    nan_obs = jnp.any(jnp.stack([jnp.any(jnp.isnan(v)) for v in obs.values()])) if obs else False
+    # a NaN observable or sensitivity of a solve that succeeded is flagged, never silent (values are kept)
+    checked = [*obs.values(), *jac.values()]
+    nan_obs = jnp.any(jnp.stack([jnp.any(jnp.isnan(v)) for v in checked])) if checked else False
     status = jnp.where(ok & nan_obs, ScanStatus.NAN_OBSERVABLE, traj.status).astype(jnp.int32)
     obs = {k: jnp.where(ok, v, jnp.nan) for k, v in obs.items()}
     obs.update({f"d_{k}": jnp.where(ok, v, jnp.nan) for k, v in jac.items()})
@@ -912,7 +914,9 @@ def scan(
             _write_manifest(out, manifest)
 
     n_chunks = math.ceil(n / chunk)
-    groups_per_chunk = chunk // lanes
+    # Groups per compiled call: the chunk's, rounded up to a multiple of the device count (a chunk laid out
+    # by a resumed run with fewer devices); the extra groups are inactive and cost nothing.
+    groups_per_chunk = math.ceil(chunk // lanes / n_dev) * n_dev
     fn = _chunk_fn(spec)
     results: dict[int, dict[str, np.ndarray]] = {}
     report = print_progress if progress is True else (progress if callable(progress) else None)
@@ -935,7 +939,7 @@ def scan(
             res = done_chunks[k]
         else:
             rows = solve_rows[idx]
-            pad = chunk - rows.shape[0]
+            pad = groups_per_chunk * lanes - rows.shape[0]
             rows_p = np.concatenate([rows, np.repeat(rows[-1:], pad, axis=0)]) if pad else rows
             n_active = math.ceil(rows.shape[0] / lanes)
             active = np.arange(groups_per_chunk) < n_active
