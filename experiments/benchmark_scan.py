@@ -1,6 +1,6 @@
 """Cost of a large μ-scan of paper-4.2 (issue 3's targets): wall time per trajectory after compilation,
-accuracy against a tight adaptive solve, scipy LSODA on the same vector field in the same process, and
-forward-mode sensitivities against the plain scan.
+accuracy against a tight adaptive solve, scipy LSODA and RK45 on the same vector field in the same process,
+and forward-mode sensitivities against the plain scan.
 
     python experiments/benchmark_scan.py --out out/bench-scan --devices 2           # 4096 μ, 25 s
     python experiments/benchmark_scan.py --out out/bench-scan --devices 2 --quick   # 64 μ, 3 s: a smoke run
@@ -15,11 +15,13 @@ What it runs (all in one process, so every ratio is against a baseline measured 
    max of the error, and for every member off by more than 1 cm how much its scan neighbours (Δμ = 0.5/(n-1))
    differ from it: a large spread means the outcome changes abruptly there (a bifurcation), so solver-error
    differences legitimately change it;
-3. **scipy LSODA** (`solve_ivp`) on the same vector field, jitted and called on the flattened state, for
-   --scipy-n of the reference members, at each tolerance of --scipy-rtol (atol = rtol/100): wall time,
-   function evaluations and error against the same reference; ratio of its time per trajectory to the scan's;
+3. **scipy** `solve_ivp` (LSODA and RK45, --scipy-methods) on the same vector field, jitted and called on
+   the flattened state, for --scipy-n of the reference members, at each tolerance of --scipy-rtol
+   (atol = rtol/100): wall time, function evaluations and error against the same reference; ratio of its
+   time per trajectory to the scan's;
 4. **forward sensitivities**: `scan(..., derivatives=True)` (d final position / dμ and d final Euler angles /
-   dμ by forward mode through the same fixed steps) against the plain scan of the same --deriv-n members.
+   dμ by forward mode through the same fixed steps) over the whole scan (or --deriv-n evenly spaced
+   members, against a plain scan of the same members).
 
 With `--half-step-check` it also solves every member again at dt/2 and reports how many land within 1 cm
 of that finer solution (a check of all members, where the adaptive reference covers --ref-n of them).
@@ -73,8 +75,9 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
-def scipy_lsoda(sc, t1, rtol, atol):
-    """LSODA on the flattened state with a jitted right-hand side; (wall s, f-evals, final position, ok)."""
+def scipy_baseline(sc, t1, method, rtol, atol):
+    """`solve_ivp(method=...)` on the flattened state with a jitted right-hand side; (wall s, f-evals, final
+    position, ok)."""
     from scipy.integrate import solve_ivp
 
     y0, c = initial_state(sc)
@@ -83,7 +86,7 @@ def scipy_lsoda(sc, t1, rtol, atol):
     rhs(0.0, flat0).block_until_ready()  # compile outside the timing
     t0 = time.perf_counter()
     sol = solve_ivp(
-        lambda t, y: np.asarray(rhs(t, y)), (0.0, t1), np.asarray(flat0), method="LSODA", rtol=rtol, atol=atol
+        lambda t, y: np.asarray(rhs(t, y)), (0.0, t1), np.asarray(flat0), method=method, rtol=rtol, atol=atol
     )
     wall = time.perf_counter() - t0
     return wall, int(sol.nfev), np.asarray(unravel(sol.y[:, -1]).position), bool(sol.success)
@@ -106,9 +109,14 @@ def main(argv=None):
         "--ref-n", type=int, default=None, help="members checked against the reference (512; quick 8)"
     )
     p.add_argument("--ref-rtol", type=float, default=1e-10, help="rtol of the adaptive Tsit5 reference")
-    p.add_argument("--scipy-n", type=int, default=None, help="members for scipy LSODA (default 3; quick 1)")
+    p.add_argument("--scipy-n", type=int, default=None, help="members for scipy (default 3; quick 1)")
     p.add_argument(
-        "--scipy-rtol", default="1e-6,1e-4", help="LSODA tolerances (comma-separated; atol = rtol/100)"
+        "--scipy-methods",
+        default="LSODA,RK45",
+        help="solve_ivp methods (default LSODA,RK45)",
+    )
+    p.add_argument(
+        "--scipy-rtol", default="1e-6,1e-4", help="scipy tolerances (comma-separated; atol = rtol/100)"
     )
     p.add_argument("--deriv-n", type=int, default=None, help="members for the sensitivities (512; quick 64)")
     p.add_argument("--sweep-lanes", default=None, help="lane widths to time first, e.g. 64,128,256,512,1024")
@@ -126,7 +134,7 @@ def main(argv=None):
     t1 = args.t1 or (3.0 if args.quick else 25.0)
     ref_n = min(n, args.ref_n if args.ref_n is not None else (8 if args.quick else 512))
     scipy_n = args.scipy_n if args.scipy_n is not None else (1 if args.quick else 3)
-    deriv_n = min(n, args.deriv_n if args.deriv_n is not None else (64 if args.quick else 512))
+    deriv_n = min(n, args.deriv_n if args.deriv_n is not None else n)  # default: the whole scan
     if ref_n < 1:
         p.error("--ref-n must be >= 1 (the accuracy check and the LSODA errors use the reference)")
     sc = jh.load_scenario("paper-4.2").replace(**{EPS: args.eps})
@@ -197,12 +205,14 @@ def main(argv=None):
         "ms_per_trajectory": 1e3 * t["compute"] / n,
         "steps_per_trajectory": steps,
         "us_per_step_per_trajectory": 1e6 * t["compute"] / n / steps,
+        "total_s": t["total"],
         "failed": int(np.sum(~r.ok)),
         "peak_rss_mb": peak_rss_mb(),
     }
     rec["scan"] = run
     print(
-        f"  scan: compile {run['compile_s']:.1f} s, {run['ms_per_trajectory']:.2f} ms per trajectory "
+        f"  scan: compile {run['compile_s']:.1f} s, total {run['total_s']:.1f} s, "
+        f"{run['ms_per_trajectory']:.2f} ms per trajectory "
         f"({steps} steps, {run['us_per_step_per_trajectory']:.3f} us per step per trajectory), failed "
         f"{run['failed']}, peak RSS {run['peak_rss_mb']:.0f} MB",
         flush=True,
@@ -308,38 +318,45 @@ def main(argv=None):
             flush=True,
         )
 
-    # 3. scipy LSODA on the same vector field, for a few of the reference members.
+    # 3. scipy (LSODA, RK45) on the same vector field, for a few of the reference members.
     if scipy_n:
         per = t["compute"] / n
         k_idx = np.unique(np.linspace(0, idx.size - 1, scipy_n + 2)[1:-1].round().astype(int))
         rows = []
-        for tol in (float(x) for x in args.scipy_rtol.split(",")):
-            for k in k_idx:
-                mu = float(mus[idx[k]])
-                wall, nfev, p_end, ok = scipy_lsoda(sc.replace(**{MU: mu}), t1, tol, 1e-2 * tol)
-                e = float(np.linalg.norm(p_end - ref["final_position"][k]))
-                rows.append(
-                    {
-                        "rtol": tol,
-                        "mu": mu,
-                        "wall_s": wall,
-                        "nfev": nfev,
-                        "success": ok,
-                        "error_cm": 100 * e,
-                        "scan_error_cm": float(100 * err[k]),
-                        "ratio_to_scan": wall / per,
-                    }
-                )
-                print(
-                    f"  LSODA rtol {tol:g}, μ = {mu:.4f}: {wall:.2f} s, {nfev} f-evals, "
-                    f"error {100 * e:.3g} cm "
-                    f"(scan {100 * err[k]:.3g} cm); {wall / per:.0f}x the scan's time per trajectory",
-                    flush=True,
-                )
-        rec["scipy_lsoda"] = {
+        for method in args.scipy_methods.split(","):
+            for tol in (float(x) for x in args.scipy_rtol.split(",")):
+                for k in k_idx:
+                    mu = float(mus[idx[k]])
+                    wall, nfev, p_end, ok = scipy_baseline(
+                        sc.replace(**{MU: mu}), t1, method, tol, 1e-2 * tol
+                    )
+                    e = float(np.linalg.norm(p_end - ref["final_position"][k]))
+                    rows.append(
+                        {
+                            "method": method,
+                            "rtol": tol,
+                            "mu": mu,
+                            "wall_s": wall,
+                            "nfev": nfev,
+                            "success": ok,
+                            "error_cm": 100 * e,
+                            "scan_error_cm": float(100 * err[k]),
+                            "ratio_to_scan": wall / per,
+                        }
+                    )
+                    print(
+                        f"  {method} rtol {tol:g}, μ = {mu:.4f}: {wall:.2f} s, {nfev} f-evals, "
+                        f"error {100 * e:.3g} cm "
+                        f"(scan {100 * err[k]:.3g} cm); {wall / per:.0f}x the scan's time per trajectory",
+                        flush=True,
+                    )
+        rec["scipy"] = {
             "runs": rows,
-            "mean_ratio_by_rtol": {
-                str(tol): float(np.mean([x["ratio_to_scan"] for x in rows if x["rtol"] == tol]))
+            "mean_ratio": {
+                f"{m} rtol {tol:g}": float(
+                    np.mean([x["ratio_to_scan"] for x in rows if x["rtol"] == tol and x["method"] == m])
+                )
+                for m in sorted({x["method"] for x in rows})
                 for tol in sorted({x["rtol"] for x in rows})
             },
         }
@@ -347,8 +364,8 @@ def main(argv=None):
     # 4. Forward sensitivities vs the plain scan of the same members.
     if deriv_n:
         sub = mus[np.linspace(0, n - 1, deriv_n).round().astype(int)]
-        plain = scan(sc, {MU: sub}, t1, **kw)
-        der = scan(sc, {MU: sub}, t1, derivatives=True, **kw)
+        plain = r if deriv_n == n else scan(sc, {MU: sub}, t1, **kw)  # the whole scan: its own timing
+        der = scan(sc, {MU: sub}, t1, derivatives=True, progress=True, **kw)
         tp, td = plain.attrs["timings_s"], der.attrs["timings_s"]
         same = float(np.max(np.abs(der["final_position"] - plain["final_position"])))
         rec["derivatives"] = {
