@@ -106,6 +106,23 @@ def _series(result: ScanResult, observable: str, param: str | None, who: str):
     return param, x[order], y[order]
 
 
+def _bracket(param, observable, x, y, i, j, score) -> Jump:
+    """The `Jump` between sorted members i < j."""
+    with np.errstate(invalid="ignore"):
+        size = abs(y[j] - y[i])
+    return Jump(
+        param=param,
+        observable=observable,
+        lo=float(x[i]),
+        hi=float(x[j]),
+        y_lo=float(y[i]),
+        y_hi=float(y[j]),
+        size=float(size),
+        score=float(score),
+        index=int(i),
+    )
+
+
 def find_crossings(
     result: ScanResult, observable: str, level: float = 0.0, *, param: str | None = None
 ) -> list[Jump]:
@@ -117,20 +134,7 @@ def find_crossings(
     param, x, y = _series(result, observable, param, "find_crossings")
     above = y - float(level) > 0.0
     idx = np.nonzero(above[:-1] != above[1:])[0]
-    return [
-        Jump(
-            param=param,
-            observable=observable,
-            lo=float(x[i]),
-            hi=float(x[i + 1]),
-            y_lo=float(y[i]),
-            y_hi=float(y[i + 1]),
-            size=float(abs(y[i + 1] - y[i])),
-            score=np.inf,
-            index=int(i),
-        )
-        for i in idx
-    ]
+    return [_bracket(param, observable, x, y, i, i + 1, np.inf) for i in idx]
 
 
 def find_jumps(
@@ -195,21 +199,7 @@ def find_jumps(
             and direction[j + 1] == direction[i]
         ):
             j += 1
-        with np.errstate(invalid="ignore"):
-            size = abs(y[j + 1] - y[i])
-        jumps.append(
-            Jump(
-                param=param,
-                observable=observable,
-                lo=float(x[i]),
-                hi=float(x[j + 1]),
-                y_lo=float(y[i]),
-                y_hi=float(y[j + 1]),
-                size=float(size),
-                score=float(np.max(score[i : j + 1])),
-                index=i,
-            )
-        )
+        jumps.append(_bracket(param, observable, x, y, i, j + 1, np.max(score[i : j + 1])))
         i = j + 1
     return jumps
 
