@@ -388,6 +388,7 @@ def test_scan_and_bifurcation_commands(tmp_path):
     )
     assert rc == 0
     res = ScanResult.load(out / "scan")
+    assert (out / "scan.nc").read_bytes()[:4] == b"CDF\x02"  # the same dataset as netCDF
     np.testing.assert_array_equal(res.coords[XI], [0.45, 0.55])
     assert np.all(np.asarray(res.status) == 0)
     # Corner indices D, E, F, H = 0..3; η_C = b/2 makes E and F (and D and H) leave together, so either may

@@ -195,7 +195,29 @@ def test_resume_after_interruption(box, clean, tmp_path):
         scan(box, {MU: MUS[:3]}, T1, chunk_size=4, out_dir=tmp_path, **KW)
 
 
-def test_grid_mode_with_time_histories(box):
+def test_netcdf_file_reads_back_with_an_independent_reader(clean, tmp_path):
+    """`to_netcdf` writes a classic netCDF file that scipy's reader (not ours) parses: dimensions, values
+    (inf kept), units, component labels and the global metadata."""
+    import scipy.io
+
+    path = clean.to_netcdf(tmp_path / "scan.nc")
+    f = scipy.io.netcdf_file(str(path), "r", mmap=False)
+    try:
+        assert f.dimensions["member"] == 6 and f.dimensions["detachment_times_component"] == 4
+        v = f.variables
+        np.testing.assert_array_equal(v[MU].data, MUS)
+        assert v[MU].units == b"-" and v["liftoff_time"].units == b"s"
+        assert v["detachment_times"].dimensions == ("member", "detachment_times_component")
+        np.testing.assert_array_equal(v["detachment_times"].data, clean["detachment_times"])
+        labels = [b"".join(row).decode() for row in v["detachment_times_component"].data]
+        assert labels == ["D", "E", "F", "H"]
+        np.testing.assert_array_equal(v["status"].data, clean.status)
+        assert f.scan_mode == b"sweep" and json.loads(f.attrs_json)["t1"] == T1
+    finally:
+        f.close()
+
+
+def test_grid_mode_with_time_histories(box, tmp_path):
     """A 2 x 2 grid over μ and the hoist speed, keeping the mass-centre history."""
     res = scan(
         box,
@@ -212,6 +234,17 @@ def test_grid_mode_with_time_histories(box):
     x = res["final_position"][..., 0]
     assert x[0, 1] > x[0, 0] and x[1, 1] > x[1, 0]  # a faster hoist drags the box further in 0.3 s
     assert x[0, 0] > x[1, 0] and x[0, 1] > x[1, 1]  # more friction, less far
+
+    import scipy.io  # the netCDF file: one dimension per grid parameter, the history over t
+
+    path = res.to_netcdf(tmp_path / "grid.nc")
+    f = scipy.io.netcdf_file(str(path), "r", mmap=False)
+    try:
+        assert f.variables["history_position"].dimensions == (MU, "hoist.speed", "t", "position_dim0")
+        np.testing.assert_array_equal(f.variables["history_position"].data, res["position"])
+        np.testing.assert_array_equal(f.variables["hoist.speed"].data, [0.2, 0.3])
+    finally:
+        f.close()
 
 
 def test_forward_sensitivities_match_differences(box):

@@ -541,6 +541,45 @@ class ScanResult:
             attrs=meta.get("attrs", {}),
         )
 
+    def _layout(self):
+        """The labelled-dataset view shared by `to_xarray` and `to_netcdf`: (dimension sizes, coordinates,
+        data variables), each variable as (name, dimension names, values, attributes); text coordinates
+        (component labels) are lists of str."""
+        dims: dict[str, int] = {}
+        member_dims = list(self.params) if self.mode == "grid" else ["member"]
+        for d, n in zip(member_dims, self.shape, strict=True):
+            dims[d] = n
+        coords = []
+        for p in self.params:
+            cdims = (p,) if self.mode == "grid" else ("member",)
+            attrs = {"units": self.units.get(p, "?"), "description": self.descriptions.get(p, "")}
+            coords.append((p, cdims, self.coords[p], attrs))
+        if self.ts is not None:
+            dims["t"] = self.ts.size
+            coords.append(("t", ("t",), self.ts, {"units": "s", "description": "saved times"}))
+        variables = []
+        for k, v in self.data.items():
+            extra = []
+            for i, n in enumerate(v.shape[len(self.shape) :]):
+                d = f"{k}_component" if i == 0 else f"{k}_dim{i}"
+                dims[d], extra = n, [*extra, d]
+                if i == 0 and self.components.get(k):
+                    coords.append((d, (d,), list(self.components[k]), {}))
+            attrs = {"units": self.units.get(k, "?"), "description": self.descriptions.get(k, "")}
+            variables.append((k, (*member_dims, *extra), v, attrs))
+        for k, v in self.histories.items():
+            extra = ["t"]
+            for i, n in enumerate(v.shape[len(self.shape) + 1 :]):
+                dims[f"{k}_dim{i}"] = n
+                extra.append(f"{k}_dim{i}")
+            variables.append((f"history_{k}", (*member_dims, *extra), v, {"units": self.units.get(k, "?")}))
+        meaning = ", ".join(f"{s.value} = {s.name.lower()}" for s in ScanStatus)
+        variables.append(
+            ("status", tuple(member_dims), self.status, {"meaning": f"ScanStatus code: {meaning}"})
+        )
+        variables.append(("num_accepted_steps", tuple(member_dims), self.num_accepted_steps, {"units": "1"}))
+        return dims, coords, variables
+
     def to_xarray(self):
         """An `xarray.Dataset` (only if xarray is installed; it is not a dependency of jaxhoist)."""
         try:
@@ -548,32 +587,51 @@ class ScanResult:
         except ImportError:
             raise ImportError(
                 "to_xarray() needs xarray, which jaxhoist does not depend on: "
-                "`pip install xarray`, or use ScanResult.data / .coords directly"
+                "`pip install xarray`, use to_netcdf() and open the file with any netCDF reader, or use "
+                "ScanResult.data / .coords directly"
             ) from None
-        if self.mode == "grid":
-            dims = list(self.params)
-            coords = {p: (p, self.coords[p], {"units": self.units.get(p, "?")}) for p in self.params}
-        else:
-            dims = ["member"]
-            coords = {p: ("member", self.coords[p], {"units": self.units.get(p, "?")}) for p in self.params}
-        if self.ts is not None:
-            coords["t"] = ("t", self.ts, {"units": "s"})
-        data_vars = {}
-        for k, v in self.data.items():
-            extra = [f"{k}_component"] if v.ndim > len(dims) else []
-            if extra and self.components.get(k):
-                coords[extra[0]] = (extra[0], list(self.components[k]))
-            data_vars[k] = (
-                dims + extra,
-                v,
-                {"units": self.units.get(k, "?"), "description": self.descriptions.get(k, "")},
-            )
-        for k, v in self.histories.items():
-            extra = ["t"] + [f"{k}_dim{i}" for i in range(v.ndim - len(dims) - 1)]
-            data_vars[f"history_{k}"] = (dims + extra, v, {"units": self.units.get(k, "?")})
-        data_vars["status"] = (dims, self.status, {"meaning": "ScanStatus code, 0 = ok"})
-        data_vars["num_accepted_steps"] = (dims, self.num_accepted_steps)
-        return xr.Dataset(data_vars, coords=coords, attrs={"format": FORMAT})
+        _, coords, variables = self._layout()
+        return xr.Dataset(
+            {k: (d, v, a) for k, d, v, a in variables},
+            coords={k: (d, v, a) for k, d, v, a in coords},
+            attrs={"format": FORMAT},
+        )
+
+    def to_netcdf(self, path: str | Path) -> Path:
+        """Write the dataset as a classic netCDF file (64-bit offsets), readable by xarray, NCO, ncview,
+        MATLAB and the like: one dimension per grid parameter (or `member`), `t` for histories, one
+        component dimension per vector observable (labels in a text coordinate), units and descriptions as
+        attributes, failure reasons and the scan's metadata as JSON text in global attributes. Names that
+        netCDF does not allow (brackets) become '_' (`"load.mass_centre[0]"` -> `load.mass_centre_0_`); the
+        original path is kept in the `path` attribute."""
+        from ..io.netcdf import nc_name, write_netcdf
+
+        dims, coords, variables = self._layout()
+        nc_dims = {nc_name(d): n for d, n in dims.items()}
+        # CF: the parameters along `member` are auxiliary coordinates of every variable on that dimension
+        aux = " ".join(nc_name(p) for p in self.params) if self.mode != "grid" else ""
+        out = []
+        for k, d, v, a in [*coords, *variables]:
+            a = {**a, "path": k} if nc_name(k) != k else dict(a)
+            if aux and "member" in d and k not in self.params:
+                a["coordinates"] = aux
+            dd = tuple(nc_name(x) for x in d)
+            if isinstance(v, list):  # text labels -> (n, strlen) characters
+                width = max(1, *(len(x.encode("utf-8")) for x in v))
+                nc_dims[f"{dd[0]}_strlen"] = width
+                chars = np.array([list(x.encode("utf-8").ljust(width, b"\0")) for x in v], dtype=np.uint8)
+                v, dd = chars.view("S1").reshape(len(v), width), (*dd, f"{dd[0]}_strlen")
+                a["_Encoding"] = "utf-8"  # read back as text, not bytes
+            out.append((nc_name(k), dd, np.asarray(v), a))
+        attrs = {
+            "title": f"jaxhoist scan of {self.attrs.get('scenario', '?')}",
+            "format": FORMAT,
+            "scan_mode": self.mode,
+            "params": ", ".join(self.params),
+            "reasons_json": json.dumps({str(k): v for k, v in self.reasons.items()}),
+            "attrs_json": json.dumps(self.attrs, default=_json_default),
+        }
+        return write_netcdf(path, nc_dims, out, attrs)
 
 
 # ------------------------------------------------------------------------------------------ progress
@@ -774,7 +832,8 @@ def scan(
       `experiments/benchmark_scan.py`: 1.3-2x a plain scan with adaptive steps, 3.1-3.8x with fixed steps
       (docs/performance.md).
     - `out_dir`: write each finished chunk there (`chunk_#####.npz` + `manifest.json`) and the final
-      `scan.npz` + `scan.json`; with `resume=True` an interrupted scan continues from the chunks on disk.
+      `scan.npz` + `scan.json` and the same dataset as netCDF, `scan.nc`; with `resume=True` an
+      interrupted scan continues from the chunks on disk.
     - `progress`: True to print a line per chunk on stderr, or a callable receiving a `Progress`.
 
     **Returns** a `ScanResult`.
@@ -1077,6 +1136,7 @@ def scan(
             manifest["chunks"] = {str(k): {"file": f"chunk_{k:05d}.npz"} for k in range(n_chunks)}
             _write_manifest(out, manifest)
         result.save(out / "scan")
+        result.to_netcdf(out / "scan.nc")
     return result
 
 
@@ -1190,7 +1250,7 @@ def configure_parser(subparsers) -> None:
     )
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
     p.add_argument(
-        "--out", default=None, help="output folder (chunk files, manifest, scan.npz/json); resumable"
+        "--out", default=None, help="output folder (chunk files, manifest, scan.npz/json/nc); resumable"
     )
     p.add_argument("--no-resume", action="store_true", help="recompute even if --out holds finished chunks")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -1251,7 +1311,7 @@ def run_cli(args) -> int:
 
         pngs = save_scan_plots(res, out)
     print(
-        f"wrote         {out / 'scan.npz'}, {out / 'scan.json'}"
+        f"wrote         {out / 'scan.npz'}, {out / 'scan.json'}, {out / 'scan.nc'}"
         + (f", {len(pngs)} PNGs (scan_<observable>.png)" if pngs else "")
     )
     return 0 if n_fail == 0 else 1
