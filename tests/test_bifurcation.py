@@ -396,33 +396,32 @@ def test_scan_and_bifurcation_commands(tmp_path):
     first = [int(x) for x in res["first_corner"]]
     assert first[0] in (1, 2) and first[1] in (0, 3)
 
-    rc = main(
-        [
-            "bifurcation",
-            str(path),
-            "--param",
-            XI,
-            "--bracket",
-            "0.46",
-            "0.57",
-            "--observable",
-            "detach:E-D",
-            "--level",
-            "0",
-            "--method",
-            "bisection",
-            "--tol",
-            "1e-4",
-            "--t1",
-            "0.2",
-            "--n-save",
-            "101",
-            "--set",
-            "hoist.speed=0.05",
-            "--out",
-            str(tmp_path / "bif"),
-        ]
-    )
+    args = [
+        "bifurcation",
+        str(path),
+        "--param",
+        XI,
+        "--bracket",
+        "0.46",
+        "0.57",
+        "--observable",
+        "detach:E-D",
+        "--level",
+        "0",
+        "--method",
+        "bisection",
+        "--tol",
+        "1e-4",
+        "--t1",
+        "0.2",
+        "--n-save",
+        "101",
+        "--set",
+        "hoist.speed=0.05",
+        "--out",
+        str(tmp_path / "bif"),
+    ]
+    rc = main(args)
     assert rc == 0
     found = json.loads((tmp_path / "bif" / "bifurcation.json").read_text())
     assert found["overrides"] == {"hoist.speed": 0.05}
@@ -431,6 +430,15 @@ def test_scan_and_bifurcation_commands(tmp_path):
     # and the plots: the scanned observable against ξ_C, how the locator converged
     for png in (out / "scan_first_corner.png", tmp_path / "bif" / "locator_0.png"):
         assert png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n", png
+
+    # The same boundary traced along the hoist speed from the command line: ξ_C* = a/2 at every speed.
+    argv = [a for a in args if a not in ("--out", str(tmp_path / "bif"))]
+    rc = main([*argv, "--along", "hoist.speed", "--along-values", "0.05,0.06", "--out", str(tmp_path / "tr")])
+    assert rc == 0
+    rows = json.loads((tmp_path / "tr" / "bifurcation.json").read_text())["boundary"]["rows"]
+    assert [r["along_value"] for r in rows] == [0.05, 0.06]
+    assert all(abs(r["value"] - 0.5) <= 1e-4 for r in rows)
+    assert (tmp_path / "tr" / "boundary.png").exists()
 
 
 def test_trace_reports_a_vanished_jump_as_lost(monkeypatch):

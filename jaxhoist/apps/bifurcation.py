@@ -47,7 +47,7 @@ import numpy as np
 
 from .._errors import ScenarioError, SolveStatus, require_x64
 from ..numerics import observables as obs_mod
-from ..numerics.scan import ScanResult, check_path, param_unit, scan, set_param
+from ..numerics.scan import ScanResult, check_path, param_unit, parse_values, scan, set_param
 from ..numerics.solve import SolverOptions, saved_times, solve
 from ..physics.params import Scenario
 
@@ -708,7 +708,7 @@ def trace_boundary(
     param: str,
     bracket: tuple[float, float],
     along: str,
-    along_values: Sequence[float],
+    along_values: Sequence[float] | np.ndarray,
     observable,
     *,
     level: float | None = None,
@@ -802,7 +802,8 @@ def trace_boundary(
 
 
 def configure_parser(subparsers) -> None:
-    """Add `jaxhoist bifurcation SCENARIO --param PATH --bracket LO HI --observable NAME [...]`."""
+    """Add `jaxhoist bifurcation SCENARIO --param PATH --bracket LO HI --observable NAME [...]` (and
+    `--along PATH --along-values SPEC` to trace the boundary in a second parameter)."""
     p = subparsers.add_parser(
         "bifurcation",
         help="locate where an observable changes character as a parameter varies",
@@ -830,6 +831,18 @@ def configure_parser(subparsers) -> None:
         default=0,
         metavar="N",
         help="first scan N points over the bracket and refine every candidate jump",
+    )
+    p.add_argument(
+        "--along",
+        default=None,
+        metavar="PATH",
+        help="trace the boundary in a second parameter by continuation, e.g. hoist.speed",
+    )
+    p.add_argument(
+        "--along-values",
+        default=None,
+        metavar="SPEC",
+        help="values of --along, start:stop:num or v1,v2,...; the first is where --bracket applies",
     )
     p.add_argument("--t1", type=float, default=None)
     p.add_argument("--n-save", type=int, default=201)
@@ -863,7 +876,30 @@ def run_cli(args) -> int:
     kw = dict(t1=args.t1, n_save=args.n_save, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     out = Path(args.out) if args.out else None
     lo, hi = args.bracket
-    if args.scan:
+    boundary = None
+    if (args.along is None) != (args.along_values is None):
+        raise ScenarioError("--along and --along-values go together")
+    if args.along is not None and args.scan:
+        raise ScenarioError("--along traces one boundary from --bracket; it does not combine with --scan")
+    if args.along is not None:
+        boundary = trace_boundary(
+            scenario,
+            args.param,
+            (lo, hi),
+            args.along,
+            parse_values(args.along_values),
+            observable,
+            level=args.level,
+            tol=args.tol,
+            method=args.method,
+            **kw,
+        )
+        found = [b for b in boundary.points if b is not None]
+        for r in boundary.rows():
+            v = "lost or not found" if r["value"] is None else f"{r['value']:.10g}"
+            print(f"{args.along} = {r['along_value']:.6g}: {args.param}* = {v}")
+        print(f"{boundary.n_solves} solves in all; a dense grid at {args.tol:g}: {boundary.n_dense}")
+    elif args.scan:
         name = _resolve_one(observable).name
         res = scan(
             scenario,
@@ -903,6 +939,19 @@ def run_cli(args) -> int:
                     "overrides": overrides,
                     "command": getattr(args, "argv", sys.argv),
                     "bifurcations": [b.to_dict() for b in found],
+                    **(
+                        {}
+                        if boundary is None
+                        else {
+                            "boundary": {
+                                "param": boundary.param,
+                                "along": boundary.along,
+                                "rows": boundary.rows(),
+                                "n_solves": boundary.n_solves,
+                                "n_dense": boundary.n_dense,
+                            }
+                        }
+                    ),
                 },
                 indent=1,
                 default=float,
@@ -912,10 +961,13 @@ def run_cli(args) -> int:
         print(f"wrote {out / 'bifurcation.json'}")
         if not args.no_plots:
             from .plots import save_figure
-            from .scan_plots import plot_locator, save_scan_plots
+            from .scan_plots import plot_boundary, plot_locator, save_scan_plots
 
             pngs = [save_figure(plot_locator(b), out / f"locator_{k}.png") for k, b in enumerate(found)]
+            if boundary is not None:
+                pngs.append(save_figure(plot_boundary(boundary), out / "boundary.png"))
             if args.scan:
                 pngs += save_scan_plots(res, out, located=found)
             print(f"wrote {len(pngs)} PNGs in {out}")
-    return 0 if all(b.converged for b in found) else 1
+    complete = boundary is None or bool(np.all(np.isfinite(boundary.values)))
+    return 0 if found and complete and all(b.converged for b in found) else 1

@@ -5,6 +5,7 @@
 - `plot_grid`: an observable over a grid of two parameters, as a colour map per component.
 - `plot_locator`: the evaluations of `locate_bifurcation`: the indicator against the parameter, and the
   bracket width against the solve count.
+- `plot_boundary`: a boundary p*(q) traced by `trace_boundary`.
 - `save_scan_plots`: every observable of a scan as PNGs, as `jaxhoist scan` writes them.
 
 Every function returns a `matplotlib.figure.Figure`; `jaxhoist.apps.plots.save_figure` writes it.
@@ -178,6 +179,34 @@ def plot_locator(b, *, title: str | None = None) -> Figure:
     aw.set_ylabel(f"distance{unit}")
     aw.legend(fontsize=7)
     what = f"{b.param}* = {b.value:.9g}{unit}: {b.n_solves} solves against {b.n_uniform} for a uniform grid"
+    fig.suptitle(what if title is None else title, fontsize=10)
+    return fig
+
+
+def plot_boundary(boundary, *, title: str | None = None) -> Figure:
+    """A boundary p*(q) traced by `trace_boundary`: located points with their final brackets as error bars
+    (usually far below the marker size), lost or failed points marked on the q axis."""
+    fig, axes = _figure(1, 1, figsize=(6.5, 4.5))
+    ax = axes[0, 0]
+    q, p = np.asarray(boundary.along_values), np.asarray(boundary.values)
+    ok = np.isfinite(p)
+    ax.errorbar(p[ok], q[ok], xerr=0.5 * np.asarray(boundary.widths)[ok], fmt="o-", ms=4, capsize=2)
+    if np.any(~ok):
+        ax.plot(
+            np.full(np.sum(~ok), np.nanmin(p) if ok.any() else 0.0),
+            q[~ok],
+            "x",
+            color="red",
+            label="lost or not found",
+        )
+        ax.legend(fontsize=7)
+    unit = next((b.unit for b in boundary.points if b is not None), "?")
+    ax.set_xlabel(f"{boundary.param}*" + ("" if unit in ("-", "", "?") else f" [{unit}]"))
+    ax.set_ylabel(boundary.along)
+    what = (
+        f"{boundary.param}*({boundary.along}) by continuation\n{boundary.n_solves} solves "
+        f"(a dense grid at {boundary.tol:g}: {boundary.n_dense})"
+    )
     fig.suptitle(what if title is None else title, fontsize=10)
     return fig
 
