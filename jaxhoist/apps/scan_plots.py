@@ -122,6 +122,7 @@ def plot_grid(result: ScanResult, name: str, *, title: str | None = None) -> Fig
             ax.set_visible(False)
             continue
         z = np.where(ok, y[..., k], np.nan)
+        n_inf = int(np.sum(np.isinf(z)))
         z = np.where(np.isfinite(z), z, np.nan)
         pc = ax.pcolormesh(x0, x1, z.T, shading="nearest", cmap="viridis")
         fig.colorbar(pc, ax=ax, label=_label(result, name) if n == 1 else labels[k])
@@ -132,8 +133,9 @@ def plot_grid(result: ScanResult, name: str, *, title: str | None = None) -> Fig
         u0, u1 = result.units.get(p0, "?"), result.units.get(p1, "?")
         ax.set_xlabel(p0 if u0 in ("-", "") else f"{p0} [{u0}]")
         ax.set_ylabel(p1 if u1 in ("-", "") else f"{p1} [{u1}]")
-        if n > 1:
-            ax.set_title(labels[k], fontsize=9)
+        blank = f"{n_inf} cells ±inf (event not reached): blank" if n_inf else ""
+        if n > 1 or blank:
+            ax.set_title(", ".join(x for x in (labels[k] if n > 1 else "", blank) if x), fontsize=9)
     fig.suptitle(f"{_label(result, name)} over ({p0}, {p1})" if title is None else title, fontsize=10)
     return fig
 
