@@ -118,7 +118,7 @@ def main(argv=None):
     p.add_argument(
         "--scipy-rtol", default="1e-6,1e-4", help="scipy tolerances (comma-separated; atol = rtol/100)"
     )
-    p.add_argument("--deriv-n", type=int, default=None, help="members for the sensitivities (512; quick 64)")
+    p.add_argument("--deriv-n", type=int, default=None, help="members for the sensitivities (default: all)")
     p.add_argument("--sweep-lanes", default=None, help="lane widths to time first, e.g. 64,128,256,512,1024")
     p.add_argument("--sweep-t1", type=float, default=0.5, help="horizon of the lane sweep [s] (default 0.5)")
     p.add_argument("--only-sweep", action="store_true", help="stop after the lane sweep")

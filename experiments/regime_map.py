@@ -23,7 +23,7 @@ map (it happens at ~0.2 s at v_l = 0.42 m/s and ~0.4 s at 0.2 m/s) and ends long
    must pass through the preset's value of each, within the error that μ*'s bracket implies there;
 5. the picture: g over (μ, v_l) with the grid's zero contour and the traced points.
 
-    python experiments/regime_map.py --out out/regime-map            # ~5 min on 2 shared cores
+    python experiments/regime_map.py --out out/regime-map            # ~2-3 min on 2 shared cores
     python experiments/regime_map.py --out out/regime-map --quick    # 11 x 5 grid
 
 Writes DIR/regime_map.json (every number), DIR/regime_map.npz (the grid), DIR/regime_map.png.
@@ -51,7 +51,7 @@ from jaxhoist.numerics.scan import get_param, set_param  # noqa: E402
 
 MU, VL = "foundation.friction_coefficient", "hoist.speed"
 MARGIN = "contact_margin[E]"
-# Other parameters to cross the boundary in, at the traced point (μ*, v_l = 0.3 m/s): (path, relative
+# Other parameters to cross the boundary in, at the traced point (μ*, v_l nearest 0.3 m/s): (path, relative
 # half-width of the bracket around the preset's value)
 OTHERS = [
     ("hoist.speed", 0.05),
@@ -189,11 +189,12 @@ def main(argv=None) -> int:
     #    |dμ*/dq|^-1 x half its width (slopes by forward mode), and the new bracket's half-width
     start = trace[j0]
     mu0, w_mu = start["mu_star"], start["width"]
-    d_mu = _slope(locate_bifurcation(sc, MU, MARGIN, start["bracket"], level=0.0, tol=args.tol, **kw))
-    sc0 = set_param(sc, MU, mu0)
+    d_mu = _slope(tr_up.points[0])  # the traced point at speeds[j0], from its Newton history
+    sc_j0 = set_param(sc, VL, speeds[j0])  # the speed at which μ* was located
+    sc0 = set_param(sc_j0, MU, mu0)
     others, n_ok = [], 0
     for path, rel in OTHERS:
-        q0 = float(get_param(sc, path))
+        q0 = float(get_param(sc_j0, path))
         tol_q = args.tol * abs(q0)
         try:
             b = locate_bifurcation(
@@ -222,7 +223,7 @@ def main(argv=None) -> int:
             }
         )
         print(
-            f"  {path}: located {b.value:.9g} {b.unit} against the preset's {q0:.9g} (difference "
+            f"  {path}: located {b.value:.9g} {b.unit} against the traced point's {q0:.9g} (difference "
             f"{b.value - q0:.2g}, allowed {bound:.2g}: {'ok' if ok else 'OFF'}); {b.n_solves} solves, "
             f"{b.n_uniform} for a uniform grid"
         )

@@ -94,6 +94,7 @@ def test_scan_physics(clean):
     assert np.all(g_min <= 1000.0 * 9.81 / (4 * 1.5e7) * (1 + 1e-6))
     # A corner's first impact comes after its first detachment (inf where it never left), mirror-symmetric.
     t_imp = clean["impact_times"]
+    assert np.isfinite(t_imp).any()  # some corners do land again within 0.3 s
     assert np.all(np.isinf(t_imp[np.isinf(t)])) and np.all(t_imp[np.isfinite(t)] > t[np.isfinite(t)])
     np.testing.assert_allclose(t_imp[:, 0], t_imp[:, 3], rtol=1e-9)
     # Time per contact configuration (16 subsets of D, E, F, H): the mirror keeps D with H and E with F, so
@@ -247,7 +248,7 @@ def test_grid_mode_with_time_histories(box, tmp_path):
         f.close()
 
 
-def test_forward_sensitivities_match_differences(box):
+def test_forward_sensitivities_match_differences(box, tmp_path):
     """d(final X)/dμ by forward mode, integrated over [0.29, 0.31] by Simpson's rule, equals the change of
     the scan's own final X, across corners leaving and striking the ground again (the contact and rope
     dampers build up over `damping_onset`, so the forces stay continuous at touch-down and the derivative
@@ -259,7 +260,7 @@ def test_forward_sensitivities_match_differences(box):
         derivatives=True,
         rtol=1e-9,
         atol=1e-11,
-        **{**KW, "observables": ["final_x", "impacts"]},
+        **{**KW, "observables": ["final_x", "impacts", "final_position"]},
     )
     x, dx = res["final_x"], res["d_final_x"][:, 0]
     assert res["d_final_x"].shape == (3, 1) and res.units["d_final_x"] == "m per -"
@@ -269,6 +270,25 @@ def test_forward_sensitivities_match_differences(box):
     # Simpson's error ~ h^5 x^(5) and the solver noise (~1e-9 x 0.6 m over a change of 1.6 mm, 4e-7) are
     # small; measured agreement 5e-6.
     assert simpson == pytest.approx(x[2] - x[0], rel=2e-5)
+    np.testing.assert_array_equal(res["d_final_position"][:, 0, 0], dx)
+
+    # The sensitivities of a vector observable keep both axes, labelled, in the netCDF file and the plots.
+    import scipy.io
+
+    from jaxhoist.apps.scan_plots import _components
+
+    assert res.axes("d_final_position") == [
+        ("final_position_component", 3, ("x", "y", "z")),
+        ("parameter", 1, (MU,)),
+    ]
+    assert _components(res, "d_final_position")[0][2] == f"d_final_position[z, {MU}]"
+    f = scipy.io.netcdf_file(str(res.to_netcdf(tmp_path / "d.nc")), "r", mmap=False)
+    try:
+        d = f.variables["d_final_position"]
+        assert d.dimensions == ("member", "final_position_component", "parameter")
+        np.testing.assert_array_equal(d.data, res["d_final_position"])
+    finally:
+        f.close()
 
 
 def test_member_layout_and_value_specs():

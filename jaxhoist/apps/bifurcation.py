@@ -128,12 +128,14 @@ def find_crossings(
 ) -> list[Jump]:
     """Neighbouring members of a 1-D scan on opposite sides of `level` (observable - level > 0 at one,
     <= 0 at the other): the brackets of the zeros of a continuous indicator, such as an event-time
-    difference or a contact margin with level 0, which `find_jumps` does not see. `score` is inf.
+    difference or a contact margin with level 0, which `find_jumps` does not see. Steps to or from ±inf
+    (an event that stops happening) are jumps, not crossings, and left to `find_jumps`. `score` is inf.
 
     **Returns** the brackets sorted by parameter value, as `Jump`s."""
     param, x, y = _series(result, observable, param, "find_crossings")
     above = y - float(level) > 0.0
-    idx = np.nonzero(above[:-1] != above[1:])[0]
+    finite = np.isfinite(y)
+    idx = np.nonzero((above[:-1] != above[1:]) & finite[:-1] & finite[1:])[0]
     return [_bracket(param, observable, x, y, i, i + 1, np.inf) for i in idx]
 
 
@@ -970,4 +972,4 @@ def run_cli(args) -> int:
                 pngs += save_scan_plots(res, out, located=found)
             print(f"wrote {len(pngs)} PNGs in {out}")
     complete = boundary is None or bool(np.all(np.isfinite(boundary.values)))
-    return 0 if found and complete and all(b.converged for b in found) else 1
+    return 0 if complete and all(b.converged for b in found) else 1

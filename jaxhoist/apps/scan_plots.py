@@ -13,6 +13,7 @@ Every function returns a `matplotlib.figure.Figure`; `jaxhoist.apps.plots.save_f
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -34,16 +35,19 @@ def _label(result: ScanResult, name: str) -> str:
     return name if unit in ("-", "") else f"{name} [{unit}]"
 
 
+def _shown(n: int, total: int) -> str:
+    return "" if n == total else f" (the first {n} of {total} components)"
+
+
 def _components(result: ScanResult, name: str):
-    """(labels, values of shape (members..., k)) for every component of `name`."""
+    """(labels, values of shape (members..., k)) for every component of `name`, all its trailing axes
+    flattened (a sensitivity of a vector observable: component x parameter)."""
     y = np.asarray(result.data[name], dtype=float)
-    comps = result.components.get(name)
-    extra = y.shape[len(result.shape) :]
-    if not extra:
+    axes = result.axes(name)
+    if not axes:
         return [name], y[..., None]
-    y = y.reshape(*result.shape, -1)
-    labels = list(comps) if comps else [str(i) for i in range(y.shape[-1])]
-    return [f"{name}[{c}]" for c in labels], y
+    lists = [labels if labels is not None else [str(i) for i in range(n)] for _, n, labels in axes]
+    return [f"{name}[{', '.join(c)}]" for c in itertools.product(*lists)], y.reshape(*result.shape, -1)
 
 
 def plot_sweep(
@@ -62,6 +66,8 @@ def plot_sweep(
     +-inf (an event that never happened) are left out and counted in the panel title.
     """
     param = param or result.params[0]
+    if result.mode == "grid" and len(result.params) > 1:
+        raise ValueError("plot_sweep needs a 1-D scan (a sweep or points); use plot_grid for a grid")
     x = np.asarray(result.coords[param], dtype=float).reshape(-1)
     labels, y = _components(result, name)
     y = y.reshape(x.size, -1)
@@ -99,7 +105,7 @@ def plot_sweep(
     if located or np.any(~ok):
         axes[0, 0].legend(fontsize=7, loc="best")
     axes[-1, 0].set_xlabel(param if unit in ("-", "") else f"{param} [{unit}]")
-    what = f"{name} [{result.units.get(name, '?')}] against {param}"
+    what = f"{name} [{result.units.get(name, '?')}] against {param}" + _shown(n, len(labels))
     fig.suptitle(what if title is None else title, fontsize=10)
     return fig
 
@@ -136,7 +142,8 @@ def plot_grid(result: ScanResult, name: str, *, title: str | None = None) -> Fig
         blank = f"{n_inf} cells ±inf (event not reached): blank" if n_inf else ""
         if n > 1 or blank:
             ax.set_title(", ".join(x for x in (labels[k] if n > 1 else "", blank) if x), fontsize=9)
-    fig.suptitle(f"{_label(result, name)} over ({p0}, {p1})" if title is None else title, fontsize=10)
+    what = f"{_label(result, name)} over ({p0}, {p1})" + _shown(n, len(labels))
+    fig.suptitle(what if title is None else title, fontsize=10)
     return fig
 
 

@@ -61,7 +61,11 @@ def _nc_type(a: np.ndarray) -> int:
 
 def _values(a: np.ndarray, t: int) -> bytes:
     if t == _NC_CHAR:
-        return a.astype("S1").tobytes() if a.dtype.kind != "U" else "".join(a.ravel()).encode("utf-8")
+        if a.dtype.kind == "U":
+            return "".join(a.ravel()).encode("utf-8")
+        if a.dtype.itemsize != 1:
+            raise ValueError(f"text arrays must hold single characters (dtype S1), got {a.dtype}")
+        return a.tobytes()
     return np.ascontiguousarray(a, dtype=_DTYPES[t]).tobytes()
 
 
@@ -95,6 +99,12 @@ def write_netcdf(
       integers that fit in int32, booleans (written as int) or single characters (dtype "S1", for text).
     - `attrs`: global attributes (str, numbers or sequences of numbers).
     """
+    for d, n in dims.items():
+        if nc_name(d) != d or int(n) < 1:
+            raise ValueError(f"dimension {d!r} of length {n}: names as nc_name gives, lengths >= 1")
+    names = [v[0] for v in variables]
+    if len(set(names)) != len(names) or any(nc_name(x) != x for x in names):
+        raise ValueError(f"variable names must be distinct valid netCDF names, got {names}")
     dim_ids = {d: i for i, d in enumerate(dims)}
     prepared = []
     for name, vdims, arr, vattrs in variables:
@@ -122,7 +132,7 @@ def write_netcdf(
         for (name, vdims, t, data, vattrs), begin in zip(prepared, begins, strict=True):
             vsize = len(_pad(data))
             out += _name(name) + _int(len(vdims)) + b"".join(_int(dim_ids[d]) for d in vdims)
-            out += _attributes(vattrs) + _int(t) + _int(vsize if vsize < 2**31 else -1)  # -1: too big to say
+            out += _attributes(vattrs) + _int(t) + struct.pack(">I", min(vsize, 2**32 - 1))  # 2^32-1: larger
             out += struct.pack(">q", begin)
         return out
 

@@ -196,7 +196,8 @@ def _impact_times(traj, scenario):
 def _configuration_time(traj, scenario):
     on = contact_function(traj, scenario) > 0.0
     code = jnp.sum(on * jnp.array([1, 2, 4, 8]), axis=-1)  # bit i: corner i (D, E, F, H) in contact
-    return jnp.stack([jnp.sum(jnp.where(code == m, _trapezoid_weights(traj.ts), 0.0)) for m in range(16)])
+    w = _trapezoid_weights(traj.ts)
+    return jnp.stack([jnp.sum(jnp.where(code == m, w, 0.0)) for m in range(16)])
 
 
 def _trapezoid_weights(ts):
@@ -301,8 +302,8 @@ _register(
         "impact_times",
         _impact_times,
         "s",
-        "per corner: first time it returns to the ground after its first detachment (interpolated; inf "
-        "if never)",
+        "per corner: first time it returns to the ground after its first detachment, or its first landing "
+        "if it starts off the ground (interpolated; inf if never)",
         CORNERS,
     )
 )

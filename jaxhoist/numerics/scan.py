@@ -541,6 +541,21 @@ class ScanResult:
             attrs=meta.get("attrs", {}),
         )
 
+    def axes(self, name: str) -> list[tuple[str, int, tuple[str, ...] | None]]:
+        """The trailing (per-member) axes of observable `name`: (dimension name, length, labels or None).
+        A vector observable's first axis is `<name>_component` (labelled by its components); a sensitivity
+        `d_<name>` has the axes of `<name>` and then `parameter` (labelled by the swept paths)."""
+        v = self.data[name]
+        trailing = v.shape[len(self.shape) :]
+        if name.startswith("d_") and name[2:] in self.data:
+            return [*self.axes(name[2:]), ("parameter", trailing[-1], tuple(self.params))]
+        out = []
+        for i, n in enumerate(trailing):
+            labels = self.components.get(name) if i == 0 else None
+            d = f"{name}_component" if i == 0 else f"{name}_dim{i}"
+            out.append((d, n, tuple(labels) if labels and len(labels) == n else None))
+        return out
+
     def _layout(self):
         """The labelled-dataset view shared by `to_xarray` and `to_netcdf`: (dimension sizes, coordinates,
         data variables), each variable as (name, dimension names, values, attributes); text coordinates
@@ -558,13 +573,14 @@ class ScanResult:
             dims["t"] = self.ts.size
             coords.append(("t", ("t",), self.ts, {"units": "s", "description": "saved times"}))
         variables = []
+        labelled: set[str] = set()
         for k, v in self.data.items():
             extra = []
-            for i, n in enumerate(v.shape[len(self.shape) :]):
-                d = f"{k}_component" if i == 0 else f"{k}_dim{i}"
+            for d, n, labels in self.axes(k):
                 dims[d], extra = n, [*extra, d]
-                if i == 0 and self.components.get(k):
-                    coords.append((d, (d,), list(self.components[k]), {}))
+                if labels is not None and d not in labelled:
+                    labelled.add(d)
+                    coords.append((d, (d,), list(labels), {}))
             attrs = {"units": self.units.get(k, "?"), "description": self.descriptions.get(k, "")}
             variables.append((k, (*member_dims, *extra), v, attrs))
         for k, v in self.histories.items():
@@ -573,10 +589,11 @@ class ScanResult:
                 dims[f"{k}_dim{i}"] = n
                 extra.append(f"{k}_dim{i}")
             variables.append((f"history_{k}", (*member_dims, *extra), v, {"units": self.units.get(k, "?")}))
-        meaning = ", ".join(f"{s.value} = {s.name.lower()}" for s in ScanStatus)
-        variables.append(
-            ("status", tuple(member_dims), self.status, {"meaning": f"ScanStatus code: {meaning}"})
-        )
+        flags = {  # CF flags: what each status code means
+            "flag_values": np.array([c.value for c in ScanStatus], dtype=np.int32),
+            "flag_meanings": " ".join(c.name.lower() for c in ScanStatus),
+        }
+        variables.append(("status", tuple(member_dims), self.status, flags))
         variables.append(("num_accepted_steps", tuple(member_dims), self.num_accepted_steps, {"units": "1"}))
         return dims, coords, variables
 

@@ -223,7 +223,7 @@ def check_times(t1, ts) -> None:
 
 
 def saved_times(scenario: Scenario, t1, ts, n_save: int, xp=np):
-    """(t1, ts): the saved times `ts` as given, else `n_save` equally spaced in [0, t1]; t1 defaults to
+    """(t1, ts) [s]: the saved times `ts` as given, else `n_save` equally spaced in [0, t1]; t1 defaults to
     `ts[-1]`, else the scenario's. Checked on the host. `xp` (numpy or jax.numpy) builds the grid: jax.numpy
     keeps a traced t1 traced."""
     if t1 is None:
