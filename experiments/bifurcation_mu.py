@@ -68,6 +68,34 @@ LABELS = {
 }
 
 
+def _plot_observables(sc, mus, res, jumps, located, ramp, out, t1):
+    """Every observable against μ; in each panel the μ* located in a grid cell where that observable had a
+    candidate jump (one cell may hold the jumps of several observables, located once: the lift-off-time jump
+    is also a change of the impact count), red for a jump, grey for a continuous crossing."""
+    n = mus.size
+    fig, axes = plt.subplots(3, 3, figsize=(13, 9), sharex=True)
+    for ax, name in zip(axes.ravel(), OBSERVABLES, strict=True):
+        label, unit, scale = LABELS[name]
+        ax.plot(mus, res[name] * scale, ".", ms=2 if n > 500 else 4)
+        bad = ~res.ok
+        if bad.any():
+            ax.plot(mus[bad], np.zeros(bad.sum()), "rx", ms=4, label="failed")
+        for b in located:
+            if b.observable == name or any(j.lo <= b.value <= j.hi for j in jumps.get(name, [])):
+                ax.axvline(b.value, color="C3" if b.kind == "jump" else "0.6", lw=0.6, alpha=0.7)
+        ax.axvline(ramp.value, color="C2", lw=0.8, ls="--")
+        ax.set_ylabel(f"{label} [{unit}]")
+    for ax in axes[-1]:
+        ax.set_xlabel("friction coefficient μ [-]")
+    fig.suptitle(
+        f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s)\nin each panel the μ* located "
+        f"where it jumps: red = jump, grey = continuous crossing; green dashed: steepest change of ψ"
+    )
+    fig.tight_layout()
+    fig.savefig(out / "observables_vs_mu.png", dpi=110)
+    plt.close(fig)
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True)
@@ -122,6 +150,11 @@ def main(argv=None):
         help="hoist speeds v_l [m/s] along which to continue the first located μ*, as start:stop:num "
         "(default 0.26:0.34:9; quick 0.3:0.31:2; 'none' to skip)",
     )
+    p.add_argument(
+        "--replot",
+        action="store_true",
+        help="no refinement: redraw observables_vs_mu.png from DIR/bifurcation_mu.json and the scan's chunks",
+    )
     p.add_argument("--rtol", type=float, default=1e-6)
     p.add_argument("--atol", type=float, default=1e-8)
     args = p.parse_args(argv)
@@ -147,6 +180,7 @@ def main(argv=None):
         "devices": [str(d) for d in jax.devices()],
     }
     path = out / "bifurcation_mu.json"
+    previous = json.loads(path.read_text()) if args.replot else None  # before this run rewrites it
 
     def write(stage):
         rec["stage"] = stage
@@ -187,6 +221,15 @@ def main(argv=None):
     rec["candidate_jumps"] = {k: [vars(j) for j in v] for k, v in jumps.items()}
     for k, v in jumps.items():
         print(f"  {k}: {len(v)} candidate jumps", flush=True)
+    if args.replot:
+        import types
+
+        located = [types.SimpleNamespace(**b) for b in previous["located"]]
+        ramp = types.SimpleNamespace(**previous["steepest_psi"])
+        _plot_observables(sc, mus, res, jumps, located, ramp, out, t1)
+        path.write_text(json.dumps(previous, indent=1, default=float) + "\n")  # as it was
+        print(f"redrew {out / 'observables_vs_mu.png'} with {len(located)} located μ*")
+        return
 
     # 3. refine every candidate jump of the continuous observables (event counts and the first corner are
     #    read on the saved grid and are not refined), one per grid cell: where several observables jump in
@@ -271,27 +314,7 @@ def main(argv=None):
     write("located")
 
     # 4a. observables against μ, with the located μ* marked
-    fig, axes = plt.subplots(3, 3, figsize=(13, 9), sharex=True)
-    for ax, name in zip(axes.ravel(), OBSERVABLES, strict=True):
-        label, unit, scale = LABELS[name]
-        ax.plot(mus, res[name] * scale, ".", ms=2 if n > 500 else 4)
-        bad = ~res.ok
-        if bad.any():
-            ax.plot(mus[bad], np.zeros(bad.sum()), "rx", ms=4, label="failed")
-        for b in located:  # each panel: the μ* located for its own observable
-            if b.observable == name:
-                ax.axvline(b.value, color="C3" if b.kind == "jump" else "0.6", lw=0.6, alpha=0.7)
-        ax.axvline(ramp.value, color="C2", lw=0.8, ls="--")
-        ax.set_ylabel(f"{label} [{unit}]")
-    for ax in axes[-1]:
-        ax.set_xlabel("friction coefficient μ [-]")
-    fig.suptitle(
-        f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s)\nin each panel its own "
-        f"located μ*: red = jump, grey = continuous crossing; green dashed: steepest change of ψ"
-    )
-    fig.tight_layout()
-    fig.savefig(out / "observables_vs_mu.png", dpi=110)
-    plt.close(fig)
+    _plot_observables(sc, mus, res, jumps, located, ramp, out, t1)
 
     # 4b. zoom around each μ* and 4c. histories across it (Figs 10-12 analogue): the steepest change of ψ
     #     and the located jumps with the highest scores
