@@ -423,7 +423,7 @@ save("four", res)
 # resume on four devices what two devices began (chunks of 4 members: 2 groups for 4 devices)
 save("resumed_on_four", scan(oblique_box(), {MU: MUS}, T1, chunk_size=4, out_dir=f"{tmp}/begun", **KW))
 mus12 = np.linspace(0.1, 0.6, 12)
-save("twelve", scan(oblique_box(), {MU: mus12}, T1, **KW))
+save("twelve", scan(oblique_box(), {MU: mus12}, T1, chunk_size=8, **KW))  # the compiled call of the next
 
 def kill_after_first_chunk(p):
     if p.chunk == 0:
