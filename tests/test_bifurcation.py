@@ -365,27 +365,9 @@ def test_scan_and_bifurcation_commands(tmp_path):
     path = tmp_path / "sym.toml"
     path.write_text(SYMMETRIC_TOML)
     out = tmp_path / "scan"
-    rc = main(
-        [
-            "scan",
-            str(path),
-            "--param",
-            XI,
-            "--values",
-            "0.45,0.55",
-            "--observable",
-            "first_corner",
-            "--t1",
-            "0.2",
-            "--n-save",
-            "101",
-            "--set",
-            "hoist.speed=0.05",
-            "--out",
-            str(out),
-            "--quiet",
-        ]
-    )
+    common = ["--t1", "0.2", "--n-save", "101", "--set", "hoist.speed=0.05"]  # both commands
+    rc = main(["scan", str(path), "--param", XI, "--values", "0.45,0.55", "--observable", "first_corner",
+               *common, "--out", str(out), "--quiet"])  # fmt: skip
     assert rc == 0
     res = ScanResult.load(out / "scan")
     assert (out / "scan.nc").read_bytes()[:4] == b"CDF\x02"  # the same dataset as netCDF
@@ -396,31 +378,9 @@ def test_scan_and_bifurcation_commands(tmp_path):
     first = [int(x) for x in res["first_corner"]]
     assert first[0] in (1, 2) and first[1] in (0, 3)
 
-    args = [
-        "bifurcation",
-        str(path),
-        "--param",
-        XI,
-        "--bracket",
-        "0.46",
-        "0.57",
-        "--observable",
-        "detach:E-D",
-        "--level",
-        "0",
-        "--method",
-        "bisection",
-        "--tol",
-        "1e-4",
-        "--t1",
-        "0.2",
-        "--n-save",
-        "101",
-        "--set",
-        "hoist.speed=0.05",
-        "--out",
-        str(tmp_path / "bif"),
-    ]
+    args = ["bifurcation", str(path), "--param", XI, "--bracket", "0.46", "0.57", "--observable",
+            "detach:E-D", "--level", "0", "--method", "bisection", "--tol", "1e-4", *common,
+            "--out", str(tmp_path / "bif")]  # fmt: skip
     rc = main(args)
     assert rc == 0
     found = json.loads((tmp_path / "bif" / "bifurcation.json").read_text())
