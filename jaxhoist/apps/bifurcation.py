@@ -934,32 +934,21 @@ def run_cli(args) -> int:
         print(b.summary())
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
-        (out / "bifurcation.json").write_text(
-            json.dumps(
-                {
-                    "scenario": scenario.name,
-                    "overrides": overrides,
-                    "command": getattr(args, "argv", sys.argv),
-                    "bifurcations": [b.to_dict() for b in found],
-                    **(
-                        {}
-                        if boundary is None
-                        else {
-                            "boundary": {
-                                "param": boundary.param,
-                                "along": boundary.along,
-                                "rows": boundary.rows(),
-                                "n_solves": boundary.n_solves,
-                                "n_dense": boundary.n_dense,
-                            }
-                        }
-                    ),
-                },
-                indent=1,
-                default=float,
-            )
-            + "\n"
-        )
+        rec = {
+            "scenario": scenario.name,
+            "overrides": overrides,
+            "command": getattr(args, "argv", sys.argv),
+            "bifurcations": [b.to_dict() for b in found],
+        }
+        if boundary is not None:
+            rec["boundary"] = {
+                "param": boundary.param,
+                "along": boundary.along,
+                "rows": boundary.rows(),
+                "n_solves": boundary.n_solves,
+                "n_dense": boundary.n_dense,
+            }
+        (out / "bifurcation.json").write_text(json.dumps(rec, indent=1, default=float) + "\n")
         print(f"wrote {out / 'bifurcation.json'}")
         if not args.no_plots:
             from .plots import save_figure

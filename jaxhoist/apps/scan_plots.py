@@ -30,9 +30,12 @@ if TYPE_CHECKING:
 _MAX_PANELS = 6
 
 
+def _with_unit(text: str, unit: str) -> str:
+    return text if unit in ("-", "") else f"{text} [{unit}]"
+
+
 def _label(result: ScanResult, name: str) -> str:
-    unit = result.units.get(name, "?")
-    return name if unit in ("-", "") else f"{name} [{unit}]"
+    return _with_unit(name, result.units.get(name, "?"))
 
 
 def _shown(n: int, total: int) -> str:
@@ -76,7 +79,6 @@ def plot_sweep(
     x, y, ok = x[order], y[order], ok[order]
     n = min(len(labels), _MAX_PANELS)
     fig, axes = _figure(n, 1, figsize=(7.0, 1.2 + 1.8 * n))
-    unit = result.units.get(param, "?")
     for k in range(n):
         ax = axes[k, 0]
         yk = np.where(ok, y[:, k], np.nan)
@@ -88,7 +90,7 @@ def plot_sweep(
             ax.set_title(f"{n_inf} members: ±inf (event not reached), not drawn", fontsize=8, loc="right")
         for j in jumps:
             ax.axvspan(j.lo, j.hi, color="orange", alpha=0.3, lw=0)
-        for i, b in enumerate(located):
+        for b in located:
             v = float(getattr(b, "value", b))
             ax.axvline(v, color="C3", lw=0.9, ls="--", label=f"{param}* = {v:.7g}" if k == 0 else None)
         if np.any(~ok):
@@ -104,7 +106,7 @@ def plot_sweep(
             )
     if located or np.any(~ok):
         axes[0, 0].legend(fontsize=7, loc="best")
-    axes[-1, 0].set_xlabel(param if unit in ("-", "") else f"{param} [{unit}]")
+    axes[-1, 0].set_xlabel(_label(result, param))
     what = f"{name} [{result.units.get(name, '?')}] against {param}" + _shown(n, len(labels))
     fig.suptitle(what if title is None else title, fontsize=10)
     return fig
@@ -136,9 +138,8 @@ def plot_grid(result: ScanResult, name: str, *, title: str | None = None) -> Fig
             i0, i1 = np.nonzero(~ok)
             ax.plot(x0[i0], x1[i1], "x", color="red", ms=5, label="failed")
             ax.legend(fontsize=7)
-        u0, u1 = result.units.get(p0, "?"), result.units.get(p1, "?")
-        ax.set_xlabel(p0 if u0 in ("-", "") else f"{p0} [{u0}]")
-        ax.set_ylabel(p1 if u1 in ("-", "") else f"{p1} [{u1}]")
+        ax.set_xlabel(_label(result, p0))
+        ax.set_ylabel(_label(result, p1))
         blank = f"{n_inf} cells ±inf (event not reached): blank" if n_inf else ""
         if n > 1 or blank:
             ax.set_title(", ".join(x for x in (labels[k] if n > 1 else "", blank) if x), fontsize=9)
@@ -165,8 +166,7 @@ def plot_locator(b, *, title: str | None = None) -> Figure:
         ax.annotate(str(i + 1), (h[0], h[1]), fontsize=6, xytext=(3, 3), textcoords="offset points")
     ax.axhline(0.0, color="0.5", lw=0.7)
     ax.axvline(b.value, color="C3", ls="--", lw=0.9, label=f"{b.param}* = {b.value:.9g}")
-    unit = "" if b.unit in ("-", "") else f" [{b.unit}]"
-    ax.set_xlabel(b.param + unit)
+    ax.set_xlabel(_with_unit(b.param, b.unit))
     ax.set_ylabel(f"g = {b.observable} - level")
     ax.legend(fontsize=7)
     # Bracket width after each evaluation: the smallest interval between evaluations of opposite sign.
@@ -185,9 +185,12 @@ def plot_locator(b, *, title: str | None = None) -> Figure:
     aw.semilogy(k[dist > 0], dist[dist > 0], "x:", ms=5, label=f"|{b.param.split('.')[-1]} - estimate|")
     aw.axhline(b.tol, color="0.5", ls=":", label=f"tol = {b.tol:g}")
     aw.set_xlabel("solve")
-    aw.set_ylabel(f"distance{unit}")
+    aw.set_ylabel(_with_unit("distance", b.unit))
     aw.legend(fontsize=7)
-    what = f"{b.param}* = {b.value:.9g}{unit}: {b.n_solves} solves against {b.n_uniform} for a uniform grid"
+    what = (
+        f"{_with_unit(f'{b.param}* = {b.value:.9g}', b.unit)}: {b.n_solves} solves against {b.n_uniform} "
+        "for a uniform grid"
+    )
     fig.suptitle(what if title is None else title, fontsize=10)
     return fig
 
@@ -209,8 +212,8 @@ def plot_boundary(boundary, *, title: str | None = None) -> Figure:
             label="lost or not found",
         )
         ax.legend(fontsize=7)
-    unit = next((b.unit for b in boundary.points if b is not None), "?")
-    ax.set_xlabel(f"{boundary.param}*" + ("" if unit in ("-", "", "?") else f" [{unit}]"))
+    unit = next((b.unit for b in boundary.points if b is not None and b.unit != "?"), "")
+    ax.set_xlabel(_with_unit(f"{boundary.param}*", unit))
     ax.set_ylabel(boundary.along)
     what = (
         f"{boundary.param}*({boundary.along}) by continuation\n{boundary.n_solves} solves "

@@ -46,7 +46,7 @@ def _name(s: str) -> bytes:
 
 
 def _nc_type(a: np.ndarray) -> int:
-    if a.dtype.kind in "SU":
+    if a.dtype.kind == "S":
         return _NC_CHAR
     if a.dtype.kind in "biu":
         if a.size and (a.min() < -(2**31) or a.max() >= 2**31):
@@ -61,8 +61,6 @@ def _nc_type(a: np.ndarray) -> int:
 
 def _values(a: np.ndarray, t: int) -> bytes:
     if t == _NC_CHAR:
-        if a.dtype.kind == "U":
-            return "".join(a.ravel()).encode("utf-8")
         if a.dtype.itemsize != 1:
             raise ValueError(f"text arrays must hold single characters (dtype S1), got {a.dtype}")
         return a.tobytes()

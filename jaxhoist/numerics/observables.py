@@ -108,12 +108,18 @@ def first_down_crossing(ts, f):
     linearly between saved times; `ts[0]` if f(0) <= 0, `+inf` if it never does."""
     on = f > 0.0
     down = on[:-1] & ~on[1:]
-    found = jnp.any(down)
-    j = jnp.argmax(down)
+    return jnp.where(~on[0], ts[0], _first_zero(ts, f, down))
+
+
+def _first_zero(ts, f, steps):
+    """The zero of `f`, interpolated linearly, in the first saved-time step where `steps` (n_t - 1,) is
+    True (f changes sign across it); `+inf` if there is none. Safe under jvp: no 0/0 where none is found."""
+    found = jnp.any(steps)
+    j = jnp.argmax(steps)
     f0, f1 = f[j], f[j + 1]
-    denom = jnp.where(found, f0 - f1, 1.0)  # > 0 where a crossing was found (f0 > 0 >= f1)
+    denom = jnp.where(found, f0 - f1, 1.0)  # != 0 where found: f0 and f1 lie on opposite sides of 0
     t = ts[j] + (f0 / denom) * (ts[j + 1] - ts[j])
-    return jnp.where(~on[0], ts[0], jnp.where(found, t, jnp.inf))
+    return jnp.where(found, t, jnp.inf)
 
 
 def _down_crossings(ts, F):
@@ -129,13 +135,7 @@ def first_return(ts, f):
     k = jnp.arange(down.size)
     j_down = jnp.where(jnp.any(down), jnp.argmax(down), down.size)  # the detachment step, if any
     j_down = jnp.where(on[0], j_down, -1)  # off the ground at t = 0: any return counts
-    after = up & (k > j_down)
-    found = jnp.any(after)
-    j = jnp.argmax(after)
-    f0, f1 = f[j], f[j + 1]
-    denom = jnp.where(found, f1 - f0, 1.0)  # > 0 where a return was found (f0 <= 0 < f1)
-    t = ts[j] + (-f0 / denom) * (ts[j + 1] - ts[j])
-    return jnp.where(found, t, jnp.inf)
+    return _first_zero(ts, f, up & (k > j_down))
 
 
 # ------------------------------------------------------------------------------------- observables
