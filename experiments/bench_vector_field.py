@@ -52,7 +52,8 @@ import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist.numerics.fixed_step import integrate, solve_fixed  # noqa: E402
-from jaxhoist.numerics.solve import SolverOptions, solve  # noqa: E402
+from jaxhoist.numerics.options import SolverOptions  # noqa: E402
+from jaxhoist.numerics.solve import solve  # noqa: E402
 from jaxhoist.physics.elastic import vector_field  # noqa: E402
 from jaxhoist.physics.equilibrium import initial_state  # noqa: E402
 

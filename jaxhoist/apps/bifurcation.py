@@ -47,8 +47,9 @@ import numpy as np
 
 from .._errors import ScenarioError, SolveStatus, require_x64
 from ..numerics import observables as obs_mod
+from ..numerics.options import SolverOptions
 from ..numerics.scan import ScanResult, check_path, param_unit, parse_values, scan, set_param
-from ..numerics.solve import SolverOptions, saved_times, solve
+from ..numerics.solve import saved_times, solve
 from ..physics.params import Scenario
 
 
@@ -382,8 +383,8 @@ def locate_bifurcation(
     ts=None,
     n_save: int = 201,
     solver: diffrax.AbstractSolver | None = None,
-    rtol: float = 1e-6,
-    atol: float = 1e-8,
+    rtol: float | None = None,
+    atol: float | None = None,
     dt0: float | None = None,
     max_steps: int = 200_000,
     max_solves: int = 200,
@@ -848,8 +849,11 @@ def configure_parser(subparsers) -> None:
     )
     p.add_argument("--t1", type=float, default=None)
     p.add_argument("--n-save", type=int, default=201)
-    p.add_argument("--rtol", type=float, default=1e-6)
-    p.add_argument("--atol", type=float, default=1e-8)
+    p.add_argument("--rtol", type=float, default=None,
+                   help="relative tolerance of the step-size control (default: the solver's; 1e-3 for "
+                   "rosenbrock-w)")
+    p.add_argument("--atol", type=float, default=None,
+                   help="absolute tolerance (default: the solver's; 1e-5 for rosenbrock-w)")
     p.add_argument("--max-steps", type=int, default=200_000)
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
     p.add_argument(

@@ -112,7 +112,8 @@ def run_simulate(args: argparse.Namespace) -> int:
     from .._errors import ScenarioError, SolveStatus, require_x64
     from ..io.results import corner_detach_times, liftoff_time, save_trajectory, trajectory_arrays
     from ..io.scenario import apply_overrides, load_scenario
-    from ..numerics.solve import SolverOptions, check_times
+    from ..numerics.options import SolverOptions
+    from ..numerics.solve import check_times
 
     require_x64()
     progress = Progress(quiet=args.quiet)
@@ -130,12 +131,17 @@ def run_simulate(args: argparse.Namespace) -> int:
             raise ScenarioError(
                 f"--rope {args.rope} needs --model rigid (the elastic-foundation model has the elastic rope)"
             )
-        options = SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+        if args.model == "rigid":
+            import diffrax
+
+            options = SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+        else:
+            options = SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
         ts = jnp.linspace(0.0, 1.0, args.n_save) * jnp.asarray(t1, dtype=jnp.float64)
     out_dir = Path(args.out) if args.out else Path("out") / scenario.name
     progress.note(
         f"scenario {scenario.name}: t1 = {t1:g} s, {args.n_save} saved times, "
-        f"rtol = {args.rtol:g}, atol = {args.atol:g}"
+        f"{type(options.solver).__name__}, rtol = {options.rtol:g}, atol = {options.atol:g}"
     )
 
     if args.model == "rigid":
@@ -147,8 +153,8 @@ def run_simulate(args: argparse.Namespace) -> int:
                 scenario,
                 t1,
                 ts=np.asarray(ts),
-                rtol=args.rtol,
-                atol=args.atol,
+                rtol=options.rtol,
+                atol=options.atol,
                 max_steps=args.max_steps,
                 rope=args.rope,
             )
@@ -171,9 +177,9 @@ def run_simulate(args: argparse.Namespace) -> int:
             options={
                 "model": args.model,
                 "rope": args.rope,
-                "solver": "Tsit5",
-                "rtol": args.rtol,
-                "atol": args.atol,
+                "solver": type(options.solver).__name__,
+                "rtol": options.rtol,
+                "atol": options.atol,
                 "max_steps": args.max_steps,
                 "t1": t1,
                 "n_save": args.n_save,
@@ -243,8 +249,11 @@ def configure_simulate(subparsers) -> None:
         metavar="N",
         help="number of equally spaced saved times (default 501)",
     )
-    p.add_argument("--rtol", type=float, default=1e-6, metavar="R", help="relative tolerance (default 1e-6)")
-    p.add_argument("--atol", type=float, default=1e-8, metavar="A", help="absolute tolerance (default 1e-8)")
+    p.add_argument("--rtol", type=float, default=None, metavar="R",
+                   help="relative tolerance of the step-size control (default 1e-3 with the default "
+                        "Rosenbrock-W solver; 1e-6 with --model rigid)")
+    p.add_argument("--atol", type=float, default=None, metavar="A",
+                   help="absolute tolerance (default 1e-5 with the default solver; 1e-8 with --model rigid)")
     p.add_argument(
         "--max-steps", type=int, default=200_000, metavar="M", help="solver step budget (default 200000)"
     )

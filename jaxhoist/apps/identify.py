@@ -38,6 +38,7 @@ from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -54,7 +55,8 @@ from ..io.measurement import (
     signal_groups,
 )
 from ..io.scenario import load_scenario
-from ..numerics.solve import SolverOptions, outputs, simulate, solve
+from ..numerics.options import SolverOptions
+from ..numerics.solve import outputs, simulate, solve
 from ..physics.elastic import vector_field
 from ..physics.equilibrium import initial_state
 from ..physics.params import Scenario, get_leaf, leaf_getter
@@ -388,7 +390,7 @@ def _sensitivity_solve(cfg: _Config, z, args):
         y0=(y0, Y0),
         args=(z, c, dC),
         saveat=diffrax.SaveAt(ts=ts),
-        stepsize_controller=diffrax.PIDController(rtol=opt.rtol, atol=opt.atol),
+        stepsize_controller=opt.stepsize_controller,
         max_steps=opt.max_steps,
         adjoint=diffrax.ForwardMode(),
         throw=False,
@@ -804,8 +806,8 @@ def _setup(
     start=None,
     bounds=None,
     t1=None,
-    rtol=1e-6,
-    atol=1e-8,
+    rtol=None,
+    atol=None,
     max_steps=200_000,
     max_iterations=100,
 ) -> _Problem:
@@ -831,7 +833,9 @@ def _setup(
     sig, noise_known, warnings = _sigmas(measurement, noise, weights)
     if int(max_iterations) < 1:
         raise ScenarioError(f"max_iterations must be >= 1, got {max_iterations}")
-    options = SolverOptions(rtol=rtol, atol=atol, max_steps=max_steps, adjoint="forward")
+    # Tsit5: the fit integrates the state with its parameter tangents as one augmented system (below), which
+    # the Rosenbrock-W solver's structured linearisation does not cover.
+    options = SolverOptions(diffrax.Tsit5(), rtol=rtol, atol=atol, max_steps=max_steps, adjoint="forward")
     names = measurement.names
     n_res = len(names) * measurement.t.size
     if n_res <= theta0.size:
@@ -870,7 +874,8 @@ def residual_function(scenario, measurement, params, **kwargs):
     """
     require_x64()
     prob = _setup(scenario, measurement, params, **kwargs)
-    cfg = dataclasses.replace(prob.cfg, options=dataclasses.replace(prob.cfg.options, adjoint="reverse"))
+    reverse = prob.cfg.options.replace(adjoint=diffrax.RecursiveCheckpointAdjoint())
+    cfg = dataclasses.replace(prob.cfg, options=reverse)
 
     def fn(theta):
         z = jnp.asarray(_flat_z(prob.params, np.asarray(theta, dtype=np.float64)))
@@ -895,8 +900,8 @@ def identify(
     start_spread: float = 0.3,
     seed: int = 0,
     t1: float | None = None,
-    rtol: float = 1e-6,
-    atol: float = 1e-8,
+    rtol: float | None = None,
+    atol: float | None = None,
     max_steps: int = 200_000,
     lm_rtol: float = 1e-4,
     lm_atol: float = 1e-6,
@@ -1223,8 +1228,8 @@ def synthetic_measurement(
     *,
     noise: Mapping[str, Any] | None = None,
     seed: int = 0,
-    rtol: float = 1e-6,
-    atol: float = 1e-8,
+    rtol: float | None = None,
+    atol: float | None = None,
     max_steps: int = 200_000,
     source: str = "synthetic",
 ) -> Measurement:
@@ -1348,8 +1353,8 @@ def configure_parser(subparsers) -> None:
     p.add_argument(
         "--t1", type=float, default=None, help="end of the simulated span [s] (default the scenario's)"
     )
-    p.add_argument("--rtol", type=float, default=1e-6, help="ODE relative tolerance (default 1e-6)")
-    p.add_argument("--atol", type=float, default=1e-8, help="ODE absolute tolerance (default 1e-8)")
+    p.add_argument("--rtol", type=float, default=None, help="ODE relative tolerance (default 1e-6)")
+    p.add_argument("--atol", type=float, default=None, help="ODE absolute tolerance (default 1e-8)")
     p.add_argument("--max-iterations", type=int, default=100, help="LM step budget (default 100)")
     p.add_argument("--out", default=None, help="output folder (default out/identify-<scenario name>)")
     p.add_argument("--no-plots", action="store_true", help="write only the JSON file")

@@ -60,7 +60,9 @@ import numpy as np
 from .._errors import ScenarioError, SolveStatus, require_x64
 from ..physics.params import Scenario, get_leaf
 from . import fixed_step as fixed_mod
-from .solve import SolverOptions, saved_times, solve
+from .options import SolverOptions
+from .rosenbrock import RosenbrockW
+from .solve import saved_times, solve
 
 FORMAT = "jaxhoist-scan/1"
 MANIFEST = "manifest.json"
@@ -795,8 +797,8 @@ def scan(
     ts=None,
     n_save: int = 201,
     solver: diffrax.AbstractSolver | None = None,
-    rtol: float = 1e-6,
-    atol: float = 1e-8,
+    rtol: float | None = None,
+    atol: float | None = None,
     dt0: float | None = None,
     max_steps: int = 200_000,
     fixed_step: bool = False,
@@ -1111,14 +1113,7 @@ def scan(
         "scenario": scenario.name,
         "t1": float(ts[-1]),
         "n_save": int(len(ts)),
-        "solver": {
-            "solver": type(options.solver).__name__,
-            "rtol": rtol,
-            "atol": atol,
-            "dt0": dt0,
-            "max_steps": max_steps,
-            "fixed_step": bool(fixed_step),
-        },
+        "solver": options.describe(),
         "lanes": lanes,
         "chunk_size": chunk,
         "devices": [str(d) for d in devs],
@@ -1182,6 +1177,7 @@ def _hist_shape(name: str) -> tuple[int, ...]:
 
 
 _CLI_SOLVERS = {
+    "rosenbrock-w": RosenbrockW,
     "tsit5": diffrax.Tsit5,
     "bosh3": diffrax.Bosh3,
     "dopri5": diffrax.Dopri5,
@@ -1239,14 +1235,18 @@ def configure_parser(subparsers) -> None:
     p.add_argument(
         "--n-save", type=int, default=201, help="saved times (event times are interpolated on them)"
     )
-    p.add_argument("--rtol", type=float, default=1e-6)
-    p.add_argument("--atol", type=float, default=1e-8)
+    p.add_argument("--rtol", type=float, default=None,
+                   help="relative tolerance of the step-size control (default: the solver's; 1e-3 for "
+                   "rosenbrock-w)")
+    p.add_argument("--atol", type=float, default=None,
+                   help="absolute tolerance (default: the solver's; 1e-5 for rosenbrock-w)")
     p.add_argument("--max-steps", type=int, default=200_000)
     p.add_argument(
         "--solver",
         choices=sorted(_CLI_SOLVERS),
-        default="tsit5",
-        help="diffrax Runge-Kutta method (default tsit5; bosh3 is the accurate choice at fixed steps)",
+        default="rosenbrock-w",
+        help="integrator: rosenbrock-w (default: linearly implicit, stiff contact and rope forces implicit) "
+        "or a diffrax Runge-Kutta method (bosh3 is the accurate explicit choice at fixed steps)",
     )
     p.add_argument(
         "--fixed-step",

@@ -3,8 +3,6 @@ diffrax and evaluates every output at the saved times."""
 
 from __future__ import annotations
 
-import dataclasses
-
 import diffrax
 import equinox as eqx
 import jax
@@ -19,7 +17,8 @@ from ..physics.elastic import Constants, State, snapshot, vector_field
 from ..physics.energy import Energy
 from ..physics.equilibrium import initial_state
 from ..physics.params import Scenario
-from .rigid_solve import ROPE_MODELS, RigidTrajectory, simulate_rigid
+from .options import AbstractModel, ElasticFoundation, RigidGround, SolverOptions, as_model
+from .rigid_solve import RigidTrajectory, simulate_rigid
 
 
 class Trajectory(eqx.Module):
@@ -70,51 +69,6 @@ class Trajectory(eqx.Module):
         return (mech - mech[..., :1]) - (supplied - supplied[..., :1])
 
 
-@dataclasses.dataclass(frozen=True)
-class SolverOptions:
-    """Numerical settings (static: a change recompiles).
-
-    - `solver`: a diffrax solver (None: Tsit5).
-    - `rtol`, `atol`: tolerances of the adaptive step-size controller; `dt0`: first step [s] (None:
-      automatic).
-    - `fixed_step`: take constant steps of `dt0` instead (no error control, no rejected steps: every member
-      of a vmapped batch takes the same steps, which removes lock-step waste in scans; check the accuracy
-      against an adaptive solve).
-    - `max_steps`: the step budget; reaching it is reported as `SolveStatus.MAX_STEPS`.
-    - `adjoint`: "reverse" (checkpointed, for `jax.grad`) or "forward" (for `jax.jacfwd`, cheaper).
-    - `progress`: print the solve's progress (`diffrax.TextProgressMeter`); for single solves.
-    """
-
-    solver: diffrax.AbstractSolver | None = None
-    rtol: float = 1e-6
-    atol: float = 1e-8
-    dt0: float | None = None
-    max_steps: int = 200_000
-    adjoint: str = "reverse"
-    progress: bool = False
-    fixed_step: bool = False
-
-    def __post_init__(self):
-        if self.solver is None:
-            object.__setattr__(self, "solver", diffrax.Tsit5())
-        for name in ("rtol", "atol"):
-            v = getattr(self, name)
-            if not (np.isfinite(v) and v > 0):
-                raise ScenarioError(f"solver option {name} must be a positive number, got {v}")
-        if self.dt0 is not None and not (np.isfinite(self.dt0) and self.dt0 > 0):
-            raise ScenarioError(f"solver option dt0 must be a positive time [s] or None, got {self.dt0}")
-        if self.fixed_step and self.dt0 is None:
-            raise ScenarioError("solver option fixed_step=True needs the step size dt0 [s]")
-        if int(self.max_steps) < 1:
-            raise ScenarioError(f"solver option max_steps must be >= 1, got {self.max_steps}")
-        if self.adjoint not in ("reverse", "forward"):
-            raise ScenarioError(f"solver option adjoint must be 'reverse' or 'forward', got {self.adjoint!r}")
-
-
-def _adjoint(name: str) -> diffrax.AbstractAdjoint:
-    return diffrax.ForwardMode() if name == "forward" else diffrax.RecursiveCheckpointAdjoint()
-
-
 def _status(result, y1: State) -> Int[Array, ""]:
     finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(y1)]))
     return jnp.where(
@@ -159,6 +113,17 @@ def outputs(ts, ys: State, scenario: Scenario, c: Constants, status, stats) -> T
     )
 
 
+def _controller(options: SolverOptions, ts):
+    """The step-size controller of `options`; for a solver whose dense output is only linear (the
+    Rosenbrock-W solver), error control also lands a step on every saved time, so that saved values are
+    the method's own rather than interpolated."""
+    ctrl = options.stepsize_controller
+    linear = options.solver.interpolation_cls is diffrax.LocalLinearInterpolation
+    if linear and isinstance(ctrl, diffrax.PIDController):
+        ctrl = diffrax.ClipStepSizeController(ctrl, step_ts=ts)
+    return ctrl
+
+
 def solve(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOptions) -> Trajectory:
     """The traceable core: initial state, one diffeqsolve with `throw=False`, outputs. Never raises."""
     y0, c = initial_state(scenario)
@@ -171,14 +136,10 @@ def solve(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOptions) 
         y0=y0,
         args=(scenario, c),
         saveat=diffrax.SaveAt(ts=ts),
-        stepsize_controller=(
-            diffrax.ConstantStepSize()
-            if options.fixed_step
-            else diffrax.PIDController(rtol=options.rtol, atol=options.atol)
-        ),
+        stepsize_controller=_controller(options, ts),
         max_steps=options.max_steps,
-        adjoint=_adjoint(options.adjoint),
-        progress_meter=diffrax.TextProgressMeter() if options.progress else diffrax.NoProgressMeter(),
+        adjoint=options.adjoint,
+        progress_meter=options.progress_meter,
         throw=False,
     )
     y1 = jax.tree_util.tree_map(lambda x: x[-1], sol.ys)
@@ -236,77 +197,72 @@ def saved_times(scenario: Scenario, t1, ts, n_save: int, xp=np):
     return t1, ts
 
 
+_LEGACY_SOLVER_KW = ("solver", "rtol", "atol", "dt0", "max_steps", "adjoint", "progress", "fixed_step")
+
+
 def simulate(
     scenario: Scenario,
     t1: float | Float[ArrayLike, ""] | None = None,
     *,
     ts: Float[ArrayLike, " n_t"] | None = None,
     n_save: int = 501,
-    solver: diffrax.AbstractSolver | None = None,
-    rtol: float = 1e-6,
-    atol: float = 1e-8,
-    dt0: float | None = None,
-    max_steps: int = 200_000,
-    adjoint: str = "reverse",
-    progress: bool = False,
-    fixed_step: bool = False,
+    model: AbstractModel | str = ElasticFoundation(),
+    options: SolverOptions | None = None,
     throw: bool = True,
-    model: str = "elastic",
-    rope: str = "elastic",
+    **solver_kw,
 ) -> Trajectory | RigidTrajectory:
-    """Simulate a lift with the elastic-foundation model (paper §3) from rest at t = 0 to `t1`.
+    """Simulate a lift from rest at t = 0 to `t1`.
 
-    Works under `jax.jit`, `jax.vmap` over any scenario leaf, `jax.grad` (adjoint="reverse") and
-    `jax.jacfwd` (adjoint="forward").
+    Works under `jax.jit`, `jax.vmap` over any scenario leaf, `jax.grad` (the default adjoint) and
+    `jax.jacfwd` (`SolverOptions(adjoint=diffrax.ForwardMode())`, or `adjoint="forward"`), for the elastic
+    model.
 
     **Arguments**
     - `scenario`: a `Scenario` (see `load_scenario`).
-    - `t1`: end time [s]; default `scenario.t1`.
+    - `t1`: end time [s]; default `ts[-1]` if `ts` is given, else `scenario.t1`.
     - `ts`: saved times [s], starting at 0 and ending at t1; default `n_save` equally spaced times.
-    - `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`, `progress`, `fixed_step`: see `SolverOptions`.
+    - `model`: `ElasticFoundation()` (paper §3, the default: one compiled, differentiable solve) or
+      `RigidGround(rope=ElasticRope() | InextensibleRope())` (paper §2, the event-driven reference
+      `simulate_rigid`: host-side phase loop, not differentiable or vmappable; it returns a
+      `RigidTrajectory` with the same output names plus `impact_loss` and the phase log). The strings
+      "elastic" and "rigid" are accepted too.
+    - `options`: `SolverOptions` (solver, step-size controller, adjoint, dt0, max_steps, progress meter).
+      The rigid model reads only its tolerances and step budget.
     - `throw`: raise if the solve fails (max steps, non-finite state); with False, read `Trajectory.status`.
-    - `model`: "elastic" (paper §3, this function's own solver) or "rigid" (paper §2, the event-driven
-      reference `numerics.rigid_solve.simulate_rigid`: host-side phase loop, not differentiable or
-      vmappable; only `t1`, `ts`, `n_save`, `rtol`, `atol`, `max_steps` apply, and it returns a
-      `RigidTrajectory` with the same output names plus `impact_loss` and the phase log).
-    - `rope`: "elastic" (eq. 2.14, both models) or "inextensible" (eq. 2.15, a constraint with the boom
-      tip's motion; `model="rigid"` only, see `simulate_rigid`).
+    - `**solver_kw`: the earlier keywords `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`,
+      `progress`, `fixed_step` (converted to `SolverOptions`; not together with `options`) and `rope`
+      ("elastic" or "inextensible", rigid model only).
 
-    **Returns** a `Trajectory`.
+    **Returns** a `Trajectory` (elastic model) or a `RigidTrajectory` (rigid model).
 
     **Raises** `ScenarioError` for invalid input (before compiling), `Float64Error` without x64,
     and (with `throw=True`) an `EquinoxRuntimeError` naming the failure.
     """
     require_x64()
-    if model not in ("elastic", "rigid"):
-        raise ScenarioError(f"model must be 'elastic' or 'rigid', got {model!r}")
-    if rope not in ROPE_MODELS:
-        raise ScenarioError(f"rope must be one of {', '.join(map(repr, ROPE_MODELS))}, got {rope!r}")
-    if model == "elastic" and rope != "elastic":
-        raise ScenarioError(
-            f"rope={rope!r} is available with model='rigid' only (the elastic-foundation model of §3 has "
-            "the elastic rope (2.14)); use model='rigid' or rope='elastic'"
-        )
-    if model == "rigid":
-        if solver is not None or fixed_step or dt0 is not None or adjoint != "reverse":
-            raise ScenarioError("model='rigid' takes only t1, ts, n_save, rtol, atol, max_steps and rope")
+    rope = solver_kw.pop("rope", None)
+    unknown = sorted(set(solver_kw) - set(_LEGACY_SOLVER_KW))
+    if unknown:
+        raise TypeError(f"simulate() got unexpected keyword argument(s): {', '.join(unknown)}")
+    model = as_model(model, rope)
+    if options is not None and solver_kw:
+        raise ScenarioError(f"give either options or the keywords {', '.join(sorted(solver_kw))}, not both")
+    if isinstance(model, RigidGround):
+        if options is None:
+            extra = set(solver_kw) - {"rtol", "atol", "max_steps"}
+            if extra and any(solver_kw[k] not in (None, False, "reverse") for k in extra):
+                raise ScenarioError("model='rigid' takes only t1, ts, n_save, rtol, atol, max_steps and rope")
+            kw = {k: v for k, v in solver_kw.items() if k in ("rtol", "atol", "max_steps")}
+            options = SolverOptions(diffrax.Tsit5(), **kw)  # for its default tolerances 1e-6, 1e-8
         return simulate_rigid(
-            scenario, t1, ts=ts, n_save=n_save, rtol=rtol, atol=atol, max_steps=max_steps, rope=rope
+            scenario, t1, ts=ts, n_save=n_save, rtol=options.rtol, atol=options.atol,
+            max_steps=options.max_steps, rope=model.rope.name,
         )
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()
     scenario = as_float64_leaves(scenario)
-    options = SolverOptions(
-        solver=solver,
-        rtol=rtol,
-        atol=atol,
-        dt0=dt0,
-        max_steps=max_steps,
-        adjoint=adjoint,
-        progress=progress,
-        fixed_step=fixed_step,
-    )
+    if options is None:
+        options = SolverOptions(**solver_kw)
     t1, ts = saved_times(scenario, t1, ts, n_save, jnp)
     ts = jnp.asarray(ts, dtype=jnp.float64)
     traj = _solve_jit(scenario, ts, options)

@@ -1,0 +1,244 @@
+"""Choices of numerics as objects: `SolverOptions` (which integrator, which step-size control, which adjoint,
+how many steps) and the models `ElasticFoundation` / `RigidGround` that `simulate` dispatches on.
+
+Every choice is a real object (a diffrax solver, a diffrax step-size controller, a diffrax adjoint), the way
+`diffrax.diffeqsolve` takes them; the strings and flags of earlier versions (`rtol=`, `fixed_step=True`,
+`adjoint="forward"`, `model="rigid"`, `rope="inextensible"`) are still accepted and converted here, in one
+place.
+"""
+
+from __future__ import annotations
+
+from typing import ClassVar, Literal
+
+import diffrax
+import equinox as eqx
+import numpy as np
+
+from .._errors import ScenarioError
+
+#: Default tolerances of the adaptive step-size control (relative, absolute in SI units of each state), for
+#: the default Rosenbrock-W solver (order 3) and for any other solver (the higher-order explicit ones).
+DEFAULT_TOLERANCES = {"RosenbrockW": (1e-3, 1e-5)}
+DEFAULT_RTOL = 1e-6
+DEFAULT_ATOL = 1e-8
+
+
+def default_tolerances(solver) -> tuple[float, float]:
+    """(rtol, atol) used when a solver is given without tolerances: 1e-3, 1e-5 for the Rosenbrock-W
+    solver (its error constant and order 3 put the default scan within 0.1 cm of an rtol 1e-10 reference,
+    docs/performance.md), 1e-6, 1e-8 otherwise."""
+    return DEFAULT_TOLERANCES.get(type(solver).__name__, (DEFAULT_RTOL, DEFAULT_ATOL))
+
+
+#: Default step budget of one solve.
+DEFAULT_MAX_STEPS = 200_000
+
+
+def _positive(name: str, v) -> float:
+    v = float(v)
+    if not (np.isfinite(v) and v > 0):
+        raise ScenarioError(f"solver option {name} must be a positive number, got {v}")
+    return v
+
+
+class SolverOptions(eqx.Module):
+    """Numerical settings of a solve (a change of any of them compiles anew).
+
+    - `solver`: a diffrax solver. Default (None): `jaxhoist.RosenbrockW()`, the linearly implicit solver that
+      treats the model's stiff contact, rope and boom forces implicitly (`numerics.rosenbrock`); any diffrax
+      solver works (`diffrax.Tsit5()` was the default before).
+    - `stepsize_controller`: a diffrax step-size controller: `diffrax.PIDController(rtol, atol)` for error
+      control (the default; rtol 1e-3, atol 1e-5 with the default solver, 1e-6, 1e-8 with any other) or
+      `diffrax.ConstantStepSize()` for constant steps of `dt0` (no error control; every member of a vmapped
+      batch takes the same steps).
+    - `adjoint`: how derivatives are taken: `diffrax.RecursiveCheckpointAdjoint()` (default; `jax.grad`) or
+      `diffrax.ForwardMode()` (`jax.jacfwd`/`jax.jvp`, cheaper for a few parameters).
+    - `dt0`: first step [s] (None: chosen by the controller); the constant step with `ConstantStepSize`.
+    - `max_steps`: the step budget; reaching it is reported as `SolveStatus.MAX_STEPS`.
+    - `progress_meter`: a diffrax progress meter (default `diffrax.NoProgressMeter()`).
+
+    Earlier keyword arguments still work and are converted: `rtol`, `atol` (a `PIDController`),
+    `fixed_step=True` (a `ConstantStepSize`), `adjoint="reverse" | "forward"`, `progress=True` (a
+    `TextProgressMeter`).
+
+    **Raises** `ScenarioError` for a non-positive tolerance or step, a constant step without `dt0`, a step
+    budget below 1 or an unknown adjoint name.
+    """
+
+    solver: diffrax.AbstractSolver
+    stepsize_controller: diffrax.AbstractStepSizeController
+    adjoint: diffrax.AbstractAdjoint
+    progress_meter: diffrax.AbstractProgressMeter
+    dt0: float | None = eqx.field(static=True)
+    max_steps: int = eqx.field(static=True)
+
+    def __init__(
+        self,
+        solver: diffrax.AbstractSolver | None = None,
+        stepsize_controller: diffrax.AbstractStepSizeController | None = None,
+        adjoint: diffrax.AbstractAdjoint | Literal["reverse", "forward"] | None = None,
+        *,
+        dt0: float | None = None,
+        max_steps: int = DEFAULT_MAX_STEPS,
+        progress_meter: diffrax.AbstractProgressMeter | None = None,
+        rtol: float | None = None,
+        atol: float | None = None,
+        fixed_step: bool = False,
+        progress: bool = False,
+    ):
+        if solver is None:
+            from .rosenbrock import RosenbrockW
+
+            solver = RosenbrockW()
+        self.solver = solver
+        if not isinstance(self.solver, diffrax.AbstractSolver):
+            raise ScenarioError(f"solver must be a diffrax solver, got {solver!r}")
+        if stepsize_controller is not None and (rtol is not None or atol is not None or fixed_step):
+            raise ScenarioError("give either stepsize_controller or rtol/atol/fixed_step, not both")
+        if stepsize_controller is None:
+            if fixed_step:
+                stepsize_controller = diffrax.ConstantStepSize()
+            else:
+                d_rtol, d_atol = default_tolerances(self.solver)
+                stepsize_controller = diffrax.PIDController(
+                    rtol=_positive("rtol", d_rtol if rtol is None else rtol),
+                    atol=_positive("atol", d_atol if atol is None else atol),
+                )
+        elif isinstance(stepsize_controller, diffrax.PIDController):
+            _positive("rtol", stepsize_controller.rtol)
+            _positive("atol", stepsize_controller.atol)
+        self.stepsize_controller = stepsize_controller
+        if adjoint is None or adjoint == "reverse":
+            adjoint = diffrax.RecursiveCheckpointAdjoint()
+        elif adjoint == "forward":
+            adjoint = diffrax.ForwardMode()
+        elif not isinstance(adjoint, diffrax.AbstractAdjoint):
+            raise ScenarioError(f"solver option adjoint must be 'reverse' or 'forward', got {adjoint!r}")
+        self.adjoint = adjoint
+        if progress_meter is None:
+            progress_meter = diffrax.TextProgressMeter() if progress else diffrax.NoProgressMeter()
+        self.progress_meter = progress_meter
+        if dt0 is not None:
+            dt0 = _positive("dt0", dt0)
+        self.dt0 = dt0
+        if self.fixed_step and dt0 is None:
+            raise ScenarioError(
+                "a constant step (fixed_step=True, ConstantStepSize) needs the step size dt0 [s]"
+            )
+        if int(max_steps) < 1:
+            raise ScenarioError(f"solver option max_steps must be >= 1, got {max_steps}")
+        self.max_steps = int(max_steps)
+
+    # Read-outs used by the scan records and the command line.
+    @property
+    def fixed_step(self) -> bool:
+        """True for constant steps (`ConstantStepSize`)."""
+        return isinstance(self.stepsize_controller, diffrax.ConstantStepSize)
+
+    @property
+    def rtol(self) -> float | None:
+        """The controller's relative tolerance (None for constant steps)."""
+        return getattr(self.stepsize_controller, "rtol", None)
+
+    @property
+    def atol(self) -> float | None:
+        """The controller's absolute tolerance (None for constant steps)."""
+        return getattr(self.stepsize_controller, "atol", None)
+
+    @property
+    def forward_mode(self) -> bool:
+        """True if derivatives are taken in forward mode (`diffrax.ForwardMode`)."""
+        return isinstance(self.adjoint, diffrax.ForwardMode)
+
+    def replace(self, **changes) -> SolverOptions:
+        """A copy with some fields changed (`eqx.tree_at` on the named fields)."""
+        out = self
+        for name, value in changes.items():
+            out = eqx.tree_at(lambda o, n=name: getattr(o, n), out, value, is_leaf=lambda x: x is None)
+        return out
+
+    def describe(self) -> dict:
+        """A JSON-ready summary (solver class, controller, tolerances, dt0, step budget, adjoint)."""
+        return {
+            "solver": type(self.solver).__name__,
+            "stepsize_controller": type(self.stepsize_controller).__name__,
+            "rtol": self.rtol,
+            "atol": self.atol,
+            "dt0": self.dt0,
+            "max_steps": self.max_steps,
+            "fixed_step": self.fixed_step,
+            "adjoint": type(self.adjoint).__name__,
+        }
+
+
+# ------------------------------------------------------------------------------------------------ models
+
+
+class AbstractRope(eqx.Module):
+    """How the rigid-ground model treats the rope (the elastic model always has the elastic rope (2.14))."""
+
+    name: ClassVar[str]
+
+
+class ElasticRope(AbstractRope):
+    """The elastic, damped rope of eq. (2.14)."""
+
+    name: ClassVar[str] = "elastic"
+
+
+class InextensibleRope(AbstractRope):
+    """The inextensible rope of eq. (2.15): a constraint with the boom tip's motion (rigid model only)."""
+
+    name: ClassVar[str] = "inextensible"
+
+
+class AbstractModel(eqx.Module):
+    """A model of the ground contact that `simulate` can solve."""
+
+
+class ElasticFoundation(AbstractModel):
+    """The paper's §3 model: the box on four one-sided corner spring-dampers with friction; solved by
+    `diffrax.diffeqsolve` (differentiable, vmappable)."""
+
+
+class RigidGround(AbstractModel):
+    """The paper's §2 model: the box on a rigid ground, phases chosen by events (rest, sliding, tipping,
+    flight, impacts); solved by the host-side phase driver `simulate_rigid` (not differentiable).
+
+    - `rope`: `ElasticRope()` (2.14, default) or `InextensibleRope()` (2.15).
+    """
+
+    rope: AbstractRope = ElasticRope()
+
+
+def as_model(model, rope=None) -> AbstractModel:
+    """The model object for `model` (an `AbstractModel`, or the earlier strings "elastic"/"rigid") and the
+    earlier `rope` string ("elastic"/"inextensible").
+
+    **Raises** `ScenarioError` for an unknown name or an inextensible rope with the elastic model.
+    """
+    ropes = {"elastic": ElasticRope(), "inextensible": InextensibleRope()}
+    if rope is not None and not isinstance(rope, AbstractRope):
+        if rope not in ropes:
+            raise ScenarioError(f"rope must be one of {', '.join(map(repr, ropes))}, got {rope!r}")
+        rope = ropes[rope]
+    if isinstance(model, str):
+        if model == "elastic":
+            model = ElasticFoundation()
+        elif model == "rigid":
+            model = RigidGround(rope=rope or ElasticRope())
+            rope = None
+        else:
+            raise ScenarioError(f"model must be 'elastic' or 'rigid' (or a model object), got {model!r}")
+    if not isinstance(model, AbstractModel):
+        raise ScenarioError(f"model must be ElasticFoundation() or RigidGround(...), got {model!r}")
+    if rope is not None:
+        if isinstance(model, RigidGround):
+            model = RigidGround(rope=rope)
+        elif not isinstance(rope, ElasticRope):
+            raise ScenarioError(
+                f"rope={rope.name!r} is available with the rigid model only (the elastic-foundation model of "
+                "§3 has the elastic rope (2.14)); use model=RigidGround(rope=InextensibleRope())"
+            )
+    return model

@@ -1,0 +1,281 @@
+"""The stiff part of the §3 model, linearised: generalised mass, damping and stiffness matrices over the nine
+generalised velocities V = (v_C, ω, v_A) (mass centre [m/s], body angular velocity [rad/s], boom tip [m/s]).
+
+Every fast mode of the elastic model is a force that depends on a corner's, the rope's or the boom tip's
+velocity or displacement (../shared/notes/stiffness.md): the regularised friction slope μN_i/ε (3.3), the
+foundation dampers h and springs k (3.1)-(3.2), the rope damper b_l and spring c_l (2.14), the boom springs
+and dampers (2.13). Each acts through a point whose velocity is linear in V, u = G V, so its contribution to
+the generalised force Q = Σ Gᵀ F has the derivatives
+
+    D = ∂Q/∂V = Σ Gᵀ (∂F/∂u) G,    K = ∂Q/∂X = Σ Gᵀ (∂F/∂x) G,
+
+with X the generalised displacement (δx_C, δθ in body axes, δx_A). The 3x3 (corner) and scalar (rope)
+force derivatives come from forward-mode derivatives of the force laws themselves (`forces.py`, the friction
+law of the scenario), so any friction law is covered; what is left out is slow: gyroscopic terms, the change
+of the lever arms G with the orientation, the rope's transverse (geometric) stiffness S/|AB|, and the
+friction law's internal state (bristle deflection).
+
+`Linearisation.solve` then solves the linear system of a linearly implicit (Rosenbrock-W) step for the
+approximate Jacobian J that these matrices define on the full state (positions driven by velocities, velocity
+rates by M⁻¹(D ΔV + K ΔX), everything else explicit), reduced to one 9x9 system per member. A W-method keeps
+its order for any such approximation; the approximation only decides which modes are treated implicitly.
+"""
+
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+from jaxtyping import Array, Float
+
+from .._typing import Quat, Scalar
+from . import forces, kinematics
+from .elastic import Constants, State
+from .params import Scenario
+
+Mat9 = Float[Array, "9 9"]
+
+
+def _skew(r):
+    """[r]x, the matrix of the cross product r x ·."""
+    x, y, z = r[..., 0], r[..., 1], r[..., 2]
+    o = jnp.zeros_like(x)
+    return jnp.stack([jnp.stack([o, -z, y], -1), jnp.stack([z, o, -x], -1), jnp.stack([-y, x, o], -1)], -2)
+
+
+_bar = jax.lax.optimization_barrier
+
+
+def _mm(A, B):
+    """A @ B over the last two axes, written out as broadcast products and sums (no dot kernels: XLA's CPU
+    dot calls for 3x3 and 6x6 matrices cost more than the arithmetic; elementwise, they fuse)."""
+    n = A.shape[-1]
+    acc = A[..., :, 0, None] * B[..., None, 0, :]
+    for k in range(1, n):
+        acc = acc + A[..., :, k, None] * B[..., None, k, :]
+    return acc
+
+
+def _mv(A, x):
+    """A @ x written out (see `_mm`)."""
+    n = A.shape[-1]
+    acc = A[..., :, 0] * x[..., 0, None]
+    for k in range(1, n):
+        acc = acc + A[..., :, k] * x[..., k, None]
+    return acc
+
+
+def _quat_xi(q: Quat) -> Float[Array, "4 3"]:
+    """Ξ(q) with dq/dt = ½ Ξ(q) ω (`kinematics.quat_rate`); ΞᵀΞ = |q|² I."""
+    w, x, y, z = q
+    return jnp.array([[-x, -y, -z], [w, -z, y], [z, w, -x], [-y, x, w]])
+
+
+class Linearisation(eqx.Module):
+    """The generalised matrices of the model's stiff forces at one state, kept in their block structure.
+
+    Over V = (v_C, ω, v_A): M = blockdiag(M_b, m_0 I), D = blockdiag(D_b, -diag c_A) - s_v a aᵀ,
+    K = blockdiag(K_b, -diag k_A) - s_x a aᵀ, where the 6x6 blocks over (v_C, ω) hold the corners' forces,
+    the diagonal tip block the boom's (2.13), and the rank-one terms the rope (2.14), whose stretch rate is
+    aᵀV + ds/dt.
+
+    - `body_mass`: M_b = blockdiag(m I, J) [kg, kg m²]; `body_damping` D_b, `body_stiffness` K_b (corner
+      forces; D_b negative semi-definite up to the small friction-normal coupling).
+    - `tip_mass`: m_0 [kg]; `tip_damping`, `tip_stiffness`: the boom's c_A [N s/m], k_A [N/m].
+    - `rope_direction`: a (9,); `rope_damping`: s_v = ∂S/∂(dδ/dt) [N s/m];
+      `rope_stiffness`: s_x = ∂S/∂δ [N/m].
+    - `quaternion`: the orientation at which it was taken (to map quaternion rates to rotations).
+    """
+
+    body_mass: Float[Array, "6 6"]
+    body_damping: Float[Array, "6 6"]
+    body_stiffness: Float[Array, "6 6"]
+    tip_mass: Scalar
+    tip_damping: Float[Array, "3"]
+    tip_stiffness: Float[Array, "3"]
+    rope_direction: Float[Array, "9"]
+    rope_damping: Scalar
+    rope_stiffness: Scalar
+    quaternion: Quat
+
+    def dense(self) -> tuple[Mat9, Mat9, Mat9]:
+        """(M, D, K) as dense 9x9 matrices (for tests and inspection)."""
+        a = self.rope_direction
+        z = jnp.zeros((9, 9))
+        M = z.at[:6, :6].set(self.body_mass).at[6:, 6:].set(self.tip_mass * jnp.eye(3))
+        D = z.at[:6, :6].set(self.body_damping).at[6:, 6:].set(-jnp.diag(self.tip_damping))
+        K = z.at[:6, :6].set(self.body_stiffness).at[6:, 6:].set(-jnp.diag(self.tip_stiffness))
+        return M, D - self.rope_damping * jnp.outer(a, a), K - self.rope_stiffness * jnp.outer(a, a)
+
+    def factor(self, hg: Scalar):
+        """Factors of S = M - hγ D - (hγ)² K (see `solve`): the LU factors of the 6x6 body block
+        S_b = M_b - hγ D_b - (hγ)² K_b, the diagonal tip block s_A = m_0 + hγ c_A + (hγ)² k_A, and for the
+        rope's rank-one term β a aᵀ (β = hγ s_v + (hγ)² s_x >= 0) the Sherman-Morrison vector w = B⁻¹a and
+        β/(1 + β aᵀw).
+
+        The LU is taken without pivoting: S_b is M_b (positive definite) plus hγ times the dissipative
+        part -D_b and (hγ)² times the restoring part -K_b, both positive semi-definite up to the small
+        non-symmetric friction-normal coupling, so elimination in the natural order is stable. It is written
+        out, so that a vmapped batch runs it as elementwise arithmetic over the members."""
+        Sb = self.body_mass - hg * self.body_damping - hg * hg * self.body_stiffness
+        lu = _lu(Sb)
+        s_tip = self.tip_mass + hg * self.tip_damping + hg * hg * self.tip_stiffness
+        a = self.rope_direction
+        w = jnp.concatenate([_lu_solve(lu, a[:6]), a[6:] / s_tip])
+        beta = hg * self.rope_damping + hg * hg * self.rope_stiffness
+        return lu, s_tip, w, beta / (1.0 + beta * jnp.dot(a, w))
+
+    def solve(self, factors, r: State, hg: Scalar) -> State:
+        """u with (I/(hγ) - J) u = r, J the approximate Jacobian described in the module docstring.
+
+        Positions follow their velocities, u_x = hγ (r_x + ∂ẋ/∂V u_V); the velocities solve
+        S u_V = hγ (M r_V + hγ K P r_x) with P the map from the position part of the state to X
+        (δθ = 2 Ξᵀ δq/|q|² for the quaternion, so that P ∂ẋ/∂V = I); everything else is explicit, u = hγ r.
+        """
+        lu, s_tip, w, sm = factors
+        q = self.quaternion
+        xi = _quat_xi(q)
+        a = self.rope_direction
+        r_V, r_X = _bar((
+            jnp.concatenate([r.velocity, r.angular_velocity, r.tip_velocity]),
+            jnp.concatenate([r.position, 2.0 * _mv(xi.T, r.quaternion) / jnp.sum(q**2), r.tip_position]),
+        ))
+        K_rX = jnp.concatenate([_mv(self.body_stiffness, r_X[:6]), -self.tip_stiffness * r_X[6:]])
+        K_rX = K_rX - self.rope_stiffness * a * jnp.dot(a, r_X)
+        M_rV = jnp.concatenate([_mv(self.body_mass, r_V[:6]), self.tip_mass * r_V[6:]])
+        rhs = _bar(hg * (M_rV + hg * K_rX))
+        z = _bar(jnp.concatenate([_lu_solve(lu, rhs[:6]), rhs[6:] / s_tip]))
+        u_V = _bar(z - sm * jnp.dot(a, z) * w)
+        u_v, u_w, u_a = u_V[:3], u_V[3:6], u_V[6:]
+        return State(
+            position=hg * (r.position + u_v),
+            velocity=u_v,
+            quaternion=hg * (r.quaternion + 0.5 * _mv(xi, u_w)),
+            angular_velocity=u_w,
+            tip_position=hg * (r.tip_position + u_a),
+            tip_velocity=u_a,
+            friction_state=hg * r.friction_state,
+            hoist_work=hg * r.hoist_work,
+            damping_loss=hg * r.damping_loss,
+            friction_work=hg * r.friction_work,
+        )
+
+
+def _lu(S):
+    """Doolittle LU of a small square matrix without pivoting, unrolled: the factors as nested lists of
+    scalars ((L - I) + U) and the reciprocal pivots."""
+    n = S.shape[0]
+    a = [[S[i, j] for j in range(n)] for i in range(n)]
+    inv = []
+    for k in range(n):
+        p = 1.0 / a[k][k]
+        inv.append(p)
+        for i in range(k + 1, n):
+            lik = a[i][k] * p
+            a[i][k] = lik
+            for j in range(k + 1, n):
+                a[i][j] = a[i][j] - lik * a[k][j]
+    return a, inv
+
+
+def _lu_solve(lu, b):
+    a, inv = lu
+    n = len(inv)
+    y = [b[i] for i in range(n)]
+    for i in range(n):
+        for k in range(i):
+            y[i] = y[i] - a[i][k] * y[k]
+    y = _bar(y)
+    x = [None] * n
+    for i in reversed(range(n)):
+        acc = y[i]
+        for k in range(i + 1, n):
+            acc = acc - a[i][k] * x[k]
+        x[i] = acc * inv[i]
+    return jnp.stack(_bar(x))
+
+
+def linearise(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> Linearisation:
+    """The `Linearisation` of the elastic model's stiff forces at (t, y) (pure; `args` as for
+    `elastic.vector_field`)."""
+    scenario, c = args
+    fnd, rope, boom, load = scenario.foundation, scenario.rope, scenario.boom, scenario.load
+    R = kinematics.quat_to_matrix(y.quaternion)
+    omega = y.angular_velocity
+    eye3 = jnp.eye(3)
+
+    # Corners, eqs. (3.1)-(3.3): u_i = v_C + R (ω x ρ_i) = G_i (v_C, ω), G_i = [I, -R [ρ_i]x].
+    G = jnp.concatenate([jnp.broadcast_to(eye3, (4, 3, 3)), -_mm(R[None], _skew(c.corners_rel))], axis=-1)
+    corners = kinematics.points_world(y.position, R, c.corners_rel)
+    corner_vel = kinematics.points_velocity(y.velocity, R, omega, c.corners_rel)
+    p, p_dot = -corners[:, 2], -corner_vel[:, 2]
+    u_h = corner_vel[:, :2]
+    ones = jnp.ones(4)
+
+    def normal(pp, pd):
+        return forces.ground_normal(pp, pd, fnd.stiffness, fnd.damping, fnd.damping_onset)[0]
+
+    N, dN_dp = jax.jvp(lambda pp: normal(pp, p_dot), (p,), (ones,))
+    dN_dpd = jax.jvp(lambda pd: normal(p, pd), (p_dot,), (ones,))[1]
+
+    def friction(n, u):
+        return fnd.friction.force(fnd.friction_coefficient, n, u, y.friction_state)
+
+    dT_dN = jax.jvp(lambda n: friction(n, u_h), (N,), (ones,))[1]  # (4, 2)
+    dT_dux = jax.jvp(lambda u: friction(N, u), (u_h,), (jnp.stack([ones, 0 * ones], -1),))[1]
+    dT_duy = jax.jvp(lambda u: friction(N, u), (u_h,), (jnp.stack([0 * ones, ones], -1),))[1]
+    # ∂F_i/∂u_i and ∂F_i/∂x_i in world axes (F = (T_x, T_y, N); Z_i = -p_i).
+    dN_dz, dN_dw = -dN_dp, -dN_dpd
+    zero = jnp.zeros(4)
+    C = jnp.stack(
+        [
+            jnp.stack([dT_dux[:, 0], dT_duy[:, 0], dT_dN[:, 0] * dN_dw], -1),
+            jnp.stack([dT_dux[:, 1], dT_duy[:, 1], dT_dN[:, 1] * dN_dw], -1),
+            jnp.stack([zero, zero, dN_dw], -1),
+        ],
+        -2,
+    )
+    Kc = jnp.stack(
+        [
+            jnp.stack([zero, zero, dT_dN[:, 0] * dN_dz], -1),
+            jnp.stack([zero, zero, dT_dN[:, 1] * dN_dz], -1),
+            jnp.stack([zero, zero, dN_dz], -1),
+        ],
+        -2,
+    )
+    Gt = jnp.swapaxes(G, -1, -2)
+    C, Kc, G, Gt = _bar((C, Kc, G, Gt))
+    CG, KG = _bar((_mm(C, G), _mm(Kc, G)))
+    D_b, K_b = _bar((_mm(Gt, CG), _mm(Gt, KG)))
+    D_body = D_b[0] + D_b[1] + D_b[2] + D_b[3]
+    K_body = K_b[0] + K_b[1] + K_b[2] + K_b[3]
+
+    # Rope, eq. (2.14): S(δ, dδ/dt) along e (from B towards A); dδ/dt = eᵀ(v_A - v_B) + ds/dt.
+    G_B = jnp.concatenate([eye3, -_mm(R, _skew(c.attachment_rel))], axis=-1)
+    B = kinematics.points_world(y.position, R, c.attachment_rel[None])[0]
+    v_B = kinematics.points_velocity(y.velocity, R, omega, c.attachment_rel[None])[0]
+    AB = y.tip_position - B
+    L = forces.safe_norm(AB)
+    e = AB / jnp.maximum(L, 1e-12)
+    s_dot = scenario.hoist.rate(t)
+    stretch = L - (c.rope_length - scenario.hoist.shortening(t))
+    rate = jnp.dot(y.tip_velocity - v_B, e) + s_dot
+
+    def tension(d, dd):
+        return forces.rope_tension(d, dd, rope.stiffness, rope.damping, rope.damping_onset)[0]
+
+    dS_dd = jax.jvp(lambda d: tension(d, rate), (stretch,), (jnp.ones_like(stretch),))[1]
+    dS_drate = jax.jvp(lambda dd: tension(stretch, dd), (rate,), (jnp.ones_like(rate),))[1]
+    a = jnp.concatenate([-_mv(G_B.T, e), e])  # Qᵀe: the rope's relative velocity eᵀ(v_A - v_B) = aᵀV
+
+    M_b = jnp.zeros((6, 6)).at[:3, :3].set(load.mass * eye3).at[3:, 3:].set(c.inertia)
+    return Linearisation(
+        body_mass=M_b,
+        body_damping=D_body,
+        body_stiffness=K_body,
+        tip_mass=boom.tip_mass,
+        tip_damping=boom.damping,
+        tip_stiffness=boom.stiffness,
+        rope_direction=a,
+        rope_damping=dS_drate,
+        rope_stiffness=dS_dd,
+        quaternion=y.quaternion,
+    )
