@@ -45,4 +45,4 @@ from .physics.statics import rest_statics as rest_statics
 try:  # the one version source is pyproject.toml, read from the installed package's metadata
     __version__ = _metadata.version("jaxhoist")
 except _metadata.PackageNotFoundError:  # a source tree used without installing it
-    __version__ = "0+unknown"
+    __version__ = "unknown"  # as the result files write it (io.results)
