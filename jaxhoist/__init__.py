@@ -1,6 +1,8 @@
 """jaxhoist: a differentiable, vectorised simulator of a crane lifting a 3D load off the ground,
 after Grabski & Strzałko, "Dynamic analysis of the load hoisting process" (2003)."""
 
+import importlib.metadata as _metadata
+
 from ._errors import Float64Error as Float64Error
 from ._errors import ScenarioError as ScenarioError
 from ._errors import SolveStatus as SolveStatus
@@ -44,4 +46,7 @@ from .physics.params import Rope as Rope
 from .physics.params import Scenario as Scenario
 from .physics.statics import rest_statics as rest_statics
 
-__version__ = "0.1.0"
+try:  # the one version source is pyproject.toml, read from the installed package's metadata
+    __version__ = _metadata.version("jaxhoist")
+except _metadata.PackageNotFoundError:  # a source tree used without installing it
+    __version__ = "unknown"  # as the result files write it (io.results)
