@@ -656,3 +656,45 @@ def test_cli_bifurcation_bad_arguments_exit_2(monkeypatch, capsys, extra, word):
             "--bracket", "0.2", "0.4"]
     code, err = _cli(monkeypatch, capsys, [*argv, *extra])
     assert code == 2 and word in err, err
+
+
+# ---- measurement CSV files (identify)
+
+
+def _csv(tmp_path, text: str | bytes, name: str = "m.csv"):
+    p = tmp_path / name
+    p.write_bytes(text if isinstance(text, bytes) else text.encode())
+    return p
+
+
+GOOD_CSV = "t [s],position_x [m]\n0.0,1.0\n0.1,1.5\n0.2,2.0\n"
+
+
+def test_measurement_bom_header_is_read(tmp_path):
+    from jaxhoist.io.measurement import read_measurement
+
+    m = read_measurement(_csv(tmp_path, b"\xef\xbb\xbf" + GOOD_CSV.encode()))
+    np.testing.assert_allclose(m.t, [0.0, 0.1, 0.2])
+
+
+@pytest.mark.parametrize("content,word", [
+    (GOOD_CSV.replace("1.5", "1_5"), "line 3"),                      # underscores: not 15
+    (GOOD_CSV.encode("utf-16"), "UTF-16"),
+    (GOOD_CSV.encode() + b"0.3,\xe9\n", "UTF-8"),
+    (GOOD_CSV.replace("1.5", "1.5\x00"), "NUL"),
+    (GOOD_CSV.replace("1.5", "1" + "0" * 400), "position_x"),       # 1e400: not finite
+], ids=["underscore", "utf-16", "latin-1", "nul", "huge"])
+def test_measurement_bad_bytes_and_numbers(tmp_path, content, word):
+    from jaxhoist.io.measurement import MeasurementError, read_measurement
+
+    with pytest.raises(MeasurementError) as info:
+        read_measurement(_csv(tmp_path, content))
+    msg = _one_bounded_line(str(info.value))
+    assert word in msg and "m.csv" in msg, msg
+
+
+def test_measurement_path_that_is_a_folder(tmp_path):
+    from jaxhoist.io.measurement import MeasurementError, read_measurement
+
+    with pytest.raises(MeasurementError, match="folder"):
+        read_measurement(tmp_path)

@@ -24,11 +24,14 @@ import re
 import reprlib
 from collections.abc import Iterable, Sequence
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .._errors import MAX_MESSAGE_CHARS, ScenarioError, one_line
-from ..physics import params as P
+
+if TYPE_CHECKING:
+    from ..physics import params as P
 
 __all__ = [
     "MAX_MESSAGE_CHARS",
@@ -359,9 +362,11 @@ def check_param_path(scenario: P.Scenario, path: str, flag: str = "--param") -> 
             f"{flag} {brief(path)}: not a parameter path; use dotted field names with an optional component "
             f"index, e.g. foundation.friction_coefficient or load.mass_centre[0]"
         )
+    from ..physics.params import get_leaf
+
     dotted, index = m.group(1), None if m.group(2) is None else int(m.group(2))
     try:
-        leaf = np.asarray(P.get_leaf(scenario, dotted))
+        leaf = np.asarray(get_leaf(scenario, dotted))
     except ScenarioError as e:
         raise ScenarioError(f"{flag}: {e}") from None
     if not np.issubdtype(leaf.dtype, np.floating):
