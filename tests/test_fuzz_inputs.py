@@ -39,7 +39,7 @@ def mutated_scenario(draw) -> bytes:
     """A preset's text with one to three mutations, encoded in one of several ways."""
     text = TEXTS[draw(st.sampled_from(PRESETS))]
     for _ in range(draw(st.integers(1, 3))):
-        lines = text.splitlines()
+        lines = text.splitlines() or [""]
         i = draw(st.integers(0, len(lines) - 1))
         kind = draw(st.sampled_from(["delete", "duplicate", "retype", "insert", "truncate", "swap"]))
         if kind == "delete":
@@ -132,6 +132,12 @@ def test_simulate_set_is_validated_or_refused_in_one_line(fuzz_dir, monkeypatch_
             code = cli.main(argv)
         except _Reached:
             return  # a valid override: nothing was solved
+        except SystemExit as e:  # argparse (a value starting with '-' read as an option): usage + error
+            assert e.code == 2
+            last = err.getvalue().strip().splitlines()[-1]
+            assert last.startswith("jaxhoist simulate: error:"), last
+            _bounded_line(last)
+            return
     assert code == 2, (code, err.getvalue()[:300])
     lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
     assert len(lines) == 1 and lines[0].startswith("jaxhoist: error:"), lines[:3]
