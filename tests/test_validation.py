@@ -698,3 +698,23 @@ def test_measurement_path_that_is_a_folder(tmp_path):
 
     with pytest.raises(MeasurementError, match="folder"):
         read_measurement(tmp_path)
+
+
+def test_cli_overwrite_replaces_a_previous_run(tmp_path, capsys):
+    """End to end (the short solve of tests/test_cli.py, compiled once per process): a second run into the
+    same folder is refused; with --overwrite and --no-plots the old PNGs are gone and the data is new."""
+    from jaxhoist.apps import cli
+    from jaxhoist.io import results
+
+    out = tmp_path / "o"
+    short = ["simulate", "paper-4.2", "--t1", "0.5", "--n-save", "11", "--out", str(out), "--quiet"]
+    assert cli.main(short) == 0
+    assert list(out.glob("*.png"))
+    (out / "notes.txt").write_text("mine")
+    mu = ["--set", "foundation.friction_coefficient=0.3"]
+    assert cli.main([*short, *mu]) == 2
+    assert "--overwrite" in capsys.readouterr().err
+    assert cli.main([*short, *mu, "--overwrite", "--no-plots"]) == 0
+    assert not list(out.glob("*.png")) and (out / "notes.txt").read_text() == "mine"
+    md = results.load_metadata(out / "trajectory.npz")
+    assert md["scenario"]["leaves"]["foundation.friction_coefficient"] == 0.3
