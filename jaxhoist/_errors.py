@@ -1,10 +1,45 @@
 """Errors and solver status codes shared by every layer."""
 
+import contextlib
 import enum
+
+MAX_MESSAGE_CHARS = 600
+"""The longest error line a `ScenarioError` carries [characters]; longer messages lose their middle."""
+
+
+def one_line(msg: str, limit: int = MAX_MESSAGE_CHARS) -> str:
+    """`msg` on one line (line breaks become spaces), at most `limit` characters.
+
+    A longer message keeps its start (which names the field) and its end (which names the file and table)
+    and says how many characters were left out in between.
+
+    **Arguments**
+    - `msg`: the message.
+    - `limit`: the longest result [characters], at least 100.
+
+    **Returns** the shortened one-line message.
+    """
+    msg = " ".join(str(msg).splitlines())
+    if len(msg) <= limit:
+        return msg
+    tail = limit // 4
+    width = len(f" ... [{len(msg)} characters omitted] ... ")  # the marker's longest possible length
+    head = limit - tail - width
+    marker = f" ... [{len(msg) - head - tail} characters omitted] ... "
+    return msg[:head] + marker + msg[len(msg) - tail :]
 
 
 class ScenarioError(ValueError):
-    """A scenario value or file is invalid. The message names the field, e.g. `rope.stiffness`."""
+    """A scenario value or file is invalid. The message names the field, e.g. `rope.stiffness`.
+
+    The message is kept to one line of at most `MAX_MESSAGE_CHARS` characters (see `one_line`), however
+    large the offending value.
+    """
+
+    def __init__(self, *args):
+        if len(args) == 1 and isinstance(args[0], str):
+            args = (one_line(args[0]),)
+        super().__init__(*args)
 
 
 class Float64Error(RuntimeError):
@@ -45,3 +80,40 @@ _MESSAGES = {
     SolveStatus.NONFINITE: "the state became non-finite (NaN or inf): check the parameters and tolerances",
     SolveStatus.SOLVER_FAILED: "the solver failed (step size collapsed or an internal error)",
 }
+
+
+FORWARD_MODE_HINT = (
+    "forward-mode differentiation (jax.jacfwd, jax.jvp) cannot pass through the default reverse-mode "
+    'adjoint of the solve: call simulate(..., adjoint="forward") (or SolverOptions(adjoint="forward")) '
+    "for jacfwd/jvp; keep the default for jax.grad"
+)
+
+
+def is_forward_through_custom_vjp(error: BaseException) -> bool:
+    """True if `error` is JAX's refusal to apply forward-mode autodiff to a `custom_vjp` function (what
+    `jax.jacfwd` through diffrax's `RecursiveCheckpointAdjoint` raises).
+
+    **Arguments**
+    - `error`: any exception.
+
+    **Returns** whether it is that `TypeError`.
+    """
+    text = str(error)
+    return isinstance(error, TypeError) and "forward-mode autodiff" in text and "custom_vjp" in text
+
+
+@contextlib.contextmanager
+def forward_mode_hint():
+    """Re-raise JAX's "can't apply forward-mode autodiff (jvp) to a custom_vjp function" as a `TypeError`
+    that says to pass `adjoint="forward"`; every other exception passes through unchanged.
+
+    Wrap the call of the solve core with it (`with forward_mode_hint(): traj = _solve_jit(...)`).
+
+    **Raises** `TypeError` with `FORWARD_MODE_HINT` (the original error chained as its cause).
+    """
+    try:
+        yield
+    except TypeError as e:
+        if is_forward_through_custom_vjp(e):
+            raise TypeError(FORWARD_MODE_HINT) from e
+        raise

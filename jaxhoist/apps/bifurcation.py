@@ -48,7 +48,7 @@ import numpy as np
 from .._errors import ScenarioError, SolveStatus, require_x64
 from ..numerics import observables as obs_mod
 from ..numerics.options import SolverOptions
-from ..numerics.scan import ScanResult, check_path, param_unit, parse_values, scan, set_param
+from ..numerics.scan import ScanResult, check_path, param_unit, scan, set_param
 from ..numerics.solve import saved_times, solve
 from ..physics.params import Scenario
 
@@ -807,6 +807,8 @@ def trace_boundary(
 def configure_parser(subparsers) -> None:
     """Add `jaxhoist bifurcation SCENARIO --param PATH --bracket LO HI --observable NAME [...]` (and
     `--along PATH --along-values SPEC` to trace the boundary in a second parameter)."""
+    from ..io.validate import count_arg, number_arg
+
     p = subparsers.add_parser(
         "bifurcation",
         help="locate where an observable changes character as a parameter varies",
@@ -816,7 +818,7 @@ def configure_parser(subparsers) -> None:
     )
     p.add_argument("scenario", metavar="SCENARIO", help="preset name (e.g. paper-4.2) or TOML file")
     p.add_argument("--param", required=True, metavar="PATH", help="e.g. foundation.friction_coefficient")
-    p.add_argument("--bracket", nargs=2, type=float, required=True, metavar=("LO", "HI"))
+    p.add_argument("--bracket", nargs=2, type=number_arg, required=True, metavar=("LO", "HI"))
     p.add_argument(
         "--observable",
         default="final_psi",
@@ -824,16 +826,16 @@ def configure_parser(subparsers) -> None:
         "detach:E-D for a detachment-time difference); default final_psi",
     )
     p.add_argument(
-        "--level", type=float, default=None, help="indicator level (default: midpoint of the ends)"
+        "--level", type=number_arg, default=None, help="indicator level (default: midpoint of the ends)"
     )
-    p.add_argument("--tol", type=float, default=1e-6, help="final bracket width (default 1e-6)")
+    p.add_argument("--tol", type=number_arg, default=1e-6, help="final bracket width (default 1e-6)")
     p.add_argument("--method", choices=("newton", "bisection", "multisection"), default="newton")
     p.add_argument(
         "--scan",
-        type=int,
+        type=count_arg,
         default=0,
         metavar="N",
-        help="first scan N points over the bracket and refine every candidate jump",
+        help="first scan N >= 2 points over the bracket and refine every candidate jump (default 0: no scan)",
     )
     p.add_argument(
         "--along",
@@ -847,14 +849,14 @@ def configure_parser(subparsers) -> None:
         metavar="SPEC",
         help="values of --along, start:stop:num or v1,v2,...; the first is where --bracket applies",
     )
-    p.add_argument("--t1", type=float, default=None)
-    p.add_argument("--n-save", type=int, default=201)
-    p.add_argument("--rtol", type=float, default=None,
+    p.add_argument("--t1", type=number_arg, default=None)
+    p.add_argument("--n-save", type=count_arg, default=201)
+    p.add_argument("--rtol", type=number_arg, default=None,
                    help="relative tolerance of the step-size control (default: the solver's; 1e-3 for "
                    "rosenbrock-w)")
-    p.add_argument("--atol", type=float, default=None,
+    p.add_argument("--atol", type=number_arg, default=None,
                    help="absolute tolerance (default: the solver's; 1e-5 for rosenbrock-w)")
-    p.add_argument("--max-steps", type=int, default=200_000)
+    p.add_argument("--max-steps", type=count_arg, default=200_000)
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
     p.add_argument(
         "--out",
@@ -869,8 +871,32 @@ def configure_parser(subparsers) -> None:
 def _cli_observable(name: str):
     if name.startswith("detach:"):
         a, _, b = name[len("detach:") :].partition("-")
+        corners = obs_mod.CORNERS
+        if a.upper() not in corners or b.upper() not in corners or a.upper() == b.upper():
+            raise ScenarioError(
+                f"--observable {name!r}: detach:X-Y needs two different corners among {list(corners)}, "
+                f"e.g. detach:E-D"
+            )
         return obs_mod.detachment_time_difference(a, b)
     return name
+
+
+def _check_cli_args(args, scenario) -> np.ndarray | None:
+    """Every argument of `jaxhoist bifurcation` checked before any solve; returns the --along values."""
+    from ..io.validate import check_count, check_out_dir, check_param_path, check_scalar_observable
+    from ..io.validate import parse_values as strict_values
+
+    check_count(args.scan, "--scan", 2, allow_zero=True)
+    check_scalar_observable(_resolve_one(_cli_observable(args.observable)), "--observable")
+    check_param_path(scenario, args.param, "--param")
+    along = None
+    if args.along is not None:
+        check_param_path(scenario, args.along, "--along")
+    if args.along_values is not None:
+        along = strict_values(args.along_values, "--along-values")
+    if args.out:
+        check_out_dir(args.out, "--out")
+    return along
 
 
 def run_cli(args) -> int:
@@ -878,6 +904,7 @@ def run_cli(args) -> int:
     from ..io.scenario import apply_overrides, load_scenario
 
     scenario, overrides = apply_overrides(load_scenario(args.scenario), args.set)
+    along_values = _check_cli_args(args, scenario)
     observable = _cli_observable(args.observable)
     kw = dict(t1=args.t1, n_save=args.n_save, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     out = Path(args.out) if args.out else None
@@ -893,7 +920,7 @@ def run_cli(args) -> int:
             args.param,
             (lo, hi),
             args.along,
-            parse_values(args.along_values),
+            along_values,
             observable,
             level=args.level,
             tol=args.tol,

@@ -102,6 +102,47 @@ def _fmt_vec(v) -> str:
     return "(" + ", ".join(f"{x:.4g}" for x in v) + ")"
 
 
+# Files `simulate` writes into --out besides the plots' PNGs (removed first with --overwrite).
+SIMULATE_OUTPUTS = ("trajectory.npz", "trajectory.json", "trajectory.csv", "trajectory.nc")
+
+
+def summary_status(arrays: dict):
+    """The run's `SolveStatus` for the summary and the exit code: the solver's, except that a run marked ok
+    whose state or energy residual is not finite everywhere counts as `NONFINITE` (a failed run)."""
+    import numpy as np
+
+    from .._errors import SolveStatus
+
+    status = SolveStatus(int(arrays["status"]))
+    if status == SolveStatus.OK:
+        keys = ("position", "euler", "normal_forces", "rope_tension", "energy_residual")
+        if not all(np.all(np.isfinite(arrays[k])) for k in keys if k in arrays):
+            return SolveStatus.NONFINITE
+    return status
+
+
+def event_lines(status, ts, normal_forces) -> list[str]:
+    """The summary's lift-off and first-detachment lines; a failed run has no event times to report (its
+    arrays past the failure are inf or NaN), so it says so instead of reading times from them."""
+    from .._errors import SolveStatus
+    from ..io.results import corner_detach_times, liftoff_time
+
+    if status != SolveStatus.OK:
+        return ["lift-off      not available (the solve failed)", "first N_i = 0 not available"]
+    lift = liftoff_time(ts, normal_forces)
+    detach = corner_detach_times(ts, normal_forces)
+    return [
+        "lift-off      "
+        + (
+            f"{lift:g} s (first saved time with every N_i = 0)"
+            if lift is not None
+            else "none within the horizon"
+        ),
+        "first N_i = 0 "
+        + ", ".join(f"{c}: {'-' if t is None else f'{t:g} s'}" for c, t in zip("DEFH", detach, strict=True)),
+    ]
+
+
 def run_simulate(args: argparse.Namespace) -> int:
     """`jaxhoist simulate`: load, validate, compile, solve, save npz+json (+ PNGs), print a summary."""
     _enable_x64()
@@ -110,8 +151,9 @@ def run_simulate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .._errors import ScenarioError, SolveStatus, require_x64
-    from ..io.results import corner_detach_times, liftoff_time, save_trajectory, trajectory_arrays
+    from ..io.results import save_trajectory, trajectory_arrays
     from ..io.scenario import apply_overrides, load_scenario
+    from ..io.validate import check_out_dir, clean_outputs
     from ..numerics.options import SolverOptions
     from ..numerics.solve import check_times
 
@@ -139,6 +181,7 @@ def run_simulate(args: argparse.Namespace) -> int:
             options = SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
         ts = jnp.linspace(0.0, 1.0, args.n_save) * jnp.asarray(t1, dtype=jnp.float64)
     out_dir = Path(args.out) if args.out else Path("out") / scenario.name
+    check_out_dir(out_dir, "--out", refuse_existing=True, overwrite=args.overwrite)
     progress.note(
         f"scenario {scenario.name}: t1 = {t1:g} s, {args.n_save} saved times, "
         f"{type(options.solver).__name__}, rtol = {options.rtol:g}, atol = {options.atol:g}"
@@ -168,6 +211,10 @@ def run_simulate(args: argparse.Namespace) -> int:
         wall_solve = progress.times["solving"]
 
     with progress(f"writing results to {out_dir}"):
+        if args.overwrite:
+            from .plots import PLOTS
+
+            clean_outputs(out_dir, [*SIMULATE_OUTPUTS, *(f"{n}.png" for n in PLOTS)])
         arrays = trajectory_arrays(traj)
         npz, meta = save_trajectory(
             out_dir / "trajectory",
@@ -198,24 +245,15 @@ def run_simulate(args: argparse.Namespace) -> int:
             pngs = plots.save_all(arrays, out_dir, title_prefix=scenario.name)
 
     # ---- summary (stdout)
-    status = SolveStatus(int(arrays["status"]))
+    status = summary_status(arrays)
     ts_np = arrays["ts"]
-    lift = liftoff_time(ts_np, arrays["normal_forces"])
-    detach = corner_detach_times(ts_np, arrays["normal_forces"])
     resid = float(np.max(np.abs(arrays["energy_residual"])))
     lines = [
         f"scenario      {scenario.name} (t = 0 .. {ts_np[-1]:g} s, {len(ts_np)} saved times)",
         f"status        {status.name.lower()}" + ("" if status == SolveStatus.OK else f": {status.message}"),
         f"final C       {_fmt_vec(arrays['position'][-1])} m",
         f"final angles  (φ, ψ, ϑ) = {_fmt_vec(np.degrees(arrays['euler'][-1]))} deg",
-        "lift-off      "
-        + (
-            f"{lift:g} s (first saved time with every N_i = 0)"
-            if lift is not None
-            else "none within the horizon"
-        ),
-        "first N_i = 0 "
-        + ", ".join(f"{c}: {'-' if t is None else f'{t:g} s'}" for c, t in zip("DEFH", detach, strict=True)),
+        *event_lines(status, ts_np, arrays["normal_forces"]),
         f"max S         {arrays['rope_tension'].max() / 1e3:.4g} kN",
         f"energy check  max |residual| = {resid:.3g} J (hoist work {arrays['hoist_work'][-1]:.4g} J)",
         f"steps         {int(arrays['num_accepted_steps'])} accepted, "
@@ -228,6 +266,8 @@ def run_simulate(args: argparse.Namespace) -> int:
 
 
 def configure_simulate(subparsers) -> None:
+    from ..io.validate import count_arg, number_arg
+
     p = subparsers.add_parser(
         "simulate",
         help="simulate one lift and write npz/json results and PNG plots",
@@ -240,22 +280,26 @@ def configure_simulate(subparsers) -> None:
         help="a preset name (paper-2.3, paper-4.1, paper-4.2) or a path to a TOML scenario file",
     )
     p.add_argument(
-        "--t1", type=float, default=None, metavar="T", help="end time [s] (default: the scenario's t1)"
+        "--t1", type=number_arg, default=None, metavar="T", help="end time [s] (default: the scenario's t1)"
     )
     p.add_argument(
         "--n-save",
-        type=int,
+        type=count_arg,
         default=501,
         metavar="N",
         help="number of equally spaced saved times (default 501)",
     )
-    p.add_argument("--rtol", type=float, default=None, metavar="R",
+    p.add_argument("--rtol", type=number_arg, default=None, metavar="R",
                    help="relative tolerance of the step-size control (default 1e-3 with the default "
                         "Rosenbrock-W solver; 1e-6 with --model rigid)")
-    p.add_argument("--atol", type=float, default=None, metavar="A",
+    p.add_argument("--atol", type=number_arg, default=None, metavar="A",
                    help="absolute tolerance (default 1e-5 with the default solver; 1e-8 with --model rigid)")
     p.add_argument(
-        "--max-steps", type=int, default=200_000, metavar="M", help="solver step budget (default 200000)"
+        "--max-steps",
+        type=count_arg,
+        default=200_000,
+        metavar="M",
+        help="solver step budget (default 200000)",
     )
     p.add_argument(
         "--set",
@@ -266,6 +310,12 @@ def configure_simulate(subparsers) -> None:
         "'load.mass_centre=[1, 2.5, 1]' (repeatable); checked before compiling",
     )
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default out/<scenario name>)")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the results of a previous run in --out (its trajectory files and PNGs are removed "
+        "first); without it, an existing non-empty --out is refused",
+    )
     p.add_argument(
         "--model",
         choices=("elastic", "rigid"),
@@ -334,7 +384,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of `jaxhoist` and `python -m jaxhoist`. Returns the exit code: 0 ok, 1 the solve failed
     (status not ok), 2 invalid input (one-line message on stderr, no traceback)."""
     _enable_x64()
-    from .._errors import Float64Error, ScenarioError
+    from .._errors import Float64Error, ScenarioError, one_line
 
     argv = list(sys.argv[1:] if argv is None else argv)
     parser = build_parser()
@@ -346,10 +396,10 @@ def main(argv: Sequence[str] | None = None) -> int:
     try:
         code = args.func(args)
     except (ScenarioError, Float64Error) as e:
-        print(f"{PROG}: error: {e}", file=sys.stderr)
+        print(f"{PROG}: error: {one_line(str(e))}", file=sys.stderr)
         return 2
-    except OSError as e:  # unreadable scenario file, unwritable output folder
-        print(f"{PROG}: error: {e}", file=sys.stderr)
+    except OSError as e:  # a write failing after the checks (disk full, folder removed meanwhile)
+        print(f"{PROG}: error: {one_line(str(e))}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)

@@ -26,6 +26,7 @@ from __future__ import annotations
 import csv
 import dataclasses
 import difflib
+import io
 import json
 import math
 import re
@@ -35,6 +36,7 @@ from pathlib import Path
 import numpy as np
 
 from .._errors import ScenarioError
+from .validate import parse_number, read_text
 
 
 class MeasurementError(ScenarioError):
@@ -277,9 +279,11 @@ def _side_json(path: Path, units_file: str | Path | None) -> tuple[dict, str | N
             raise MeasurementError(f"{side}: side file not found")
         return {}, None
     try:
-        data = json.loads(side.read_text())
+        data = json.loads(_text(side, "units side file"))
     except json.JSONDecodeError as e:
         raise MeasurementError(f"{side}: not valid JSON: {e}") from None
+    except RecursionError:
+        raise MeasurementError(f"{side}: not valid JSON: nested too deeply") from None
     if not isinstance(data, dict):
         raise MeasurementError(f"{side}: expected a JSON object with keys 'units' and/or 'noise'")
     for key in data:
@@ -292,6 +296,16 @@ def _side_json(path: Path, units_file: str | Path | None) -> tuple[dict, str | N
         if key in data and not isinstance(data[key], dict):
             raise MeasurementError(f"{side}: {key!r} must map column names to values")
     return data, str(side)
+
+
+def _text(path: Path, what: str) -> str:
+    """The UTF-8 text of a file (a UTF-8 byte-order mark dropped), or a `MeasurementError` naming it."""
+    try:
+        return read_text(path, what)
+    except MeasurementError:
+        raise
+    except ScenarioError as e:
+        raise MeasurementError(str(e)) from None
 
 
 def _noise_value(raw, name: str, factor: float, values: np.ndarray, where: str) -> float:
@@ -342,9 +356,12 @@ def read_measurement(
     src = str(path)
     if not path.exists():
         raise MeasurementError(f"{src}: measurement file not found")
+    text = _text(path, "measurement file")
     side, side_src = _side_json(path, units_file)
-    with path.open(newline="") as fh:
-        rows = [(i + 1, r) for i, r in enumerate(csv.reader(fh))]
+    try:
+        rows = [(i + 1, r) for i, r in enumerate(csv.reader(io.StringIO(text, newline="")))]
+    except csv.Error as e:
+        raise MeasurementError(f"{src}: not a readable CSV table: {e}") from None
     rows = [
         (n, r)
         for n, r in rows
@@ -409,10 +426,11 @@ def read_measurement(
         for c, cell in enumerate(row):
             s = cell.strip()
             try:
-                data[r, c] = float(s) if s else np.nan
-            except ValueError:
+                data[r, c] = parse_number(s, "cell") if s else np.nan
+            except ScenarioError:
                 raise MeasurementError(
-                    f"{src}: line {line}, column {names[c]!r}: {cell!r} is not a number"
+                    f"{src}: line {line}, column {names[c]!r}: {cell[:40]!r} is not a number"
+                    + (" (underscores are not allowed in numbers)" if "_" in cell else "")
                 ) from None
     cols = {n: data[:, i] * factors[n] for i, n in enumerate(names)}
     for n in names:

@@ -27,6 +27,7 @@ from typing import Any
 
 from .._errors import ScenarioError, require_x64
 from ..physics import params as P
+from .validate import brief, parse_list, parse_number, read_text
 
 # field -> (unit, required, kind) where kind is "float", "vec3", "mat33", "str" or "float|vec3".
 _REQ, _OPT = True, False
@@ -118,7 +119,7 @@ class _Reader:
                 raise self.error(
                     table,
                     f"{_dotted(table, key)} must be a {kind.replace('|', ' or ')} [{unit}], "
-                    f"got a table {value!r}",
+                    f"got a table {brief(value)}",
                 )
             if isinstance(value, dict):
                 allowed = sorted(schema) + list(subtables)
@@ -142,12 +143,17 @@ class _Reader:
 
         def num(v):
             if isinstance(v, bool) or not isinstance(v, int | float):
-                raise self.error(table, f"{name} must be a number [{unit}], got {v!r}")
-            return float(v)
+                raise self.error(table, f"{name} must be a number [{unit}], got {brief(v)}")
+            try:
+                return float(v)
+            except OverflowError:
+                raise self.error(
+                    table, f"{name} = {brief(v)} is an integer too large for a float [{unit}]"
+                ) from None
 
         if kind == "str":
             if not isinstance(value, str):
-                raise self.error(table, f"{name} must be a string, got {value!r}")
+                raise self.error(table, f"{name} must be a string, got {brief(value)}")
             return value
         if kind == "float":
             return num(value)
@@ -155,7 +161,7 @@ class _Reader:
             return num(value)
         if kind in ("vec3", "float|vec3"):
             if not isinstance(value, list) or len(value) != 3:
-                raise self.error(table, f"{name} must be a list of 3 numbers [{unit}], got {value!r}")
+                raise self.error(table, f"{name} must be a list of 3 numbers [{unit}], got {brief(value)}")
             return [num(v) for v in value]
         if kind == "mat33":
             if not (
@@ -163,7 +169,7 @@ class _Reader:
                 and len(value) == 3
                 and all(isinstance(r, list) and len(r) == 3 for r in value)
             ):
-                raise self.error(table, f"{name} must be a 3x3 list of lists [{unit}], got {value!r}")
+                raise self.error(table, f"{name} must be a 3x3 list of lists [{unit}], got {brief(value)}")
             return [[num(v) for v in r] for r in value]
         raise AssertionError(kind)
 
@@ -178,7 +184,9 @@ def _law(reader: _Reader, data: dict, table: str, laws, default: str | None) -> 
         raise reader.error(table, f"missing field {table}.law; one of {list(laws)}")
     if law not in laws:
         raise reader.error(
-            table, f"{table}.law = {law!r} is not a known law{_hint(str(law), laws)}; one of {list(laws)}"
+            table,
+            f"{table}.law = {brief(law)} is not a known law{_hint(str(law)[:100], laws)}; "
+            f"one of {list(laws)}",
         )
     return law
 
@@ -196,7 +204,7 @@ def scenario_from_dict(data: dict, source: str = "<dict>") -> P.Scenario:
         if t not in data:
             raise r.error("", f"missing table [{t}]")
         if not isinstance(data[t], dict):
-            raise r.error("", f"{t} must be a table [{t}], got {data[t]!r}")
+            raise r.error("", f"{t} must be a table [{t}], got {brief(data[t])}")
 
     try:
         ld = r.table(data["load"], "load")
@@ -210,7 +218,8 @@ def scenario_from_dict(data: dict, source: str = "<dict>") -> P.Scenario:
         fr_data = data["foundation"].get("friction", {"law": "regularised-coulomb"})
         if not isinstance(fr_data, dict):
             raise r.error(
-                "foundation", f"foundation.friction must be a table [foundation.friction], got {fr_data!r}"
+                "foundation",
+                f"foundation.friction must be a table [foundation.friction], got {brief(fr_data)}",
             )
         law = _law(r, fr_data, "foundation.friction", FRICTION_LAWS, None)
         fr = r.table(fr_data, "foundation.friction", f"foundation.friction:{law}")
@@ -259,27 +268,24 @@ def scenario_from_dict(data: dict, source: str = "<dict>") -> P.Scenario:
         raise ScenarioError(f"{msg} [{source}]") from None
 
 
-def parse_overrides(items) -> dict[str, float | list[float]]:
-    """Command-line overrides `["rope.stiffness=1e7", "load.mass_centre=[1, 2.5, 1]"]` -> {path: value}."""
-    import json
+def parse_overrides(items) -> dict[str, float | list]:
+    """Command-line overrides `["rope.stiffness=1e7", "load.mass_centre=[1, 2.5, 1]"]` -> {path: value}.
 
+    Numbers are read strictly (`jaxhoist.io.validate.parse_number`: `0_3` is refused, not read as 3);
+    lists in JSON syntax, nested at most 2 deep.
+
+    **Raises** `ScenarioError` naming `--set` and the path.
+    """
     out = {}
     for item in items:
-        path, sep, value = item.partition("=")
+        path, sep, value = str(item).partition("=")
         path = path.strip()
         if not sep or not path:
             raise ScenarioError(
-                f"--set expects PATH=VALUE (e.g. foundation.friction_coefficient=0.3), got {item!r}"
+                f"--set expects PATH=VALUE (e.g. foundation.friction_coefficient=0.3), got {brief(item)}"
             )
-        try:
-            v = json.loads(value) if value.strip().startswith("[") else float(value)
-            if isinstance(v, list) and not all(type(x) in (int, float) for x in v):
-                raise ValueError
-        except ValueError:
-            raise ScenarioError(
-                f"--set {path}: value must be a number or a list of numbers like [1, 2.5, 1], got {value!r}"
-            ) from None
-        out[path] = v
+        where = f"--set {brief(path, 60)}"
+        out[path] = parse_list(value, where) if value.strip().startswith("[") else parse_number(value, where)
     return out
 
 
@@ -301,14 +307,37 @@ def apply_overrides(scenario: P.Scenario, items) -> tuple[P.Scenario, dict]:
 def load_scenario(name_or_path: str | Path) -> P.Scenario:
     """A `Scenario` from a bundled preset name (`paper-2.3`, `paper-4.1`, `paper-4.2`) or a TOML path.
 
-    **Raises** `ScenarioError` naming the file and field for any invalid content, before compiling.
+    **Raises** `ScenarioError` naming the file and field for any invalid content (a folder, non-UTF-8
+    bytes, invalid TOML, nesting too deep, integers too large for a float, unknown or missing fields, bad
+    values), before compiling.
     """
     text, source = _read(name_or_path)
     try:
         data = tomllib.loads(text)
+    except RecursionError:
+        raise ScenarioError(f"{source}: not valid TOML: arrays or tables nested too deeply") from None
     except tomllib.TOMLDecodeError as e:
         raise ScenarioError(f"{source}: not valid TOML: {e}") from None
+    except ValueError as e:  # an integer of more than 4300 digits (Python's int-from-text limit)
+        raise ScenarioError(f"{source}: {_huge_integer(text) or e}") from None
     return scenario_from_dict(data, source)
+
+
+def _huge_integer(text: str) -> str | None:
+    """Where a scenario text holds an integer too long to read: "line N: key = <integer of D digits> ..."."""
+    import re
+
+    m = re.search(r"[0-9_]{4000,}", text)
+    if m is None:
+        return None
+    line_no = text.count("\n", 0, m.start()) + 1
+    line = text[text.rfind("\n", 0, m.start()) + 1 : m.start()]
+    key = re.match(r"\s*([\w.\"'-]+)\s*=", line)
+    name = f"{key.group(1)} = " if key else ""
+    return (
+        f"line {line_no}: {name}an integer of {m.end() - m.start()} digits, too large for a float "
+        f"(write numbers like 1.5e7)"
+    )
 
 
 def _read(name_or_path) -> tuple[str, str]:
@@ -316,9 +345,9 @@ def _read(name_or_path) -> tuple[str, str]:
     if s in PRESETS:
         return resources.files("jaxhoist.io.presets").joinpath(f"{s}.toml").read_text(), f"{s}.toml"
     path = Path(s)
-    if not path.exists():
+    if not path.exists() and not path.is_symlink():
         raise ScenarioError(
-            f"no scenario file {s!r} and no preset of that name{_hint(s, PRESETS)}; "
+            f"no scenario file {brief(s)} and no preset of that name{_hint(s[:100], PRESETS)}; "
             f"presets are {list(PRESETS)}"
         )
-    return path.read_text(), str(path)
+    return read_text(path, "scenario file"), str(path)

@@ -12,6 +12,7 @@ Host-side checks (`check()`) run on concrete values only, so the modules stay tr
 from __future__ import annotations
 
 import abc
+import dataclasses
 from collections.abc import Callable
 from typing import ClassVar
 
@@ -36,6 +37,32 @@ def _concrete(x) -> np.ndarray | None:
     return np.asarray(x)
 
 
+PLAUSIBLE_MAGNITUDE = (1e-100, 1e100)
+"""Plausibility check: every nonzero finite parameter (and the derived mass) must have a magnitude in this
+range, in SI units. Outside it, float64 products in the forces and energies (m g z, k p², ρabc) overflow or
+lose the value entirely, and a solve "succeeds" with absurd states (C_z ≈ -1e295 m)."""
+
+
+def _show(v):
+    """A value for an error message: the list itself if short, else a summary (messages stay short)."""
+    v = np.asarray(v)
+    if v.size <= 6:
+        return v.tolist()
+    return f"<array of shape {v.shape}, from {np.nanmin(v):g} to {np.nanmax(v):g}>"
+
+
+def _check_plausible(label: str, v: np.ndarray, unit_s: str) -> None:
+    lo, hi = PLAUSIBLE_MAGNITUDE
+    with np.errstate(invalid="ignore"):
+        a = np.abs(np.where(np.isfinite(v), v, 0.0))
+    bad = (a > hi) | ((a > 0) & (a < lo))
+    if np.any(bad):
+        raise ScenarioError(
+            f"{label} = {_show(v)}{unit_s} is not plausible: nonzero values must have a magnitude between "
+            f"{lo:g} and {hi:g} in SI units (beyond that, forces and energies overflow float64)"
+        )
+
+
 def _check(
     name: str,
     value,
@@ -48,8 +75,10 @@ def _check(
     high_open=False,
     symbol: str = "",
     allow_posinf=False,
+    plausible=True,
 ) -> None:
-    """Raise `ScenarioError` naming `name` unless every element of `value` is finite and in range."""
+    """Raise `ScenarioError` naming `name` unless every element of `value` is finite and in range (and,
+    with `plausible`, of a magnitude within `PLAUSIBLE_MAGNITUDE` unless zero)."""
     v = _concrete(value)
     if v is None:
         return
@@ -59,22 +88,26 @@ def _check(
             f"{label} is float32. " + "jaxhoist needs float64: call "
             "`jax.config.update('jax_enable_x64', True)` before building a scenario."
         )
+    if v.dtype.kind not in "fiu":
+        raise ScenarioError(f"{label} must be a number or an array of numbers, got dtype {v.dtype}")
     if shape is not None and v.shape[v.ndim - len(shape) :] != shape:
         raise ScenarioError(f"{label} must have shape {shape}, got {v.shape}")
     if not np.all(np.isfinite(v)):
         if not allow_posinf or np.any(np.isnan(v) | np.isneginf(v)):
-            raise ScenarioError(f"{label} must be finite, got {v.tolist()}")
+            raise ScenarioError(f"{label} must be finite, got {_show(v)}")
     unit_s = f" {unit}" if unit and unit != "-" else ""
     if low is not None:
         bad = v <= low if low_open else v < low
         if np.any(bad):
             rel = ">" if low_open else ">="
-            raise ScenarioError(f"{label} must be {rel} {low}{unit_s}, got {v.tolist()}")
+            raise ScenarioError(f"{label} must be {rel} {low}{unit_s}, got {_show(v)}")
     if high is not None:
         bad = v >= high if high_open else v > high
         if np.any(bad):
             rel = "<" if high_open else "<="
-            raise ScenarioError(f"{label} must be {rel} {high}{unit_s}, got {v.tolist()}")
+            raise ScenarioError(f"{label} must be {rel} {high}{unit_s}, got {_show(v)}")
+    if plausible:
+        _check_plausible(label, v, unit_s)
 
 
 # --------------------------------------------------------------------------------------------- load
@@ -105,6 +138,12 @@ class Load(eqx.Module):
         if density is not None:
             _check("load.density", _f64(density), unit="kg/m^3", low=0.0, low_open=True, symbol="ρ")
             mass = _f64(density) * size[0] * size[1] * size[2]
+            m = _concrete(mass)
+            if m is not None and (not np.all(np.isfinite(m)) or np.any(m > PLAUSIBLE_MAGNITUDE[1])):
+                raise ScenarioError(
+                    f"load.density (ρ) = {_show(np.asarray(density))} kg/m^3 is not plausible: the mass "
+                    f"ρabc = {_show(m)} kg is beyond {PLAUSIBLE_MAGNITUDE[1]:g} kg"
+                )
         self.size = size
         self.mass = _f64(mass)
         self.mass_centre = 0.5 * size if mass_centre is None else _f64(mass_centre)
@@ -127,8 +166,8 @@ class Load(eqx.Module):
         s, c = _concrete(self.size), _concrete(self.mass_centre)
         if s is not None and c is not None and np.any((c <= 0) | (c >= s)):
             raise ScenarioError(
-                f"load.mass_centre must lie strictly inside the box 0 < C < size = {s.tolist()} m, "
-                f"got {c.tolist()} m"
+                f"load.mass_centre must lie strictly inside the box 0 < C < size = {_show(s)} m, "
+                f"got {_show(c)} m"
             )
         if self.inertia is not None:
             _check("load.inertia", self.inertia, unit="kg m^2", shape=(3, 3), symbol="J")
@@ -421,7 +460,7 @@ class RampedHoist(AbstractHoistLaw):
         v, T, L = (_concrete(x) for x in (self.speed, self.ramp_time, self.travel))
         if v is not None and T is not None and L is not None and np.any(L < v * T):
             raise ScenarioError(
-                f"hoist.travel must be >= speed * ramp_time = {(v * T).tolist()} m, got {L.tolist()} m"
+                f"hoist.travel must be >= speed * ramp_time = {_show(v * T)} m, got {_show(L)} m"
             )
 
 
@@ -513,7 +552,14 @@ class Scenario(eqx.Module):
         self.check()
 
     def check(self) -> None:
-        """Raise `ScenarioError` naming the first invalid field (concrete leaves only)."""
+        """Raise `ScenarioError` naming the first invalid field (concrete leaves only).
+
+        Besides each field's range, shape and dtype, the box geometry (C inside the box, B on or in it) and a
+        plausibility check of physically absurd but finite values: every nonzero parameter within
+        `PLAUSIBLE_MAGNITUDE` (1e-100 to 1e100 in SI units), and the static sinking of the ground under the
+        load's weight, m g / (4 k), less than the box height c (else the initial static state is absurd:
+        the box would rest below the ground).
+        """
         self.load.check()
         self.foundation.check()
         self.rope.check()
@@ -525,17 +571,64 @@ class Scenario(eqx.Module):
         s, b = _concrete(self.load.size), _concrete(self.rope.attachment)
         if s is not None and b is not None and np.any((b < -1e-12) | (b > s + 1e-12)):
             raise ScenarioError(
-                f"rope.attachment (B) must lie on or inside the box 0 <= B <= size = {s.tolist()} m, "
-                f"got {b.tolist()} m"
+                f"rope.attachment (B) must lie on or inside the box 0 <= B <= size = {_show(s)} m, "
+                f"got {_show(b)} m"
             )
+        m, g, k = (_concrete(x) for x in (self.load.mass, self.gravity, self.foundation.stiffness))
+        if s is not None and m is not None and g is not None and k is not None:
+            with np.errstate(all="ignore"):
+                sink = m * g / (4.0 * k)
+            c = s[..., 2]
+            if np.any(~np.isfinite(sink) | (sink >= c)):
+                raise ScenarioError(
+                    f"foundation.stiffness (k) = {_show(k)} N/m is not plausible for load.mass m = "
+                    f"{_show(m)} kg: the load's weight would press the ground in by m g / (4 k) = "
+                    f"{_show(sink)} m, at least the box height c = {_show(c)} m (stiffen the ground or "
+                    f"lighten the load)"
+                )
 
     def replace(self, **leaves) -> Scenario:
-        """A copy with leaves replaced by dotted path, e.g.
-        `replace(**{"foundation.friction_coefficient": 0.3})`."""
+        """A copy with leaves replaced by dotted path.
+
+        **Arguments**
+        - `leaves`: `{dotted path: value}`, e.g. `replace(**{"foundation.friction_coefficient": 0.3})`;
+          a value has the leaf's shape or broadcasts to it (a number for a 3-vector), in the leaf's unit.
+
+        **Returns** the new `Scenario` (not checked: `simulate` and `check()` do that).
+
+        **Raises** `ScenarioError` naming the path for a field that does not exist (with the closest
+        field's name), a static setting (`t1`, `name`), a value that is not numeric or whose shape does
+        not fit the leaf.
+        """
         out = self
         for path, value in leaves.items():
-            out = eqx.tree_at(leaf_getter(path), out, _f64(value))
+            old = get_leaf(out, path)
+            out = eqx.tree_at(leaf_getter(path), out, _leaf_value(path, value, np.shape(old)))
         return out
+
+
+def _leaf_value(path: str, value, shape: tuple) -> Array:
+    """`value` as a float64 array of `shape` (broadcast), or a `ScenarioError` naming `path`."""
+    if not isinstance(value, jax.core.Tracer):
+        try:
+            a = np.asarray(value)
+        except (ValueError, TypeError, OverflowError):
+            a = np.asarray(None)
+        if a.dtype.kind not in "fiu":
+            raise ScenarioError(f"{path} must be a number or an array of numbers, got {value!r:.60}")
+        try:
+            a = a.astype(np.float64)
+        except OverflowError:
+            raise ScenarioError(f"{path}: the integer {value!r:.40} is too large for a float") from None
+    vshape = np.shape(value)
+    try:
+        ok = np.broadcast_shapes(vshape, shape) == tuple(shape)
+    except ValueError:
+        ok = False
+    if not ok:
+        want = "a number" if shape == () else f"shape {tuple(shape)}"
+        raise ScenarioError(f"{path} must be {want}, got a value of shape {vshape}")
+    return jnp.broadcast_to(_f64(value), shape)
 
 
 def leaf_getter(path: str) -> Callable[[Scenario], Array]:
@@ -550,15 +643,44 @@ def leaf_getter(path: str) -> Callable[[Scenario], Array]:
     return get
 
 
+_STATIC_HINTS = {
+    "t1": "the scenario's end time, a static setting: give it with --t1 T on the command line or "
+    "simulate(scenario, t1=T), or as t1 in the scenario file",
+    "name": "a static label (the scenario file's name)",
+    "description": "static free text (the scenario file's description)",
+}
+
+
 def get_leaf(scenario: Scenario, path: str) -> Array:
-    """The leaf at a dotted path, with an error naming the path if there is none."""
+    """The float leaf at a dotted path such as `"rope.stiffness"`.
+
+    **Arguments**
+    - `scenario`: the scenario (or any of its parts).
+    - `path`: dotted field names, e.g. `foundation.friction.regularisation_velocity`.
+
+    **Returns** the leaf (an array).
+
+    **Raises** `ScenarioError` naming the path if a part is no field of its parent (with the closest
+    field's name), is a static setting (`t1`, `name`, `description`) or reaches past a leaf
+    (`load.mass.real`), or if the path ends at a table rather than a float leaf.
+    """
+    import difflib
+
     obj = scenario
-    for i, p in enumerate(path.split(".")):
-        if not hasattr(obj, p) or p.startswith("_"):
-            where = ".".join(path.split(".")[:i]) or "scenario"
-            fields = [f for f in getattr(type(obj), "__dataclass_fields__", {})]
-            raise ScenarioError(f"{path!r}: {where} has no field {p!r}; fields are {fields}")
+    parts = str(path).split(".")
+    for i, p in enumerate(parts):
+        where = ".".join(parts[:i]) or "scenario"
+        if not isinstance(obj, eqx.Module):
+            raise ScenarioError(f"{path!r}: {where} is a value, not a table; it has no field {p!r}")
+        fields = {f.name: f for f in dataclasses.fields(obj)}
+        if p not in fields:
+            close = difflib.get_close_matches(p, list(fields), n=1, cutoff=0.6)
+            hint = f" (did you mean {close[0]!r}?)" if close else ""
+            raise ScenarioError(f"{path!r}: {where} has no field {p!r}{hint}; fields are {list(fields)}")
+        if fields[p].metadata.get("static", False):
+            what = _STATIC_HINTS.get(p, "a static setting")
+            raise ScenarioError(f"{path!r} is not a float leaf: it is {what}")
         obj = getattr(obj, p)
-    if not isinstance(obj, jax.Array | np.ndarray | float):
+    if not isinstance(obj, jax.Array | np.ndarray):
         raise ScenarioError(f"{path!r} is not a float leaf (got {type(obj).__name__})")
     return obj
