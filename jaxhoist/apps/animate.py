@@ -350,7 +350,7 @@ def ffmpeg_available() -> bool:
     return shutil.which("ffmpeg") is not None
 
 
-def save_animation(scene: Scene, path: str | Path, indices: Sequence[int], *, fps: float = 20.0,
+def save_animation(scene: Scene, path: str | Path, indices: Sequence[int] | np.ndarray, *, fps: float = 20.0,
                    fmt: str | None = None, dpi: int = 90,
                    progress: Callable[[int, int], None] | None = None) -> Path:
     """Render the frames `indices` of `scene` and write them as an animated GIF (Pillow) or MP4 (ffmpeg).

@@ -79,7 +79,7 @@ class _Step:
 # ------------------------------------------------------------------------------------- progress bars
 
 
-def _bar(total: float, desc: str, unit: str, *, quiet: bool = False, bar_format: str | None = None):
+def _bar(total: float | int, desc: str, unit: str, *, quiet: bool = False, bar_format: str | None = None):
     """A tqdm progress bar on stderr (a disabled one with `quiet`)."""
     from tqdm import tqdm
 
@@ -446,13 +446,18 @@ def configure_simulate(subparsers) -> None:
 def _animate(result_dir, *, quiet: bool = False, **kw) -> list[Path]:
     from .animate import animate
 
-    with _bar(0, "animating", "frame", quiet=quiet) as bar:
+    bars = []  # the bar opens with the first frame, after every check has passed
 
-        def step(done, total):
-            bar.total = total
-            bar.update(done - bar.n)
+    def step(done, total):
+        if not bars:
+            bars.append(_bar(total, "animating", "frame", quiet=quiet))
+        bars[0].update(done - bars[0].n)
 
+    try:
         return animate(result_dir, progress=step, **kw)
+    finally:
+        for bar in bars:
+            bar.close()
 
 
 def run_animate(args: argparse.Namespace) -> int:
