@@ -138,14 +138,16 @@ def test_rigid_phase_log_names_the_state(result_dir, tmp_path):
         {"t_start": 0.0, "t_end": 0.5, "contact": ["stick"] * 4, "rest": True, "end": "rest:slip",
          "rope": "elastic", "name": results.phase_name(["stick"] * 4, True)},
         {"t_start": 0.5, "t_end": 1.0, "contact": ["free", "slide", "stick", "free"], "rest": False,
-         "end": "t1", "rope": "elastic", "name": results.phase_name(["free", "slide", "stick", "free"], False)},
+         "end": "t1", "rope": "elastic",
+         "name": results.phase_name(["free", "slide", "stick", "free"], False)},
     ]
     meta["solver"] = {"model": "rigid"}
     sc = an.scene_from_result(arrays, meta)
     assert sc.model == "rigid"
     assert sc.state[0] == "phase 1/2: rest" and sc.state[-1] == "phase 2/2: E slide, F stick"
     assert results.phase_name(["free"] * 4, False) == "flight"
-    assert results.phase_name(["slide"] * 4, False, "slack") == "D slide, E slide, F slide, H slide (rope slack)"
+    slack = results.phase_name(["slide"] * 4, False, "slack")
+    assert slack == "D slide, E slide, F slide, H slide (rope slack)"
 
 
 def test_bad_input_refused_before_rendering(result_dir, tmp_path, capsys):

@@ -53,7 +53,7 @@ from ..io.measurement import (
     read_measurement,
     signal_groups,
 )
-from ..io.scenario import load_scenario
+from ..io.scenario import apply_overrides, load_scenario
 from ..numerics.solve import SolverOptions, outputs, simulate, solve
 from ..physics.elastic import vector_field
 from ..physics.equilibrium import initial_state
@@ -1351,6 +1351,14 @@ def configure_parser(subparsers) -> None:
     p.add_argument("--rtol", type=float, default=1e-6, help="ODE relative tolerance (default 1e-6)")
     p.add_argument("--atol", type=float, default=1e-8, help="ODE absolute tolerance (default 1e-8)")
     p.add_argument("--max-iterations", type=int, default=100, help="LM step budget (default 100)")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="PATH=VALUE",
+        help="replace a scenario value by dotted path before fitting, e.g. hoist.speed=0.25 (repeatable; "
+        "as in `jaxhoist simulate --set`); checked before compiling",
+    )
     p.add_argument("--out", default=None, help="output folder (default out/identify-<scenario name>)")
     p.add_argument("--no-plots", action="store_true", help="write only the JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -1367,7 +1375,7 @@ def run(args: argparse.Namespace) -> int:
         if not quiet:
             print(msg, file=sys.stderr, flush=True)
 
-    scenario = load_scenario(args.scenario)
+    scenario, overrides = apply_overrides(load_scenario(args.scenario), getattr(args, "set", None) or [])
     measurement = read_measurement(args.measurement)
     params = [s.strip() for s in args.fit.split(",") if s.strip()]
     noise = _parse_kv(args.noise, "--noise")
@@ -1400,6 +1408,7 @@ def run(args: argparse.Namespace) -> int:
     doc = res.to_dict() | {
         "command": ["jaxhoist", *args.argv] if getattr(args, "argv", None) is not None else sys.argv,
         "scenario": scenario.name,
+        "overrides": overrides,
         "measurement": str(args.measurement),
         "fitted_signals": list(res.measured),
     }
