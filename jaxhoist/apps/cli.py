@@ -157,12 +157,16 @@ class ScanProgressBar:
             self.bar = tqdm(total=p.total, desc="scan", unit="member", file=self.stream or sys.stderr,
                             disable=self.quiet, dynamic_ncols=True,
                             bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} members "
-                            "[{elapsed}{postfix}]")
+                            "[{postfix}]")
         rate = f"{p.rate:.3g} members/s" if p.rate else "compiling"
         eta = "?" if p.eta is None else _fmt_seconds(p.eta)
         loaded = ", resumed from disk" if p.loaded else ""
         self.bar.n = p.done
-        self.bar.set_postfix_str(f"{rate}, ETA {eta}, failed {p.failed}{loaded}", refresh=False)
+        self.bar.set_postfix_str(
+            f"{_fmt_seconds(p.elapsed)} elapsed (compile {p.compile_time:.3g} s), {rate}, ETA {eta}, "
+            f"failed {p.failed}{loaded}",
+            refresh=False,
+        )
         self.bar.refresh()
         if p.done >= p.total:
             self.close()
