@@ -1,6 +1,8 @@
 """The `jaxhoist` command line, called in-process through `main([...])` so that compiled code is shared:
-a short simulate writes npz/json/PNGs and a summary; invalid input exits 2 with a one-line message naming
-the field, before anything is compiled; subcommand modules plug in through `configure_parser`."""
+a short simulate writes npz/json/csv/nc/PNGs and a summary (with progress bars on stderr); its CSV goes into
+`identify` unchanged; invalid input exits 2 with a one-line message naming the field (in the CLI's flag
+names), before anything is compiled; every --help shows the defaults; subcommand modules plug in through
+`configure_parser`."""
 
 import jax
 
@@ -32,8 +34,9 @@ def _no_compile(monkeypatch):
 
 @pytest.fixture(scope="module")
 def short_run(tmp_path_factory):
+    # not --quiet: the progress meter is compiled into the solve; test_summary_and_progress_lines reuses it
     out = tmp_path_factory.mktemp("cli") / "paper-4.2"
-    code = cli.main(["simulate", "paper-4.2", *SHORT, "--out", str(out), "--quiet"])
+    code = cli.main(["simulate", "paper-4.2", *SHORT, "--out", str(out)])
     return code, out
 
 
@@ -57,6 +60,53 @@ def test_simulate_writes_results_and_plots(short_run, capsys):
     pngs = sorted(p.name for p in out.glob("*.png"))
     assert pngs == sorted(f"{n}.png" for n in cli_plots())
     assert all((out / p).stat().st_size > 5_000 for p in pngs)
+    assert (out / "trajectory.csv").is_file() and (out / "trajectory.nc").is_file()
+    assert not (out / "animation.gif").exists()  # only with --animate
+
+
+def test_trajectory_csv_and_netcdf_hold_the_npz_values(short_run):
+    import scipy.io
+
+    from jaxhoist.io.measurement import SIGNALS, read_measurement
+
+    _, out = short_run
+    d = results.load_trajectory(out / "trajectory.npz")
+    # the CSV reads as a measurement (trajectory.json next to it is the npz's sidecar, not a side file)
+    m = read_measurement(out / "trajectory.csv")
+    assert set(m.signals) == set(SIGNALS)
+    np.testing.assert_allclose(m.t, d["ts"], rtol=1e-11)
+    np.testing.assert_allclose(m.signals["position_z"], d["position"][:, 2], rtol=1e-11)
+    np.testing.assert_allclose(m.signals["euler_psi"], d["euler"][:, 1], rtol=1e-11, atol=1e-15)
+    np.testing.assert_allclose(m.signals["corners_F_y"], d["corners"][:, 2, 1], rtol=1e-11)
+    np.testing.assert_allclose(m.signals["normal_forces_E"], d["normal_forces"][:, 1], rtol=1e-11)
+    header = (out / "trajectory.csv").read_text().splitlines()[0].split(",")
+    assert header[0] == "t [s]" and "rope_tension [N]" in header and "euler_phi [rad]" in header
+    # netCDF: every npz array under its name, with the units table's unit
+    with scipy.io.netcdf_file(str(out / "trajectory.nc"), "r", mmap=False) as f:
+        v = f.variables
+        np.testing.assert_array_equal(v["corners"][:], d["corners"])
+        np.testing.assert_array_equal(v["ts"][:], d["ts"])
+        assert v["normal_forces"].dimensions == ("time", "corner")
+        assert v["normal_forces"].units == b"N" and v["euler"].units == b"rad" and v["ts"].units == b"s"
+        assert b"".join(v["corner_name"][:].ravel()) == b"DEFH"
+        assert int(v["status"].getValue()) == 0
+        assert json.loads(f.metadata_json)["scenario"]["name"] == "paper-4.2"
+
+
+def test_simulate_csv_goes_into_identify_unchanged(tmp_path):
+    """simulate (μ = 0.3) -> trajectory.csv -> identify recovers μ from the mass-centre path (0.4 s: before a
+    corner touches down again, see docs/identification.md); `identify --set` applies overrides first."""
+    sim = tmp_path / "sim"
+    assert cli.main(["simulate", "paper-4.2", "--t1", "0.4", "--n-save", "21", "--out", str(sim), "--quiet",
+                     "--no-plots", "--set", "foundation.friction_coefficient=0.3"]) == 0
+    fit = tmp_path / "fit"
+    code = cli.main(["identify", "paper-4.2", str(sim / "trajectory.csv"), "--fit", "mu", "--signals",
+                     "position", "--start", "mu=0.25", "--t1", "0.4", "--out", str(fit), "--no-plots",
+                     "--quiet", "--set", "hoist.speed=0.3"])
+    doc = json.loads((fit / "estimates.json").read_text())
+    assert code == 0, doc
+    assert doc["estimates"]["foundation.friction_coefficient"]["value"] == pytest.approx(0.3, rel=1e-4)
+    assert doc["overrides"] == {"hoist.speed": 0.3}
 
 
 def cli_plots():
@@ -72,6 +122,8 @@ def test_summary_and_progress_lines(short_run, tmp_path, capsys):
     assert code == 0
     cap = capsys.readouterr()
     assert "compiling (cached in this process)" in cap.err and "solving ..." in cap.err
+    # diffrax's progress meter, drawn as a bar on stderr; stdout holds only the summary
+    assert "solving: 100%" in cap.err and "%" not in cap.out
     assert "loading scenario paper-4.2 ..." in cap.err
     for key in ("status        ok", "final C", "lift-off      none within the horizon", "steps", "wall time"):
         assert key in cap.out, key
@@ -172,3 +224,96 @@ def test_numpy_only_reader(short_run):
     _, out = short_run
     with np.load(out / "trajectory.npz") as f:
         assert "position" in f.files and f["position"].shape == (11, 3)
+
+
+def test_every_help_shows_the_defaults():
+    import argparse
+
+    parser = cli.build_parser()
+    subs = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction)).choices
+    assert {"simulate", "animate"} <= set(subs)
+    for name, sub in subs.items():
+        text = " ".join(sub.format_help().split())
+        for action in sub._actions:
+            d = action.default
+            if not action.option_strings or d in (None, False, [], argparse.SUPPRESS):
+                continue
+            helptext = sub._get_formatter()._get_help_string(action)
+            assert "default" in helptext, f"{name} {action.option_strings[0]}: {helptext!r}"
+        assert text.count("default") >= 2
+    sim = " ".join(subs["simulate"].format_help().split())
+    assert "out/<scenario name>" in sim and "(default 501)" in sim and "atol + rtol |y|" in sim
+    if "scan" in subs:
+        scan = " ".join(subs["scan"].format_help().split())
+        assert "out/scan-<scenario name>" in scan and "atol + rtol |y|" in scan and "(default: 201)" in scan
+
+
+def test_library_hints_use_the_flag_names(monkeypatch, capsys):
+    import inspect
+
+    from jaxhoist._errors import ScenarioError
+    from jaxhoist.numerics import scan as scan_mod
+
+    src = inspect.getsource(scan_mod)
+    assert "use another out_dir, or resume=False to " in src and '"overwrite it"' in src  # the text reworded
+
+    def configure_parser(subparsers):
+        p = subparsers.add_parser("scan")
+
+        def run(args):
+            raise ScenarioError("out/x holds chunks of a different scan (other scenario, values, times, "
+                                "observables or solver options): use another out_dir, or resume=False to "
+                                "overwrite it")
+
+        p.set_defaults(func=run)
+
+    fake = types.ModuleType("fake_scan_module")
+    fake.configure_parser = configure_parser
+    monkeypatch.setitem(sys.modules, "fake_scan_module", fake)
+    monkeypatch.setattr(cli, "EXTENSIONS", {"scan": "fake_scan_module"})
+    assert cli.main(["scan"]) == 2
+    err = capsys.readouterr().err
+    assert "use another --out, or --no-resume" in err and "resume=False" not in err and "out_dir" not in err
+
+
+def test_scan_progress_bar_shows_members_rate_eta_failures(monkeypatch):
+    import io
+
+    from jaxhoist.numerics import scan as scan_mod
+
+    stream = io.StringIO()
+    bar = cli.ScanProgressBar(stream=stream)
+    kw = dict(n_chunks=4, total=64, compile_time=3.0, loaded=False)
+    bar(scan_mod.Progress(chunk=0, done=16, elapsed=5.0, eta=None, rate=None, failed=0, **kw))
+    bar(scan_mod.Progress(chunk=1, done=32, elapsed=6.0, eta=2.0, rate=16.0, failed=1, **kw))
+    text = stream.getvalue().replace("\r", "\n")
+    last = [ln for ln in text.splitlines() if ln.strip()][-1]
+    assert "32/64 members" in last and "16 members/s" in last and "ETA 0:02" in last and "failed 1" in last
+    assert " 50%" in last
+    bar(scan_mod.Progress(chunk=3, done=64, elapsed=8.0, eta=0.0, rate=16.0, failed=1, **kw))
+    assert bar.bar is None  # closed when every member is done
+
+    # while a subcommand runs, the scan's default per-chunk line is this bar; afterwards it is restored
+    saved = scan_mod.print_progress
+    with cli._scan_bars():
+        assert isinstance(scan_mod.print_progress, cli.ScanProgressBar)
+    assert scan_mod.print_progress is saved
+
+
+def test_printed_progress_lines_drive_the_bars():
+    import io
+
+    from tqdm import tqdm
+
+    stream = io.StringIO()
+    bar = tqdm(total=100.0, file=stream)
+    sink = cli._LineSink(cli._percent_to_bar(bar))
+    sink.write("0.00%\n12.")  # diffrax's TextProgressMeter lines, possibly split
+    sink.write("50%\n")
+    assert bar.n == 12.5
+    sink.write("100.00%\n")
+    assert bar.n == 100.0
+    bar = tqdm(total=4.0, file=stream)
+    sink = cli._LineSink(cli._phase_to_bar(bar))
+    sink.write("  0.000000 -   0.300000 s  rest                     -> rest:slip [12 steps so far]\n")
+    assert bar.n == pytest.approx(0.3)

@@ -127,3 +127,73 @@ def test_plots_from_loaded_file_and_save_all(traj42, tmp_path):
     for p in paths:
         assert p.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert 5_000 < p.stat().st_size < 300_000
+
+
+def _fake_sweep(mu, data, units, components):
+    from jaxhoist.numerics.scan import ScanResult
+
+    n = mu.size
+    return ScanResult(params=["foundation.friction_coefficient"], mode="sweep",
+                      coords={"foundation.friction_coefficient": mu}, shape=(n,), data=data,
+                      components=components, status=np.zeros(n, dtype=np.int32), reasons={},
+                      num_accepted_steps=np.full(n, 100), num_rejected_steps=np.zeros(n, dtype=int), ts=None,
+                      histories={}, units={"foundation.friction_coefficient": "-", **units}, descriptions={},
+                      attrs={})
+
+
+def test_scan_plots_use_degrees_and_draw_no_empty_panels(tmp_path):
+    from jaxhoist.apps import scan_plots
+
+    mu = np.linspace(0.2, 0.4, 5)
+    psi = np.stack([np.zeros(5), 0.1 * mu, np.zeros(5)], axis=1)  # final (φ, ψ, ϑ) [rad]
+    detach = np.stack([mu, np.full(5, np.inf), 2 * mu, np.full(5, np.inf)], axis=1)  # E and H never leave
+    data = {"final_euler": psi, "liftoff_time": np.full(5, np.inf), "detachment_times": detach}
+    res = _fake_sweep(mu, data, {"final_euler": "rad", "liftoff_time": "s", "detachment_times": "s"},
+                      {"final_euler": ("phi", "psi", "theta"), "detachment_times": ("D", "E", "F", "H")})
+    fig = scan_plots.plot_sweep(res, "final_euler")
+    assert "[deg]" in fig.get_suptitle() and "rad" not in fig.get_suptitle()
+    np.testing.assert_allclose(fig.axes[1].lines[0].get_ydata(), np.degrees(0.1 * mu))
+    assert fig.axes[1].get_ylabel() == "final_euler[psi]"
+    # corners that never leave the ground get no panel; the title says which were left out
+    fig = scan_plots.plot_sweep(res, "detachment_times")
+    assert [ax.get_ylabel() for ax in fig.axes] == ["detachment_times[D]", "detachment_times[F]"]
+    assert "detachment_times[E], detachment_times[H]" in fig.get_suptitle()
+    assert all(ax.has_data() for ax in fig.axes)
+    # nothing lifts off: no scan_liftoff_time.png at all
+    paths = scan_plots.save_scan_plots(res, tmp_path)
+    assert sorted(p.name for p in paths) == ["scan_detachment_times.png", "scan_final_euler.png"]
+    assert scan_plots.display_unit("rad/s") == (pytest.approx(180 / np.pi), "deg/s")
+    assert scan_plots.display_unit("m") == (1.0, "m")
+
+
+def test_component_observables_keep_the_name_as_written():
+    from jaxhoist.numerics import observables
+
+    assert observables.get("contact_margin[E]").name == "contact_margin[E]"  # not contact_margin[1]
+    assert observables.get("final_euler[1]").name == "final_euler[1]"
+
+
+def test_rigid_results_keep_the_phase_log(traj42, tmp_path):
+    """A rigid-model trajectory saves `impact_loss`, `phase_index` and the phase log (names per phase)."""
+    import types
+
+    from jaxhoist.numerics.rigid_solve import PhaseRecord
+
+    scenario, traj = traj42
+    n = N_SAVE
+    names = ("ts", "position", "velocity", "euler", "angular_velocity", "corners", "normal_forces",
+             "friction_forces", "ground_reaction", "rope_tension", "tip_position", "energy", "hoist_work",
+             "damping_loss", "friction_work", "states", "status", "num_accepted_steps", "num_rejected_steps")
+    fields = {k: getattr(traj, k) for k in names}
+    phases = (PhaseRecord(0.0, 0.4, ("stick",) * 4, True, "rest:slip"),
+              PhaseRecord(0.4, T1, ("free", "slide", "slide", "free"), False, "t1"))
+    index = jnp.asarray(np.arange(n) > n // 2, dtype=int)
+    rigid_like = types.SimpleNamespace(**fields, impact_loss=jnp.zeros(n), phase_index=index, phases=phases)
+    npz, meta = results.save_trajectory(tmp_path / "r", rigid_like, scenario)
+    loaded = results.load_trajectory(npz)
+    assert set(loaded) == set(results.TRAJECTORY_ARRAYS) | {"impact_loss", "phase_index"}
+    md = json.loads(meta.read_text())
+    assert [p["name"] for p in md["phases"]] == ["rest", "E slide, F slide"]
+    assert md["arrays"]["phase_index"]["unit"] == "-" and md["arrays"]["impact_loss"]["unit"] == "J"
+    nc = results.save_trajectory_netcdf(tmp_path / "r.nc", loaded)
+    assert nc.read_bytes()[:4] == b"CDF\x02"

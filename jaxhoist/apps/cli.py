@@ -2,6 +2,7 @@
 
     jaxhoist simulate paper-4.2 --out out/paper-4.2
     jaxhoist simulate my-lift.toml --t1 5 --n-save 201 --set foundation.friction_coefficient=0.3
+    jaxhoist animate out/paper-4.2
 
 Subcommands live in their own modules: each exposes `configure_parser(subparsers)`, which adds its
 subcommand with `subparsers.add_parser(...)` and `set_defaults(func=run)`; `run(args)` returns an exit code
@@ -12,6 +13,7 @@ Invalid input (`ScenarioError`) prints one line naming the field and exits with 
 from __future__ import annotations
 
 import argparse
+import contextlib
 import importlib
 import sys
 import time
@@ -46,8 +48,9 @@ class Progress:
     def _out(self):
         return self.stream if self.stream is not None else sys.stderr
 
-    def __call__(self, label: str):
-        return _Step(self, label)
+    def __call__(self, label: str, *, bar: bool = False):
+        """A timed step; with `bar` (a progress bar draws meanwhile) the line is printed whole at the end."""
+        return _Step(self, label, bar)
 
     def note(self, msg: str) -> None:
         if not self.quiet:
@@ -55,12 +58,12 @@ class Progress:
 
 
 class _Step:
-    def __init__(self, progress: Progress, label: str):
-        self.p, self.label = progress, label
+    def __init__(self, progress: Progress, label: str, bar: bool = False):
+        self.p, self.label, self.bar = progress, label, bar
 
     def __enter__(self):
         self.t0 = time.perf_counter()
-        if not self.p.quiet:
+        if not self.p.quiet and not self.bar:
             print(f"{self.label} ...", end="", file=self.p._out(), flush=True)
         return self
 
@@ -68,7 +71,139 @@ class _Step:
         dt = time.perf_counter() - self.t0
         self.p.times[self.label] = dt
         if not self.p.quiet:
-            print(f" {dt:.2f} s" if exc_type is None else " failed", file=self.p._out(), flush=True)
+            head = f"{self.label} ..." if self.bar else ""
+            print(head + (f" {dt:.2f} s" if exc_type is None else " failed"), file=self.p._out(), flush=True)
+        return False
+
+
+# ------------------------------------------------------------------------------------- progress bars
+
+
+def _bar(total: float | int, desc: str, unit: str, *, quiet: bool = False, bar_format: str | None = None):
+    """A tqdm progress bar on stderr (a disabled one with `quiet`)."""
+    from tqdm import tqdm
+
+    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, disable=quiet, dynamic_ncols=True,
+                leave=True, bar_format=bar_format)
+
+
+class _LineSink:
+    """A text stream that hands every complete line to `on_line` (used to turn what the library prints on
+    stdout while it works, diffrax's `TextProgressMeter` percentages or the rigid model's phase log, into a
+    progress bar on stderr; stdout keeps only the summary)."""
+
+    def __init__(self, on_line):
+        self.on_line, self.buf = on_line, ""
+
+    def write(self, text: str) -> int:
+        self.buf += text
+        *lines, self.buf = self.buf.split("\n")
+        for line in lines:
+            if line.strip():
+                self.on_line(line.strip())
+        return len(text)
+
+    def flush(self) -> None:
+        pass
+
+
+def _percent_to_bar(bar):
+    """`on_line` for diffrax's TextProgressMeter: lines "12.34%" move `bar` (total 100) to 12.34."""
+
+    def on_line(line: str) -> None:
+        try:
+            value = float(line.rstrip("%"))
+        except ValueError:
+            print(line, file=sys.stderr)
+            return
+        bar.n = round(min(max(value, 0.0), 100.0), 2)
+        bar.refresh()
+
+    return on_line
+
+
+def _phase_to_bar(bar):
+    """`on_line` for the rigid model's verbose phase log ("t0 - t1 s  modes -> end [n steps so far]"): moves
+    `bar` (total t1 [s]) to the phase's end time and shows the phase in the postfix."""
+
+    def on_line(line: str) -> None:
+        head, sep, rest = line.partition(" s ")
+        try:
+            t_end = float(head.split("-")[-1])
+        except ValueError:
+            return
+        bar.n = min(round(t_end, 4), bar.total)
+        bar.set_postfix_str(rest.split("[")[0].strip(), refresh=False)
+        bar.refresh()
+
+    return on_line
+
+
+class ScanProgressBar:
+    """Renders `jaxhoist.numerics.scan.Progress` reports (one per chunk) as a tqdm bar on stderr: members
+    done of the total, members per second, ETA, failures so far (and chunks read back from disk).
+
+    **Arguments**
+    - `stream`: where to draw (default stderr); `quiet`: draw nothing.
+    """
+
+    def __init__(self, stream=None, quiet: bool = False):
+        self.stream, self.quiet, self.bar = stream, quiet, None
+
+    def __call__(self, p) -> None:
+        from tqdm import tqdm
+
+        if self.bar is None:
+            self.bar = tqdm(total=p.total, desc="scan", unit="member", file=self.stream or sys.stderr,
+                            disable=self.quiet, dynamic_ncols=True,
+                            bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} members "
+                            "[{postfix}]")
+        rate = f"{p.rate:.3g} members/s" if p.rate else "compiling"
+        eta = "?" if p.eta is None else _fmt_seconds(p.eta)
+        loaded = ", resumed from disk" if p.loaded else ""
+        self.bar.n = p.done
+        self.bar.set_postfix_str(
+            f"{_fmt_seconds(p.elapsed)} elapsed (compile {p.compile_time:.3g} s), {rate}, ETA {eta}, "
+            f"failed {p.failed}{loaded}",
+            refresh=False,
+        )
+        self.bar.refresh()
+        if p.done >= p.total:
+            self.close()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+def _fmt_seconds(s: float) -> str:
+    s = int(round(s))
+    return f"{s // 3600}:{s // 60 % 60:02d}:{s % 60:02d}" if s >= 3600 else f"{s // 60}:{s % 60:02d}"
+
+
+class _scan_bars:
+    """While a subcommand runs, scans that print their default per-chunk line (`scan(progress=True)`, as the
+    `scan` and `bifurcation --scan` commands call it) draw a `ScanProgressBar` instead. The scan module
+    picks its default reporter `print_progress` at call time; this swaps it for the bar and back."""
+
+    def __enter__(self):
+        import importlib
+
+        try:
+            self.mod = importlib.import_module("jaxhoist.numerics.scan")
+        except Exception:  # noqa: BLE001 - no scan module: nothing to render
+            self.mod = None
+        self.saved = getattr(self.mod, "print_progress", None)
+        if self.saved is not None:
+            self.bars = ScanProgressBar()
+            self.mod.print_progress = self.bars
+        return self
+
+    def __exit__(self, *exc):
+        if self.saved is not None:
+            self.bars.close()
+            self.mod.print_progress = self.saved
         return False
 
 
@@ -151,7 +286,13 @@ def run_simulate(args: argparse.Namespace) -> int:
     import numpy as np
 
     from .._errors import ScenarioError, SolveStatus, require_x64
-    from ..io.results import save_trajectory, trajectory_arrays
+    from ..io.results import (
+        load_metadata,
+        save_trajectory,
+        save_trajectory_csv,
+        save_trajectory_netcdf,
+        trajectory_arrays,
+    )
     from ..io.scenario import apply_overrides, load_scenario
     from ..io.validate import check_out_dir, clean_outputs
     from ..numerics.options import SolverOptions
@@ -178,7 +319,9 @@ def run_simulate(args: argparse.Namespace) -> int:
 
             options = SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
         else:
-            options = SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+            # diffrax's progress meter (TextProgressMeter) unless --quiet; its lines become a bar on stderr
+            options = SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps,
+                                    progress=not args.quiet)
         ts = jnp.linspace(0.0, 1.0, args.n_save) * jnp.asarray(t1, dtype=jnp.float64)
     out_dir = Path(args.out) if args.out else Path("out") / scenario.name
     check_out_dir(out_dir, "--out", refuse_existing=True, overwrite=args.overwrite)
@@ -191,23 +334,32 @@ def run_simulate(args: argparse.Namespace) -> int:
         from ..numerics.rigid_solve import simulate_rigid
 
         label = "solving with the rigid-ground model (each phase compiles on first use)"
-        with progress(label):
-            traj = simulate_rigid(
-                scenario,
-                t1,
-                ts=np.asarray(ts),
-                rtol=options.rtol,
-                atol=options.atol,
-                max_steps=args.max_steps,
-                rope=args.rope,
-            )
+        with progress(label, bar=True), _bar(float(t1), "rigid model", "s", quiet=args.quiet, bar_format=(
+            "{desc}: {percentage:3.0f}%|{bar}| t = {n:.3f}/{total:.3g} s [{elapsed}<{remaining}{postfix}]"
+        )) as bar:
+            with contextlib.redirect_stdout(_LineSink(_phase_to_bar(bar))):
+                traj = simulate_rigid(
+                    scenario,
+                    t1,
+                    ts=np.asarray(ts),
+                    rtol=options.rtol,
+                    atol=options.atol,
+                    max_steps=args.max_steps,
+                    rope=args.rope,
+                    verbose=not args.quiet,  # the phase log, one line per phase: drives the bar
+                )
+            bar.n = bar.total  # the phase ending at t1 is not logged
+            bar.refresh()
         wall_solve = progress.times[label]
     else:
         cached = _cache_key(scenario, ts, options) in _COMPILED
         with progress("compiling (cached in this process)" if cached else "compiling"):
             solve_fn = _compiled_solve(scenario, ts, options)
-        with progress("solving"):
-            traj = jax.block_until_ready(solve_fn(scenario, ts, options))
+        with progress("solving", bar=True), _bar(100.0, "solving", "%", quiet=args.quiet, bar_format=(
+            "{desc}: {percentage:3.0f}%|{bar}| t = {n:.0f}% of t1 [{elapsed}<{remaining}]"
+        )) as bar:
+            with contextlib.redirect_stdout(_LineSink(_percent_to_bar(bar))):
+                traj = jax.block_until_ready(solve_fn(scenario, ts, options))
         wall_solve = progress.times["solving"]
 
     with progress(f"writing results to {out_dir}"):
@@ -237,12 +389,19 @@ def run_simulate(args: argparse.Namespace) -> int:
                 "timings_s": {k: round(v, 4) for k, v in progress.times.items()},
             },
         )
+        csv_path = save_trajectory_csv(out_dir / "trajectory.csv", arrays)
+        md = load_metadata(npz)
+        nc_path = save_trajectory_netcdf(out_dir / "trajectory.nc", arrays,
+                                         {k: md[k] for k in ("command", "scenario", "solver", "status")})
     pngs = []
     if not args.no_plots:
         from . import plots
 
         with progress("plotting"):
             pngs = plots.save_all(arrays, out_dir, title_prefix=scenario.name)
+    animation = []
+    if args.animate:
+        animation = _animate(out_dir, quiet=args.quiet)
 
     # ---- summary (stdout)
     status = summary_status(arrays)
@@ -259,7 +418,9 @@ def run_simulate(args: argparse.Namespace) -> int:
         f"steps         {int(arrays['num_accepted_steps'])} accepted, "
         f"{int(arrays['num_rejected_steps'])} rejected",
         f"wall time     solve {wall_solve:.3g} s, total {time.perf_counter() - wall0:.3g} s",
-        f"wrote         {npz}, {meta}" + (f", {len(pngs)} PNGs" if pngs else ""),
+        f"wrote         {npz}, {meta}, {csv_path.name}, {nc_path.name}"
+        + (f", {len(pngs)} PNGs" if pngs else "")
+        + "".join(f", {p.name}" for p in animation),
     ]
     print("\n".join(lines), flush=True)
     return 0 if status == SolveStatus.OK else 1
@@ -270,9 +431,11 @@ def configure_simulate(subparsers) -> None:
 
     p = subparsers.add_parser(
         "simulate",
-        help="simulate one lift and write npz/json results and PNG plots",
-        description="Simulate one lift with the elastic-foundation model (paper §3) and write "
-        "trajectory.npz, trajectory.json and PNG plots to --out.",
+        help="simulate one lift and write npz/json/csv/nc results and PNG plots",
+        description="Simulate one lift with the elastic-foundation model (paper §3, or --model rigid) and "
+        "write trajectory.npz + trajectory.json (arrays and what they are), trajectory.csv (every signal, "
+        "SI units in the header; `jaxhoist identify` reads it), trajectory.nc (netCDF) and PNG plots to "
+        "--out.",
     )
     p.add_argument(
         "scenario",
@@ -287,13 +450,13 @@ def configure_simulate(subparsers) -> None:
         type=count_arg,
         default=501,
         metavar="N",
-        help="number of equally spaced saved times (default 501)",
+        help="number of equally spaced saved times from 0 to t1 (default 501)",
     )
     p.add_argument("--rtol", type=number_arg, default=None, metavar="R",
-                   help="relative tolerance of the step-size control (default 1e-3 with the default "
-                        "Rosenbrock-W solver; 1e-6 with --model rigid)")
+                   help=_RTOL_HELP + " (default 1e-3 with the default Rosenbrock-W solver; 1e-6 with --model "
+                   "rigid)")
     p.add_argument("--atol", type=number_arg, default=None, metavar="A",
-                   help="absolute tolerance (default 1e-5 with the default solver; 1e-8 with --model rigid)")
+                   help=_ATOL_HELP + " (default 1e-5 with the default solver; 1e-8 with --model rigid)")
     p.add_argument(
         "--max-steps",
         type=count_arg,
@@ -328,12 +491,157 @@ def configure_simulate(subparsers) -> None:
         default="elastic",
         help="elastic rope (2.14, default) or inextensible rope (2.15, with --model rigid only)",
     )
-    p.add_argument("--no-plots", action="store_true", help="write only the npz/json files")
-    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument("--no-plots", action="store_true", help="write no PNG plots")
+    p.add_argument(
+        "--animate",
+        action="store_true",
+        help="also write the 3-D animation and keyframes.png (as `jaxhoist animate DIR` with its defaults)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bars or lines on stderr")
     p.set_defaults(func=run_simulate)
 
 
+# ---------------------------------------------------------------------------------------- animate
+
+
+def _animate(result_dir, *, quiet: bool = False, **kw) -> list[Path]:
+    from .animate import animate
+
+    bars = []  # the bar opens with the first frame, after every check has passed
+
+    def step(done, total):
+        if not bars:
+            bars.append(_bar(total, "animating", "frame", quiet=quiet))
+        bars[0].update(done - bars[0].n)
+
+    try:
+        return animate(result_dir, progress=step, **kw)
+    finally:
+        for bar in bars:
+            bar.close()
+
+
+def run_animate(args: argparse.Namespace) -> int:
+    """`jaxhoist animate RESULT_DIR`: the 3-D animation and the key-frame strip of a saved lift."""
+    paths = _animate(
+        args.result_dir,
+        quiet=args.quiet,
+        fps=args.fps,
+        duration=args.duration,
+        stride=args.stride,
+        fmt=args.format,
+        keyframes=not args.no_keyframes,
+        n_keyframes=args.keyframes,
+    )
+    print("wrote         " + ", ".join(str(p) for p in paths), flush=True)
+    return 0
+
+
+def configure_animate(subparsers) -> None:
+    p = subparsers.add_parser(
+        "animate",
+        help="draw a saved lift in 3-D: animation (MP4 or GIF) and a key-frame strip (PNG)",
+        description="Read RESULT_DIR/trajectory.npz and trajectory.json (written by `jaxhoist simulate`, "
+        "either model) and write RESULT_DIR/animation.mp4 (when ffmpeg is on PATH, else animation.gif) and "
+        "RESULT_DIR/keyframes.png: the box with its corners D, E, F, H, the rope from B to the boom tip A, "
+        "the ground, the corner forces N_i as arrows scaled to the weight, a clock and the contact state "
+        "(or the rigid model's phase).",
+    )
+    p.add_argument("result_dir", metavar="RESULT_DIR", help="a folder written by `jaxhoist simulate --out`")
+    p.add_argument("--fps", type=float, default=20.0, metavar="F", help="frames per second of the animation")
+    g = p.add_mutually_exclusive_group()
+    g.add_argument(
+        "--duration",
+        type=float,
+        default=None,
+        metavar="SECONDS",
+        help="length of the animation [s], frames spread evenly over the saved times "
+        "(default: min(t1, 10 s), i.e. real time up to 10 s)",
+    )
+    g.add_argument(
+        "--stride", type=int, default=None, metavar="K", help="instead, one frame per K saved times"
+    )
+    p.add_argument(
+        "--format",
+        choices=("gif", "mp4"),
+        default=None,
+        help="file format (default: mp4 if ffmpeg is on PATH, else gif)",
+    )
+    p.add_argument("--keyframes", type=int, default=5, metavar="N", help="frames in keyframes.png")
+    p.add_argument("--no-keyframes", action="store_true", help="do not write keyframes.png")
+    p.add_argument("--quiet", action="store_true", help="no progress bar on stderr")
+    p.set_defaults(func=run_animate)
+
+
 # -------------------------------------------------------------------------------------------- parser
+
+_RTOL_HELP = (
+    "relative tolerance of the adaptive step-size control: each step's local error estimate must stay "
+    "below atol + rtol |y| in every state component"
+)
+_ATOL_HELP = (
+    "absolute tolerance of the adaptive step-size control, in the state's SI units (m, m/s, rad, ...); "
+    "it matters where a component is near zero"
+)
+# Help texts the CLI adds where a subcommand module gives none (key: (command, option dest)); each help
+# then gets its default appended by `_DefaultsFormatter`.
+_EXTRA_HELP = {
+    "rtol": _RTOL_HELP,
+    "atol": _ATOL_HELP,
+    "t1": "end time [s] (default: the scenario's t1)",
+    "n_save": "number of equally spaced saved times from 0 to t1",
+    "max_steps": "solver step budget per solve; reaching it is reported as status max_steps",
+    ("scan", "out"): "output folder (chunk files, manifest, scan.npz/json/nc); resumable "
+    "(default out/scan-<scenario name>)",
+    ("bifurcation", "out"): "folder for bifurcation.json and the PNGs (default: none, nothing is written)",
+    ("bifurcation", "bracket"): "the parameter interval LO HI in which to locate the change",
+}
+# Library wording in error messages -> the CLI's flag names
+_CLI_WORDS = {
+    "use another out_dir, or resume=False to overwrite it": "use another --out, or --no-resume to "
+    "recompute and overwrite it",
+    "resume=False": "--no-resume",
+}
+
+
+class _DefaultsFormatter(argparse.HelpFormatter):
+    """Appends "(default: X)" to every option's help unless the help already names its default or the
+    default is None/False (a flag)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        d = action.default
+        if (
+            action.option_strings
+            and d is not None
+            and d is not False
+            and d != []
+            and d is not argparse.SUPPRESS
+            and "default" not in text
+            and "%(default)" not in text
+        ):
+            text += " (default: %(default)s)"
+        return text
+
+
+def _complete_help(parser: argparse.ArgumentParser, command: str) -> None:
+    """Give every option of `command` a help text with its default (see `_EXTRA_HELP`)."""
+    parser.formatter_class = _DefaultsFormatter
+    for action in parser._actions:
+        extra = _EXTRA_HELP.get((command, action.dest))
+        if extra is None and not action.help:
+            extra = _EXTRA_HELP.get(action.dest)
+        if extra is not None:
+            action.help = extra
+        elif not action.help and action.option_strings and action.default not in (None, False):
+            action.help = "default: %(default)s"
+
+
+def _cli_message(text: str) -> str:
+    """An error message of the library in the CLI's words (flag names instead of Python arguments)."""
+    for lib, cli in _CLI_WORDS.items():
+        text = text.replace(lib, cli)
+    return text
 
 
 def _add_unavailable(subparsers, name: str, module: str, error: BaseException) -> None:
@@ -363,6 +671,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     configure_simulate(subparsers)
+    configure_animate(subparsers)
     for name, module in EXTENSIONS.items():
         try:
             mod = importlib.import_module(module)
@@ -377,6 +686,8 @@ def build_parser() -> argparse.ArgumentParser:
         configure = getattr(mod, "configure_parser", None)
         if callable(configure):
             configure(subparsers)
+    for name, sub in subparsers.choices.items():
+        _complete_help(sub, name)
     return parser
 
 
@@ -394,12 +705,21 @@ def main(argv: Sequence[str] | None = None) -> int:
         parser.print_help(sys.stderr)
         return 2
     try:
-        code = args.func(args)
+        if args.command in ("simulate", "animate"):
+            code = args.func(args)
+        else:
+            with _scan_bars():
+                code = args.func(args)
     except (ScenarioError, Float64Error) as e:
-        print(f"{PROG}: error: {one_line(str(e))}", file=sys.stderr)
+        print(f"{PROG}: error: {one_line(_cli_message(str(e)))}", file=sys.stderr)
         return 2
     except OSError as e:  # a write failing after the checks (disk full, folder removed meanwhile)
         print(f"{PROG}: error: {one_line(str(e))}", file=sys.stderr)
+        return 1
+    except RuntimeError as e:  # the rigid model's RigidContactError: no consistent contact solution
+        if type(e).__name__ != "RigidContactError":
+            raise
+        print(f"{PROG}: error: the rigid-ground model stopped: {str(e).splitlines()[0]}", file=sys.stderr)
         return 1
     except KeyboardInterrupt:
         print(f"{PROG}: interrupted", file=sys.stderr)

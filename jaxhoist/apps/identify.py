@@ -54,7 +54,7 @@ from ..io.measurement import (
     read_measurement,
     signal_groups,
 )
-from ..io.scenario import load_scenario
+from ..io.scenario import apply_overrides, load_scenario
 from ..numerics.options import SolverOptions
 from ..numerics.solve import outputs, simulate, solve
 from ..physics.elastic import vector_field
@@ -1356,6 +1356,14 @@ def configure_parser(subparsers) -> None:
     p.add_argument("--rtol", type=float, default=None, help="ODE relative tolerance (default 1e-6)")
     p.add_argument("--atol", type=float, default=None, help="ODE absolute tolerance (default 1e-8)")
     p.add_argument("--max-iterations", type=int, default=100, help="LM step budget (default 100)")
+    p.add_argument(
+        "--set",
+        action="append",
+        default=[],
+        metavar="PATH=VALUE",
+        help="replace a scenario value by dotted path before fitting, e.g. hoist.speed=0.25 (repeatable; "
+        "as in `jaxhoist simulate --set`); checked before compiling",
+    )
     p.add_argument("--out", default=None, help="output folder (default out/identify-<scenario name>)")
     p.add_argument("--no-plots", action="store_true", help="write only the JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
@@ -1372,7 +1380,7 @@ def run(args: argparse.Namespace) -> int:
         if not quiet:
             print(msg, file=sys.stderr, flush=True)
 
-    scenario = load_scenario(args.scenario)
+    scenario, overrides = apply_overrides(load_scenario(args.scenario), getattr(args, "set", None) or [])
     measurement = read_measurement(args.measurement)
     params = [s.strip() for s in args.fit.split(",") if s.strip()]
     noise = _parse_kv(args.noise, "--noise")
@@ -1405,6 +1413,7 @@ def run(args: argparse.Namespace) -> int:
     doc = res.to_dict() | {
         "command": ["jaxhoist", *args.argv] if getattr(args, "argv", None) is not None else sys.argv,
         "scenario": scenario.name,
+        "overrides": overrides,
         "measurement": str(args.measurement),
         "fitted_signals": list(res.measured),
     }

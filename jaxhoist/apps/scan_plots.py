@@ -34,8 +34,27 @@ def _with_unit(text: str, unit: str) -> str:
     return text if unit in ("-", "") else f"{text} [{unit}]"
 
 
+def display_unit(unit: str) -> tuple[float, str]:
+    """(factor, unit) in which a quantity of SI `unit` is drawn: angles in degrees ("rad" -> 180/π, "deg";
+    "rad/s" -> "deg/s"), everything else as it is."""
+    if unit == "rad" or unit.startswith("rad/"):
+        return 180.0 / np.pi, "deg" + unit[3:]
+    return 1.0, unit
+
+
 def _label(result: ScanResult, name: str) -> str:
-    return _with_unit(name, result.units.get(name, "?"))
+    return _with_unit(name, display_unit(result.units.get(name, "?"))[1])
+
+
+def _values(result: ScanResult, name: str, y: np.ndarray) -> np.ndarray:
+    return y * display_unit(result.units.get(name, "?"))[0]
+
+
+def _has_values(result: ScanResult, name: str) -> bool:
+    """True if some successful member has a finite value of `name` (else a plot of it would be empty, e.g.
+    liftoff_time when nothing lifts off)."""
+    y = np.asarray(result.data[name], dtype=float).reshape(*np.shape(result.ok), -1)
+    return bool(np.any(np.isfinite(y[np.asarray(result.ok)])))
 
 
 def _shown(n: int, total: int) -> str:
@@ -71,12 +90,19 @@ def plot_sweep(
     param = param or result.params[0]
     if result.mode == "grid" and len(result.params) > 1:
         raise ValueError("plot_sweep needs a 1-D scan (a sweep or points); use plot_grid for a grid")
-    x = np.asarray(result.coords[param], dtype=float).reshape(-1)
+    xf, x_unit = display_unit(result.units.get(param, "?"))
+    x = xf * np.asarray(result.coords[param], dtype=float).reshape(-1)
     labels, y = _components(result, name)
-    y = y.reshape(x.size, -1)
+    y = _values(result, name, y.reshape(x.size, -1))
+    unit = display_unit(result.units.get(name, "?"))[1]
     ok = np.asarray(result.ok).reshape(-1)
     order = np.argsort(x, kind="stable")
     x, y, ok = x[order], y[order], ok[order]
+    # components never finite (an event that happens for no member) get no panel
+    empty = [k for k in range(len(labels)) if not np.any(np.isfinite(y[ok, k]))]
+    keep = [k for k in range(len(labels)) if k not in empty] or [0]
+    n_all = len(labels)
+    labels, y = [labels[k] for k in keep], y[:, keep]
     n = min(len(labels), _MAX_PANELS)
     fig, axes = _figure(n, 1, figsize=(7.0, 1.2 + 1.8 * n))
     for k in range(n):
@@ -85,7 +111,7 @@ def plot_sweep(
         fin = np.isfinite(yk)
         ax.plot(x[fin], yk[fin], ".-", ms=2.5, lw=0.8, color="C0")
         n_inf = int(np.sum(np.isinf(yk)))
-        ax.set_ylabel(labels[k] + ("" if n > 1 else f" [{result.units.get(name, '?')}]"), fontsize=8)
+        ax.set_ylabel(labels[k] + ("" if n > 1 else f" [{unit}]"), fontsize=8)
         if n_inf:
             ax.set_title(f"{n_inf} members: ±inf (event not reached), not drawn", fontsize=8, loc="right")
         for j in jumps:
@@ -106,8 +132,10 @@ def plot_sweep(
             )
     if located or np.any(~ok):
         axes[0, 0].legend(fontsize=7, loc="best")
-    axes[-1, 0].set_xlabel(_label(result, param))
-    what = f"{name} [{result.units.get(name, '?')}] against {param}" + _shown(n, len(labels))
+    axes[-1, 0].set_xlabel(_with_unit(param, x_unit))
+    what = f"{name} [{unit}] against {param}" + _shown(n, n_all)
+    if empty and len(keep) < n_all:
+        what += f"\nnot drawn, no finite value: {', '.join(_components(result, name)[0][k] for k in empty)}"
     fig.suptitle(what if title is None else title, fontsize=10)
     return fig
 
@@ -117,8 +145,10 @@ def plot_grid(result: ScanResult, name: str, *, title: str | None = None) -> Fig
     if result.mode != "grid" or len(result.params) != 2:
         raise ValueError(f"plot_grid needs a grid of two parameters, got {result.mode} of {result.params}")
     p0, p1 = result.params
-    x0, x1 = (np.asarray(result.coords[p], dtype=float) for p in (p0, p1))
+    (f0, u0), (f1, u1) = (display_unit(result.units.get(p, "?")) for p in (p0, p1))
+    x0, x1 = f0 * np.asarray(result.coords[p0], dtype=float), f1 * np.asarray(result.coords[p1], dtype=float)
     labels, y = _components(result, name)
+    y = _values(result, name, y)
     ok = np.asarray(result.ok)
     n = min(len(labels), _MAX_PANELS)
     ncols = 1 if n == 1 else 2
@@ -138,8 +168,8 @@ def plot_grid(result: ScanResult, name: str, *, title: str | None = None) -> Fig
             i0, i1 = np.nonzero(~ok)
             ax.plot(x0[i0], x1[i1], "x", color="red", ms=5, label="failed")
             ax.legend(fontsize=7)
-        ax.set_xlabel(_label(result, p0))
-        ax.set_ylabel(_label(result, p1))
+        ax.set_xlabel(_with_unit(p0, u0))
+        ax.set_ylabel(_with_unit(p1, u1))
         blank = f"{n_inf} cells ±inf (event not reached): blank" if n_inf else ""
         if n > 1 or blank:
             ax.set_title(", ".join(x for x in (labels[k] if n > 1 else "", blank) if x), fontsize=9)
@@ -225,10 +255,13 @@ def plot_boundary(boundary, *, title: str | None = None) -> Figure:
 
 def save_scan_plots(result: ScanResult, out_dir: str | Path, *, located=(), dpi: int = 110) -> list[Path]:
     """Write `<out_dir>/scan_<observable>.png` for every observable: against the parameter for a sweep of
-    one parameter (with `located` critical values drawn), a colour map for a grid of two. Other layouts
-    (points, three or more parameters) get no plots. Returns the paths."""
+    one parameter (with `located` critical values drawn), a colour map for a grid of two; angles in degrees.
+    Other layouts (points, three or more parameters) and observables without a single finite value (an
+    event no member reaches, e.g. liftoff_time when nothing lifts off) get no plots. Returns the paths."""
     paths = []
     for name in result.data:
+        if not _has_values(result, name):
+            continue  # e.g. liftoff_time when nothing lifts off: no empty plot
         if result.mode == "grid" and len(result.params) == 2:
             fig = plot_grid(result, name)
         elif len(result.params) == 1:

@@ -286,6 +286,10 @@ def _side_json(path: Path, units_file: str | Path | None) -> tuple[dict, str | N
         raise MeasurementError(f"{side}: not valid JSON: nested too deeply") from None
     if not isinstance(data, dict):
         raise MeasurementError(f"{side}: expected a JSON object with keys 'units' and/or 'noise'")
+    if units_file is None and str(data.get("format", "")).startswith("jaxhoist-"):
+        # `jaxhoist simulate` writes trajectory.csv next to trajectory.json, the sidecar of trajectory.npz:
+        # not a measurement side file (the CSV header carries every unit), so it is not read as one.
+        return {}, None
     for key in data:
         if key not in ("units", "noise", "description", "metadata"):
             raise MeasurementError(

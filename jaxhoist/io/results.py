@@ -99,7 +99,41 @@ def trajectory_arrays(traj) -> dict[str, np.ndarray]:
         "num_rejected_steps": traj.num_rejected_steps,
     }
     assert list(out) == list(TRAJECTORY_ARRAYS)
-    return {k: np.asarray(v) for k, v in out.items()}
+    out = {k: np.asarray(v) for k, v in out.items()}
+    if hasattr(traj, "phase_index"):  # a rigid-model trajectory: impact losses and the phase per saved time
+        out["impact_loss"] = np.asarray(traj.impact_loss)
+        out["phase_index"] = np.asarray(traj.phase_index)
+    return out
+
+
+# Arrays only a rigid-model (`simulate_rigid`) trajectory has; its phase log goes to the JSON sidecar.
+RIGID_ARRAYS: dict[str, tuple[str, str]] = {
+    "impact_loss": ("J", "kinetic energy lost in corner impacts (and rope jerks), accumulated"),
+    "phase_index": ("-", "index into the sidecar's 'phases' list of the phase each saved time belongs to"),
+}
+
+
+def phase_name(contact: Sequence[str], rest: bool, rope: str = "elastic") -> str:
+    """A short name of a rigid-model phase: "rest", "flight", or the contact mode of each touching corner,
+    e.g. "D slide, E stick" (corners D, E, F, H; modes "free", "slide", "stick"); the inextensible rope's
+    state is appended when it is not "elastic"."""
+    if rest:
+        name = "rest"
+    elif all(m == "free" for m in contact):
+        name = "flight"
+    else:
+        name = ", ".join(f"{c} {m}" for c, m in zip("DEFH", contact, strict=True) if m != "free")
+    return name if rope == "elastic" else f"{name} (rope {rope})"
+
+
+def phase_records(traj) -> list[dict[str, Any]]:
+    """The phase log of a rigid-model trajectory as JSON-ready dicts (t_start, t_end [s], contact per corner,
+    rest, end, rope, name); empty for a trajectory without one."""
+    return [
+        {"t_start": float(p.t_start), "t_end": float(p.t_end), "contact": list(p.contact),
+         "rest": bool(p.rest), "end": p.end, "rope": p.rope, "name": phase_name(p.contact, p.rest, p.rope)}
+        for p in getattr(traj, "phases", ())
+    ]
 
 
 def as_arrays(data) -> dict[str, np.ndarray]:
@@ -248,8 +282,10 @@ def save_trajectory(path: str | Path, traj, scenario=None, *, command: Sequence[
         "status": ([SolveStatus(int(s)).name.lower() for s in status.ravel()] if status.ndim
                    else SolveStatus(int(status)).name.lower()),
     }
+    if hasattr(traj, "phases"):
+        meta["phases"] = phase_records(traj)
     meta.update(extra or {})
-    return save_arrays(path, arrays, TRAJECTORY_ARRAYS, meta)
+    return save_arrays(path, arrays, {**TRAJECTORY_ARRAYS, **RIGID_ARRAYS}, meta)
 
 
 def load_arrays(path: str | Path) -> dict[str, np.ndarray]:
@@ -286,3 +322,96 @@ def corner_detach_times(ts, normal_forces) -> list[float | None]:
     ts, n = np.asarray(ts), np.asarray(normal_forces)
     off = n <= 0.0
     return [float(ts[np.argmax(off[:, i])]) if off[:, i].any() else None for i in range(n.shape[-1])]
+
+
+# ----------------------------------------------------------------------------------- CSV and netCDF
+
+
+def trajectory_signals(data) -> dict[str, np.ndarray]:
+    """Every scalar signal of `jaxhoist.io.measurement.SIGNALS` (position_x, euler_phi, corners_D_z,
+    normal_forces_E, rope_tension, ...) of one trajectory, by name, in SI units; shape (n_t,) each."""
+    from .measurement import SIGNALS
+
+    d = as_arrays(data)
+    return {name: d[s.field][(slice(None), *s.index)] for name, s in SIGNALS.items()}
+
+
+def save_trajectory_csv(path: str | Path, data, *, digits: int = 12) -> Path:
+    """Write one trajectory as a measurement CSV that `jaxhoist identify` (`read_measurement`) reads
+    unchanged: a header `t [s],position_x [m],...,rope_tension [N]` (every signal of `SIGNALS`, SI units
+    as in the units table `TRAJECTORY_ARRAYS`) and one row per saved time.
+
+    **Arguments**
+    - `path`: the CSV file; parent folders are created.
+    - `data`: a `Trajectory` (or `RigidTrajectory`) or the dict of arrays of `load_trajectory`; one solve,
+      not a batch.
+    - `digits`: significant digits per value.
+
+    **Returns** the path.
+
+    **Raises** `ValueError` for a batched trajectory (a scan: write one member at a time).
+    """
+    import csv
+
+    from .measurement import SIGNALS
+
+    d = as_arrays(data)
+    if d["ts"].ndim != 1:
+        raise ValueError(f"save_trajectory_csv: one trajectory expected, got ts of shape {d['ts'].shape}")
+    cols = {"t": d["ts"], **trajectory_signals(d)}
+    header = ["t [s]"] + [f"{k} [{SIGNALS[k].unit}]" for k in cols if k != "t"]
+    table = np.stack(list(cols.values()), axis=1)
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    with path.open("w", newline="") as fh:
+        w = csv.writer(fh)
+        w.writerow(header)
+        for row in table:
+            w.writerow([f"{x:.{digits}g}" for x in row])
+    return path
+
+
+def save_trajectory_netcdf(path: str | Path, data, metadata: Mapping[str, Any] | None = None) -> Path:
+    """Write one trajectory as a classic netCDF file (`jaxhoist.io.netcdf`, numpy only): dimensions `time`,
+    `corner` (D, E, F, H), `xyz`, `quat`; every array of the npz under its own name with `units` (those of
+    the units table `TRAJECTORY_ARRAYS`) and `long_name` attributes; `corner_name` holds the corner letters.
+
+    **Arguments**
+    - `path`: the `.nc` file; parent folders are created.
+    - `data`: a `Trajectory` (or `RigidTrajectory`) or the dict of arrays of `load_trajectory`; one solve.
+    - `metadata`: JSON-able global metadata (command, scenario, ...), stored as the text attribute
+      `metadata_json`.
+
+    **Returns** the path.
+
+    **Raises** `ValueError` for a batched trajectory.
+    """
+    from .netcdf import write_netcdf
+
+    d = as_arrays(data)
+    if d["ts"].ndim != 1:
+        raise ValueError(f"save_trajectory_netcdf: one trajectory expected, got ts of shape {d['ts'].shape}")
+    n_t = d["ts"].shape[0]
+    dims: dict[str, int] = {"time": n_t, "corner": 4, "xyz": 3, "quat": 4, "name_strlen": 1}
+    n_fs = d["friction_state"].shape[-1] if d["friction_state"].ndim == 3 else 0
+    if n_fs:
+        dims["friction_state_dim"] = n_fs
+    by_shape = {(): (), (n_t,): ("time",), (n_t, 3): ("time", "xyz"), (n_t, 4): ("time", "corner"),
+                (n_t, 4, 3): ("time", "corner", "xyz"),
+                (n_t, 4, n_fs): ("time", "corner", "friction_state_dim")}
+    table = {**TRAJECTORY_ARRAYS, **RIGID_ARRAYS}
+    variables = [("corner_name", ("corner", "name_strlen"), np.array([[c] for c in "DEFH"], dtype="S1"),
+                  {"long_name": "corner label"})]
+    for name, a in d.items():
+        if name == "quaternion":
+            vdims = ("time", "quat")
+        elif name == "friction_state" and not n_fs:
+            continue  # a friction law without state (Coulomb): nothing to store
+        else:
+            vdims = by_shape[a.shape]
+        unit, meaning = table.get(name, ("-", ""))
+        variables.append((name, vdims, a, {"units": unit if unit != "-" else "1", "long_name": meaning}))
+    attrs = {"title": "jaxhoist trajectory", "format": FORMAT, "Conventions": "CF-1.8"}
+    if metadata:
+        attrs["metadata_json"] = json.dumps(_jsonable(dict(metadata)))
+    return write_netcdf(path, dims, variables, attrs)

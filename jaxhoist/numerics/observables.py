@@ -381,10 +381,12 @@ def detachment_time_difference(first: str, second: str) -> Observable:
     )
 
 
-def _indexed(base: Observable, index: int) -> Observable:
+def _indexed(base: Observable, index: int, name: str | None = None) -> Observable:
+    """Component `index` of `base`, called `name` as the user wrote it (`contact_margin[E]` stays that, not
+    `contact_margin[1]`), or `base[index]`."""
     label = base.components[index] if base.components else str(index)
     return Observable(
-        f"{base.name}[{index}]",
+        name or f"{base.name}[{index}]",
         _component(base.fn, index),
         base.unit,
         f"{base.description} [component {label}]",
@@ -413,7 +415,7 @@ def get(name: str) -> Observable:
         n = len(obs.components) if obs.components else None
         if n is not None and not 0 <= i < n:
             raise ValueError(f"observable {name!r}: component index must be in 0..{n - 1}")
-        return _indexed(obs, i)
+        return _indexed(obs, i, name)
     return obs
 
 
