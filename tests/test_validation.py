@@ -457,17 +457,15 @@ def test_replace_refuses_wrong_shapes_and_types(paper42):
 
 
 def test_t1_contradicting_ts_is_refused():
-    from jaxhoist.io.validate import check_times_agree
+    from jaxhoist.numerics.solve import check_times
 
     with pytest.raises(jh.ScenarioError, match=r"t1.*ts"):
-        check_times_agree(1.0, [0.0, 0.02, 0.05])
-    check_times_agree(0.05, np.array([0.0, 0.02, 0.05]))
-    check_times_agree(None, [0.0, 0.05])
-    check_times_agree(1.0, None)
+        check_times(1.0, [0.0, 0.02, 0.05])
+    check_times(0.05, np.array([0.0, 0.02, 0.05]))
+    check_times(None, [0.0, 0.05])
+    check_times(1.0, None)
 
 
-@pytest.mark.xfail(strict=True, reason="needs io.validate.check_times_agree called in numerics/solve.py "
-                   "saved_times (owned by the numerics restructuring); remove this marker once it is")
 def test_simulate_refuses_t1_contradicting_ts(paper42):
     with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
         with pytest.raises(jh.ScenarioError, match=r"t1.*ts"):
@@ -492,8 +490,6 @@ def test_forward_mode_through_a_reverse_adjoint_says_what_to_do():
             raise ValueError("unrelated")
 
 
-@pytest.mark.xfail(strict=True, reason="needs _errors.forward_mode_hint around the solve in "
-                   "numerics/solve.py simulate (owned by the numerics restructuring)")
 def test_jacfwd_through_simulate_says_adjoint_forward(paper42):
     def final_x(mu):
         sc = paper42.replace(**{"foundation.friction_coefficient": mu})

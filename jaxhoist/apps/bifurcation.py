@@ -851,11 +851,8 @@ def configure_parser(subparsers) -> None:
     )
     p.add_argument("--t1", type=number_arg, default=None)
     p.add_argument("--n-save", type=count_arg, default=201)
-    p.add_argument("--rtol", type=number_arg, default=None,
-                   help="relative tolerance of the step-size control (default: the solver's; 1e-3 for "
-                   "rosenbrock-w)")
-    p.add_argument("--atol", type=number_arg, default=None,
-                   help="absolute tolerance (default: the solver's; 1e-5 for rosenbrock-w)")
+    p.add_argument("--rtol", type=number_arg, default=None)
+    p.add_argument("--atol", type=number_arg, default=None)
     p.add_argument("--max-steps", type=count_arg, default=200_000)
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
     p.add_argument(

@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
+import os
 import sys
 import time
 from collections.abc import Sequence
@@ -22,7 +23,7 @@ from pathlib import Path
 
 # subcommand name -> module exposing configure_parser(subparsers)
 EXTENSIONS = {
-    "scan": "jaxhoist.numerics.scan",
+    "scan": "jaxhoist.apps.scan_cli",
     "bifurcation": "jaxhoist.apps.bifurcation",
     "identify": "jaxhoist.apps.identify",
 }
@@ -586,8 +587,8 @@ _ATOL_HELP = (
 # Help texts the CLI adds where a subcommand module gives none (key: (command, option dest)); each help
 # then gets its default appended by `_DefaultsFormatter`.
 _EXTRA_HELP = {
-    "rtol": _RTOL_HELP,
-    "atol": _ATOL_HELP,
+    "rtol": _RTOL_HELP + " (default: the solver's, 1e-3 for the default rosenbrock-w, 1e-6 for the others)",
+    "atol": _ATOL_HELP + " (default: the solver's, 1e-5 for the default rosenbrock-w, 1e-8 for the others)",
     "t1": "end time [s] (default: the scenario's t1)",
     "n_save": "number of equally spaced saved times from 0 to t1",
     "max_steps": "solver step budget per solve; reaching it is reported as status max_steps",
@@ -659,6 +660,38 @@ def _add_unavailable(subparsers, name: str, module: str, error: BaseException) -
     p.set_defaults(func=run)
 
 
+def _use_devices(argv: list[str]) -> list[str]:
+    """Take `--devices N` (anywhere on the command line) out of `argv` and split the host CPU into N JAX
+    devices before JAX starts, so that scans run on every core: default N = the number of CPU cores
+    (`os.cpu_count()`). Scans shard their members over `jax.local_devices()`; on a machine with an
+    accelerator the accelerator's devices are used and this setting does not matter.
+
+    **Raises** `ValueError` for a value that is not a positive integer.
+    """
+    import jax
+
+    n, rest, i = None, [], 0
+    while i < len(argv):
+        a = argv[i]
+        if a == "--devices" and i + 1 < len(argv):
+            n, i = argv[i + 1], i + 2
+            continue
+        if a.startswith("--devices="):
+            n, i = a.split("=", 1)[1], i + 1
+            continue
+        rest.append(a)
+        i += 1
+    if n is not None:
+        if not (n.isdigit() and int(n) >= 1):
+            raise ValueError(f"--devices must be a positive integer, got {n!r}")
+    count = int(n) if n is not None else (os.cpu_count() or 1)
+    try:
+        jax.config.update("jax_num_cpu_devices", count)
+    except (AttributeError, RuntimeError):  # older JAX, or the backend already started (in-process use)
+        pass
+    return rest
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser: `simulate`, plus every subcommand module of `EXTENSIONS` that exists."""
     from .. import __version__
@@ -669,6 +702,14 @@ def build_parser() -> argparse.ArgumentParser:
         "(Grabski & Strzałko 2003).",
     )
     parser.add_argument("--version", action="version", version=f"{PROG} {__version__}")
+    parser.add_argument(
+        "--devices",
+        type=int,
+        default=None,
+        metavar="N",
+        help="split the CPU into N JAX devices for scans (any position on the command line; default: one "
+        "per CPU core)",
+    )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     configure_simulate(subparsers)
     configure_animate(subparsers)
@@ -698,6 +739,11 @@ def main(argv: Sequence[str] | None = None) -> int:
     from .._errors import Float64Error, ScenarioError, one_line
 
     argv = list(sys.argv[1:] if argv is None else argv)
+    try:
+        argv = _use_devices(argv)
+    except ValueError as e:
+        print(f"{PROG}: error: {e}", file=sys.stderr)
+        return 2
     parser = build_parser()
     args = parser.parse_args(argv)
     args.argv = argv

@@ -1247,7 +1247,11 @@ def synthetic_measurement(
     Measurement(t, {n: np.zeros_like(t) for n in names})  # validates the times
     drop = bool(t[0] > 0)
     ts = np.concatenate([[0.0], t]) if drop else t
-    traj = simulate(scenario, ts=jnp.asarray(ts), rtol=rtol, atol=atol, max_steps=max_steps)
+    # the solver identify's model uses (Tsit5, its default tolerances), so a fit to noise-free data recovers
+    # the parameters to the solver's accuracy
+    traj = simulate(
+        scenario, ts=jnp.asarray(ts), solver=diffrax.Tsit5(), rtol=rtol, atol=atol, max_steps=max_steps
+    )
     clean = {}
     for n in names:
         spec = SIGNALS[n]

@@ -11,7 +11,7 @@ or the file, before anything is compiled or solved; none imports JAX transformat
 - Output folders are checked by `check_out_dir` before any work (a file in the way, a read-only parent,
   an existing result folder without `--overwrite`), and `clean_outputs` removes a previous run's files.
 - Parameter paths (`check_param_path`), counts (`check_count`), observables (`check_scalar_observable`) and
-  the agreement of `t1` with `ts` (`check_times_agree`) for the scan, bifurcation and simulate front ends.
+  (the agreement of `t1` with `ts` is checked with the time grid, `numerics.solve.check_times`).
 - A scenario's own values, including the plausibility check of physically absurd but finite values, are
   checked by `Scenario.check()` (`jaxhoist.physics.params`); `check_scenario` is the same call.
 """
@@ -41,7 +41,6 @@ __all__ = [
     "check_param_path",
     "check_scalar_observable",
     "check_scenario",
-    "check_times_agree",
     "clean_outputs",
     "count_arg",
     "number_arg",
@@ -311,32 +310,6 @@ def _concrete(x):
     import jax
 
     return None if isinstance(x, jax.core.Tracer) else x
-
-
-def check_times_agree(t1, ts, rtol: float = 1e-12) -> None:
-    """Refuse an end time `t1` that contradicts the saved times `ts` (which end at the end time).
-
-    Call it where `simulate`, `scan` and the rigid solver combine `t1` and `ts` (before `ts[-1]` is used
-    in place of `t1`). Traced values are skipped.
-
-    **Arguments**
-    - `t1`: the end time given [s], or None.
-    - `ts`: the saved times given [s], or None.
-    - `rtol`: relative tolerance of the comparison.
-
-    **Raises** `ScenarioError` naming `t1` and `ts` if both are given and `ts[-1]` differs from `t1`.
-    """
-    if t1 is None or ts is None or _concrete(t1) is None or _concrete(ts) is None:
-        return
-    a = np.asarray(ts, dtype=np.float64)
-    t = float(np.asarray(t1, dtype=np.float64))
-    if a.ndim != 1 or a.size == 0:
-        return  # the shape of ts is check_times' business
-    if not abs(a[-1] - t) <= rtol * max(1.0, abs(t)):
-        raise ScenarioError(
-            f"t1 = {t:g} s contradicts ts, which ends at {a[-1]:g} s: give ts ending at t1, or leave t1 out "
-            f"(it defaults to ts[-1])"
-        )
 
 
 _PATH = re.compile(r"([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)(?:\[([0-9]{1,6})\])?")

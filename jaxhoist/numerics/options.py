@@ -9,7 +9,7 @@ place.
 
 from __future__ import annotations
 
-from typing import ClassVar, Literal
+from typing import ClassVar
 
 import diffrax
 import equinox as eqx
@@ -77,7 +77,7 @@ class SolverOptions(eqx.Module):
         self,
         solver: diffrax.AbstractSolver | None = None,
         stepsize_controller: diffrax.AbstractStepSizeController | None = None,
-        adjoint: diffrax.AbstractAdjoint | Literal["reverse", "forward"] | None = None,
+        adjoint: diffrax.AbstractAdjoint | str | None = None,
         *,
         dt0: float | None = None,
         max_steps: int = DEFAULT_MAX_STEPS,
@@ -238,7 +238,7 @@ def as_model(model, rope=None) -> AbstractModel:
             model = RigidGround(rope=rope)
         elif not isinstance(rope, ElasticRope):
             raise ScenarioError(
-                f"rope={rope.name!r} is available with the rigid model only (the elastic-foundation model of "
+                f"rope={rope.name!r} is available with model='rigid' only (the elastic-foundation model of "
                 "§3 has the elastic rope (2.14)); use model=RigidGround(rope=InextensibleRope())"
             )
     return model

@@ -10,7 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
-from .._errors import ScenarioError, SolveStatus, require_x64
+from .._errors import ScenarioError, SolveStatus, forward_mode_hint, require_x64
 from ..physics import energy as energy_mod
 from ..physics import kinematics
 from ..physics.elastic import Constants, State, snapshot, vector_field
@@ -167,11 +167,13 @@ def as_float64_leaves(scenario: Scenario) -> Scenario:
 
 
 def _concrete_float(x):
-    return None if isinstance(x, jax.core.Tracer) else float(np.asarray(x))
+    return None if x is None or isinstance(x, jax.core.Tracer) else float(np.asarray(x))
 
 
 def check_times(t1, ts) -> None:
-    """Host-side checks of the time grid (concrete values only)."""
+    """Host-side checks of the time grid (concrete values only): t1 > 0 finite; ts 1-D, at least 2 times,
+    starting at 0, finite, strictly increasing; and, where both are given, ts ending at t1 (a contradiction
+    used to be resolved silently in favour of ts)."""
     t1c = _concrete_float(t1)
     if t1c is not None and not (np.isfinite(t1c) and t1c > 0):
         raise ScenarioError(f"t1 must be a positive finite time [s], got {t1c}")
@@ -181,15 +183,21 @@ def check_times(t1, ts) -> None:
             raise ScenarioError(f"ts must be a 1-D array of at least 2 times [s], got shape {a.shape}")
         if not np.all(np.isfinite(a)) or a[0] != 0.0 or np.any(np.diff(a) <= 0):
             raise ScenarioError("ts must start at 0 s and be finite and strictly increasing")
+        if t1c is not None and not abs(float(a[-1]) - t1c) <= 1e-12 * max(1.0, abs(t1c)):
+            raise ScenarioError(
+                f"t1 = {t1c:g} s contradicts ts, which ends at {float(a[-1]):g} s: give ts ending at t1, or "
+                "leave t1 out (it defaults to ts[-1])"
+            )
 
 
 def saved_times(scenario: Scenario, t1, ts, n_save: int, xp=np):
     """(t1, ts) [s]: the saved times `ts` as given, else `n_save` equally spaced in [0, t1]; t1 defaults to
     `ts[-1]`, else the scenario's. Checked on the host. `xp` (numpy or jax.numpy) builds the grid: jax.numpy
     keeps a traced t1 traced."""
+    check_times(t1, ts)
     if t1 is None:
         t1 = scenario.t1 if ts is None else (ts[-1] if xp is jnp else float(np.asarray(ts)[-1]))
-    check_times(t1, ts)
+        check_times(t1, ts)
     if ts is None:
         if int(n_save) < 2:
             raise ScenarioError(f"n_save must be >= 2, got {n_save}")
@@ -265,5 +273,6 @@ def simulate(
         options = SolverOptions(**solver_kw)
     t1, ts = saved_times(scenario, t1, ts, n_save, jnp)
     ts = jnp.asarray(ts, dtype=jnp.float64)
-    traj = _solve_jit(scenario, ts, options)
+    with forward_mode_hint():  # jacfwd through the reverse adjoint: say to pass adjoint="forward"
+        traj = _solve_jit(scenario, ts, options)
     return _raise_on_failure(traj) if throw else traj

@@ -63,6 +63,16 @@ def _mv(A, x):
     return acc
 
 
+def _dot(a, b):
+    """a · b written out in index order: no dot or reduce kernel, so the sum is formed in the same order
+    whatever the batch layout (a batched dot may be blocked differently by XLA's CPU backend for other
+    device counts, which changed scans at 1e-7)."""
+    acc = a[..., 0] * b[..., 0]
+    for k in range(1, a.shape[-1]):
+        acc = acc + a[..., k] * b[..., k]
+    return acc
+
+
 def _quat_xi(q: Quat) -> Float[Array, "4 3"]:
     """Ξ(q) with dq/dt = ½ Ξ(q) ω (`kinematics.quat_rate`); ΞᵀΞ = |q|² I."""
     w, x, y, z = q
@@ -121,7 +131,7 @@ class Linearisation(eqx.Module):
         a = self.rope_direction
         w = jnp.concatenate([_lu_solve(lu, a[:6]), a[6:] / s_tip])
         beta = hg * self.rope_damping + hg * hg * self.rope_stiffness
-        return lu, s_tip, w, beta / (1.0 + beta * jnp.dot(a, w))
+        return lu, s_tip, w, beta / (1.0 + beta * _dot(a, w))
 
     def solve(self, factors, r: State, hg: Scalar) -> State:
         """u with (I/(hγ) - J) u = r, J the approximate Jacobian described in the module docstring.
@@ -136,14 +146,14 @@ class Linearisation(eqx.Module):
         a = self.rope_direction
         r_V, r_X = _bar((
             jnp.concatenate([r.velocity, r.angular_velocity, r.tip_velocity]),
-            jnp.concatenate([r.position, 2.0 * _mv(xi.T, r.quaternion) / jnp.sum(q**2), r.tip_position]),
+            jnp.concatenate([r.position, 2.0 * _mv(xi.T, r.quaternion) / _dot(q, q), r.tip_position]),
         ))
         K_rX = jnp.concatenate([_mv(self.body_stiffness, r_X[:6]), -self.tip_stiffness * r_X[6:]])
-        K_rX = K_rX - self.rope_stiffness * a * jnp.dot(a, r_X)
+        K_rX = K_rX - self.rope_stiffness * a * _dot(a, r_X)
         M_rV = jnp.concatenate([_mv(self.body_mass, r_V[:6]), self.tip_mass * r_V[6:]])
         rhs = _bar(hg * (M_rV + hg * K_rX))
         z = _bar(jnp.concatenate([_lu_solve(lu, rhs[:6]), rhs[6:] / s_tip]))
-        u_V = _bar(z - sm * jnp.dot(a, z) * w)
+        u_V = _bar(z - sm * _dot(a, z) * w)
         u_v, u_w, u_a = u_V[:3], u_V[3:6], u_V[6:]
         return State(
             position=hg * (r.position + u_v),
@@ -257,7 +267,7 @@ def linearise(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> Linearis
     e = AB / jnp.maximum(L, 1e-12)
     s_dot = scenario.hoist.rate(t)
     stretch = L - (c.rope_length - scenario.hoist.shortening(t))
-    rate = jnp.dot(y.tip_velocity - v_B, e) + s_dot
+    rate = _dot(y.tip_velocity - v_B, e) + s_dot
 
     def tension(d, dd):
         return forces.rope_tension(d, dd, rope.stiffness, rope.damping, rope.damping_onset)[0]
