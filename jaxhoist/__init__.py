@@ -20,10 +20,10 @@ from .numerics.options import ElasticRope as ElasticRope
 from .numerics.options import InextensibleRope as InextensibleRope
 from .numerics.options import RigidGround as RigidGround
 from .numerics.options import SolverOptions as SolverOptions
-from .numerics.rosenbrock import RosenbrockW as RosenbrockW
 from .numerics.rigid_solve import RigidContactError as RigidContactError
 from .numerics.rigid_solve import RigidTrajectory as RigidTrajectory
 from .numerics.rigid_solve import simulate_rigid as simulate_rigid
+from .numerics.rosenbrock import RosenbrockW as RosenbrockW
 from .numerics.scan import ScanResult as ScanResult
 from .numerics.scan import ScanStatus as ScanStatus
 from .numerics.scan import scan as scan
