@@ -405,7 +405,9 @@ def locate_bifurcation(
     - `method`: "newton" (safeguarded Newton on g with dg/dp from forward-mode sensitivities; bisection
       whenever a Newton step leaves the bracket or does not shrink it fast enough), "bisection" (value-only
       solves), or "multisection" (`points_per_round` values per round in one vmapped `scan`).
-    - `t1`, `ts`, `n_save`, `solver`, `rtol`, `atol`, `dt0`, `max_steps`: as in `simulate`.
+    - `t1`, `ts`, `n_save`, `solver`, `rtol`, `atol`, `dt0`, `max_steps`: as in `simulate`, except that
+      the default solver here is `diffrax.Tsit5()` (rtol 1e-6, atol 1e-8): Newton steps need forward-mode
+      sensitivities, which through the default Rosenbrock-W solver are not reliable yet at high friction.
     - `max_solves`: give up (converged=False) after this many solves.
 
     **Returns** a `Bifurcation`.
@@ -430,6 +432,11 @@ def locate_bifurcation(
         raise ScenarioError(f"method must be 'newton', 'bisection' or 'multisection', got {method!r}")
     obs = _resolve_one(observable)
     ts = jnp.asarray(saved_times(scenario, t1, ts, n_save)[1], dtype=jnp.float64)
+    if solver is None:
+        # Tsit5 (rtol 1e-6): the Newton steps take forward-mode sensitivities, which through the default
+        # Rosenbrock-W solver are not reliable yet at high friction (they grow without bound over 25 s of
+        # paper-4.2 at mu >= 0.5; docs/performance.md)
+        solver = diffrax.Tsit5()
     options = SolverOptions(solver=solver, rtol=rtol, atol=atol, dt0=dt0, max_steps=max_steps)
     n_uniform = int(math.ceil((hi - lo) / tol)) + 1
     unit = param_unit(scenario, param)

@@ -147,7 +147,11 @@ def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None)
     **Returns** `(y1, error, f1)`: the order-3 solution, the difference to the embedded solution, and
     f(t + h, y1) when `quadrature` is given (else None).
     """
-    lin = linearise(t, y, args)
+    # W is not differentiated: a W-method may use any W, and with W held fixed the derivative of the step is
+    # the same W-method applied to the variational equations (consistent, and as stable as the step). The
+    # derivative *of* W (the friction slope's own derivative, ~μN/ε² per corner) made forward-mode
+    # sensitivities of paper-4.2 grow to 1e77 and NaN over 25 s.
+    lin = jax.lax.stop_gradient(linearise(t, y, args))
     hg = h * tab.gamma
     # Barriers keep XLA from fusing (and so recomputing) the linearisation and its factors into every
     # stage that reads them.

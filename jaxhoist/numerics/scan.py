@@ -846,9 +846,10 @@ def scan(
       beyond the grouping).
     - `derivatives`: also compute forward-mode sensitivities of every observable with respect to the swept
       parameters (`jax.jacfwd`, through `diffrax.ForwardMode` or the fixed-step loop), stored as `d_<name>`
-      with a last axis over the parameters. Cost for one parameter, measured in
-      `experiments/benchmark_scan.py`: 1.3-2x a plain scan with adaptive steps, 3.1-3.8x with fixed steps
-      (docs/performance.md).
+      with a last axis over the parameters. The default solver is then `diffrax.Tsit5()` (rtol 1e-6):
+      through the Rosenbrock-W solver sensitivities are not reliable yet at high friction. Cost for one
+      parameter, measured in `experiments/benchmark_scan.py`: 1.3-2x a plain scan with adaptive steps,
+      3.1-3.8x with fixed steps (docs/performance.md).
     - `out_dir`: write each finished chunk there (`chunk_#####.npz` + `manifest.json`) and the final
       `scan.npz` + `scan.json` and the same dataset as netCDF, `scan.nc`; with `resume=True` an
       interrupted scan continues from the chunks on disk.
@@ -880,6 +881,10 @@ def scan(
             raise ScenarioError(
                 f"history {h!r} is not a Trajectory output; choose from {sorted(_HISTORY_UNITS)}"
             )
+    if derivatives and solver is None:
+        # Tsit5: forward-mode sensitivities through the default Rosenbrock-W solver are not reliable yet at
+        # high friction (they grow without bound over 25 s of paper-4.2 at mu >= 0.5; docs/performance.md)
+        solver = diffrax.Tsit5()
     options = SolverOptions(
         solver=solver,
         rtol=rtol,
