@@ -155,8 +155,12 @@ def test_vmap_equals_single_solves(paper42):
         return jh.simulate(sc, ts=ts).position[-1]
 
     batched = jax.vmap(final)(mus)
+    # The vmapped and the single solves are different compiled programs, which round differently (1e-14 m
+    # per step); at the default rtol 1e-3 that can change a step's acceptance, so the two agree to round-off
+    # amplified by the step-size control (measured 2e-8 m after 1 s), not bit for bit: 1e-6 m is still
+    # 1000x below what the tolerance allows.
     for k, mu in enumerate(mus):
-        np.testing.assert_allclose(batched[k], final(mu), rtol=0, atol=1e-9)
+        np.testing.assert_allclose(batched[k], final(mu), rtol=0, atol=1e-6)
 
 
 def test_forward_and_reverse_derivatives_match_central_differences(paper42):
