@@ -350,3 +350,23 @@ def test_bad_arguments_rejected_before_compiling(scenario, clean, no_compile):
         identify(scenario, clean, ["mu"], signals=["rope_tension"])
     with pytest.raises(jh.ScenarioError, match=r"not both"):
         identify(scenario, clean, ["mu"], noise={"position_x": 0.01}, weights={"position": 1.0})
+
+
+def test_plot_fit_shows_angles_in_degrees():
+    """Euler angles and angular velocities are drawn in deg and deg/s, like every other angle plot; lengths
+    stay in m. A stand-in result (no fit) carries only the fields `plot_fit` reads."""
+    t = np.linspace(0.0, 1.0, 11)
+    sig = {"euler_psi": 0.1 * t, "angular_velocity_xi": 0.2 + 0 * t, "position_x": 1.0 + t}
+    res = object.__new__(ident.IdentificationResult)
+    fields = dict(t=t, measured=sig, fitted={k: v + 1e-3 for k, v in sig.items()}, names=["mu"],
+                  values=np.array([0.25]), std_errors=np.array([0.01]))  # fmt: skip
+    for k, v in fields.items():
+        object.__setattr__(res, k, v)
+    fig = ident.plot_fit(res)
+    axes = [ax for ax in fig.axes if ax.get_visible()]
+    assert [ax.get_ylabel() for ax in axes] == [
+        "euler_psi [deg]", "angular_velocity_xi [deg/s]", "position_x [m]"
+    ]
+    np.testing.assert_allclose(axes[0].lines[0].get_ydata(), np.degrees(0.1 * t))
+    np.testing.assert_allclose(axes[1].lines[1].get_ydata(), np.degrees(0.2 + 1e-3))
+    np.testing.assert_allclose(axes[2].lines[0].get_ydata(), 1.0 + t)

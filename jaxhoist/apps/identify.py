@@ -1330,8 +1330,12 @@ def synthetic_measurement(
 # ------------------------------------------------------------------------------------- plotting
 
 
+_DEGREES = {"rad": "deg", "rad/s": "deg/s"}  # SI angle units and how `plot_fit` shows them
+
+
 def plot_fit(result: IdentificationResult, *, max_signals: int = 12, title: str | None = None):
-    """Measured (dots) against fitted (line) signals, one panel per signal; returns a matplotlib Figure."""
+    """Measured (dots) against fitted (line) signals, one panel per signal, in SI units except angles
+    (Euler angles in deg, angular velocities in deg/s); returns a matplotlib Figure."""
     from matplotlib.figure import Figure
 
     names = list(result.measured)[:max_signals]
@@ -1341,8 +1345,11 @@ def plot_fit(result: IdentificationResult, *, max_signals: int = 12, title: str 
     axes = np.atleast_1d(fig.subplots(nrows, ncols, sharex=True, squeeze=False)).ravel()
     for ax, n in zip(axes, names, strict=False):
         unit = SIGNALS[n].unit
-        ax.plot(result.t, result.measured[n], ".", ms=2.5, color="0.45", label="measured")
-        ax.plot(result.t, result.fitted[n], "-", lw=1.2, color="tab:red", label="fitted")
+        k = 1.0
+        if unit in _DEGREES:  # angles in degrees, as in every other plot
+            unit, k = _DEGREES[unit], 180.0 / math.pi
+        ax.plot(result.t, k * result.measured[n], ".", ms=2.5, color="0.45", label="measured")
+        ax.plot(result.t, k * result.fitted[n], "-", lw=1.2, color="tab:red", label="fitted")
         ax.set_ylabel(f"{n} [{unit}]")
         ax.grid(alpha=0.3)
     for ax in axes[len(names) :]:
