@@ -123,11 +123,12 @@ def test_bisection_finds_the_same_point_with_more_solves(newton_result):
     assert newton_result.n_solves < b.n_solves
 
 
-def test_multisection_and_continuation_along_the_hoist_speed(capsys):
+def test_multisection_and_continuation_along_the_hoist_speed():
     """Multisection (8 points per vmapped round) finds ξ_C* = 0.5 m too; and the boundary ξ_C*(v_l) traced
     by continuation over three hoist speeds stays at a/2 (the symmetry argument holds for every v_l).
-    Without a progress callback the locator prints nothing; with one, the continuation's reports name the
-    point."""
+    The progress reports come one per round (the bracket shrinking by k + 1 each time); the continuation's
+    reports name the point."""
+    mreps = []
     m = locate_bifurcation(
         symmetric_lift(),
         XI,
@@ -138,12 +139,17 @@ def test_multisection_and_continuation_along_the_hoist_speed(capsys):
         method="multisection",
         points_per_round=8,
         lanes=8,
+        progress=mreps.append,
         **SYM_KW,
     )
     assert m.converged and abs(m.value - 0.5) <= 1e-6
     assert m.n_solves % 8 == 0
-    out = capsys.readouterr()
-    assert out.out == "" and out.err == ""
+    assert [r["iteration"] for r in mreps] == list(range(1, m.n_solves // 8 + 1))
+    assert [r["n_solves"] for r in mreps] == [8 * r["iteration"] for r in mreps]
+    assert all(len(r["param"]) == 8 and r["kind"] == "multisection" for r in mreps)
+    for r0, r1 in zip(mreps, mreps[1:], strict=False):
+        assert r1["width"] == pytest.approx(r0["width"] / 9, rel=1e-6)
+    assert mreps[-1]["bracket"] == m.bracket
 
     reps = []
     tr = trace_boundary(
@@ -367,13 +373,16 @@ def test_scan_plots_show_the_data_failures_and_located_values(newton_result, tmp
     assert [p.name for p in paths] == ["scan_w.png", "scan_v.png"] and all(p.stat().st_size for p in paths)
 
 
-def test_locator_refuses_a_bracket_without_a_sign_change():
+def test_locator_refuses_a_bracket_without_a_sign_change(capfd):
+    """... and, with no progress callback, prints nothing while it solves."""
     with pytest.raises(jh.ScenarioError, match="lo < hi"):
         locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.6, 0.4), **SYM_KW)
     with pytest.raises(jh.ScenarioError, match="mass_centre"):
         locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.4, 1.2), **SYM_KW)  # outside the box
     with pytest.raises(BifurcationError, match="same sign"):
         locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.48), level=0.0, **SYM_KW)
+    out = capfd.readouterr()
+    assert out.out == "" and out.err == ""
 
 
 SYMMETRIC_TOML = """
