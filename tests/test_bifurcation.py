@@ -43,8 +43,33 @@ def symmetric_lift(xi_c: float = 0.45) -> jh.Scenario:
 
 
 @pytest.fixture(scope="module")
-def newton_result():
-    return locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), level=0.0, tol=1e-6, **SYM_KW)
+def newton_run():
+    """The Newton locator on the symmetric lift, with every progress report it made."""
+    reports = []
+    b = locate_bifurcation(
+        symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), level=0.0, tol=1e-6, progress=reports.append, **SYM_KW
+    )
+    return b, reports
+
+
+@pytest.fixture(scope="module")
+def newton_result(newton_run):
+    return newton_run[0]
+
+
+def test_locator_progress_reports(newton_run):
+    """One report per solve, numbered 1, 2, ...; the bracket only shrinks and ends as the result's."""
+    b, reps = newton_run
+    assert [r["iteration"] for r in reps] == list(range(1, b.n_solves + 1))
+    assert [r["n_solves"] for r in reps] == list(range(1, b.n_solves + 1))
+    assert [r["kind"] for r in reps[:2]] == ["end", "end"] and reps[0]["bracket"] == (0.46, 0.57)
+    widths = [r["width"] for r in reps]
+    assert all(w1 <= w0 for w0, w1 in zip(widths, widths[1:], strict=False)) and widths[-1] <= 1e-6
+    assert reps[-1]["bracket"] == b.bracket
+    assert all(r["bracket"][0] <= r["param"] <= r["bracket"][1] for r in reps[2:])
+    assert [(r["param"], r["indicator"]) for r in reps] == [(h[0], h[1]) for h in b.history]
+    times = [r["elapsed"] for r in reps]
+    assert times == sorted(times) and all(r["tol"] == 1e-6 for r in reps)
 
 
 def test_corner_order_swaps_at_the_symmetric_mass_centre(newton_result):
@@ -75,9 +100,22 @@ def test_corner_order_swaps_at_the_symmetric_mass_centre(newton_result):
 
 
 def test_bisection_finds_the_same_point_with_more_solves(newton_result):
+    reps = []
     b = locate_bifurcation(
-        symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), level=0.0, tol=1e-6, method="bisection", **SYM_KW
+        symmetric_lift(),
+        XI,
+        E_MINUS_D,
+        (0.46, 0.57),
+        level=0.0,
+        tol=1e-6,
+        method="bisection",
+        progress=reps.append,
+        **SYM_KW,
     )
+    # every bisection report halves the bracket
+    assert [r["kind"] for r in reps] == ["end", "end"] + ["bisect"] * (b.n_solves - 2)
+    for r0, r1 in zip(reps[1:], reps[2:], strict=False):
+        assert r1["width"] == pytest.approx(0.5 * r0["width"], rel=1e-9)
     assert b.converged and abs(b.value - 0.5) <= 1e-6
     assert b.n_derivative_solves == 0
     # log2(0.11 / 1e-6) = 16.7 halvings, plus the two ends
@@ -87,7 +125,10 @@ def test_bisection_finds_the_same_point_with_more_solves(newton_result):
 
 def test_multisection_and_continuation_along_the_hoist_speed():
     """Multisection (8 points per vmapped round) finds ξ_C* = 0.5 m too; and the boundary ξ_C*(v_l) traced
-    by continuation over three hoist speeds stays at a/2 (the symmetry argument holds for every v_l)."""
+    by continuation over three hoist speeds stays at a/2 (the symmetry argument holds for every v_l).
+    The progress reports come one per round (the bracket shrinking by k + 1 each time); the continuation's
+    reports name the point."""
+    mreps = []
     m = locate_bifurcation(
         symmetric_lift(),
         XI,
@@ -98,11 +139,19 @@ def test_multisection_and_continuation_along_the_hoist_speed():
         method="multisection",
         points_per_round=8,
         lanes=8,
+        progress=mreps.append,
         **SYM_KW,
     )
     assert m.converged and abs(m.value - 0.5) <= 1e-6
     assert m.n_solves % 8 == 0
+    assert [r["iteration"] for r in mreps] == list(range(1, m.n_solves // 8 + 1))
+    assert [r["n_solves"] for r in mreps] == [8 * r["iteration"] for r in mreps]
+    assert all(len(r["param"]) == 8 and r["kind"] == "multisection" for r in mreps)
+    for r0, r1 in zip(mreps, mreps[1:], strict=False):
+        assert r1["width"] == pytest.approx(r0["width"] / 9, rel=1e-6)
+    assert mreps[-1]["bracket"] == m.bracket
 
+    reps = []
     tr = trace_boundary(
         symmetric_lift(),
         XI,
@@ -112,9 +161,14 @@ def test_multisection_and_continuation_along_the_hoist_speed():
         E_MINUS_D,
         level=0.0,
         tol=1e-6,
+        progress=reps.append,
         **SYM_KW,
     )
     np.testing.assert_allclose(tr.values, 0.5, atol=1e-6)
+    assert [r["point"] for r in reps] == sorted(r["point"] for r in reps)
+    assert {r["point"] for r in reps} == {0, 1, 2} and all(r["n_points"] == 3 for r in reps)
+    assert {r["along_value"] for r in reps} == {0.05, 0.06, 0.07}
+    assert len(reps) <= tr.n_solves
     assert np.all(tr.widths <= 1e-6)
     assert tr.n_solves < 40 and tr.n_dense > 3e5
     rows = tr.rows()  # the table form: one plain dict per point
@@ -319,13 +373,16 @@ def test_scan_plots_show_the_data_failures_and_located_values(newton_result, tmp
     assert [p.name for p in paths] == ["scan_w.png", "scan_v.png"] and all(p.stat().st_size for p in paths)
 
 
-def test_locator_refuses_a_bracket_without_a_sign_change():
+def test_locator_refuses_a_bracket_without_a_sign_change(capfd):
+    """... and, with no progress callback, prints nothing while it solves."""
     with pytest.raises(jh.ScenarioError, match="lo < hi"):
         locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.6, 0.4), **SYM_KW)
     with pytest.raises(jh.ScenarioError, match="mass_centre"):
         locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.4, 1.2), **SYM_KW)  # outside the box
     with pytest.raises(BifurcationError, match="same sign"):
         locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.48), level=0.0, **SYM_KW)
+    out = capfd.readouterr()
+    assert out.out == "" and out.err == ""
 
 
 SYMMETRIC_TOML = """
@@ -353,7 +410,7 @@ damping = 5.0e3
 """
 
 
-def test_scan_and_bifurcation_commands(tmp_path):
+def test_scan_and_bifurcation_commands(tmp_path, capfd):
     """The `scan` and `bifurcation` subcommands on `symmetric_lift` written as a scenario file, with a
     `--set` override: the scan sees E leave first below ξ_C = a/2 and D above it (the sign argument of
     the test above), and the command-line locator, asked for the sign change of t_E - t_D (`--level 0`;
@@ -381,8 +438,11 @@ def test_scan_and_bifurcation_commands(tmp_path):
     args = ["bifurcation", str(path), "--param", XI, "--bracket", "0.46", "0.57", "--observable",
             "detach:E-D", "--level", "0", "--method", "bisection", "--tol", "1e-4", *common,
             "--out", str(tmp_path / "bif")]  # fmt: skip
+    capfd.readouterr()
     rc = main(args)
     assert rc == 0
+    err = capfd.readouterr().err  # the locator's bar: the bracket closing in on a log scale, on stderr
+    assert "locating: 100%" in err and "bisect" in err and "solves" in err
     found = json.loads((tmp_path / "bif" / "bifurcation.json").read_text())
     assert found["overrides"] == {"hoist.speed": 0.05}
     (b,) = found["bifurcations"]

@@ -63,6 +63,30 @@ def test_mu_recovered_noise_free(scenario, clean):
     assert res.scenario.foundation.friction_coefficient == pytest.approx(res.values[0], rel=1e-15)
 
 
+def test_progress_reports_every_evaluation_and_nothing_without_a_callback(scenario, clean, capfd):
+    """The compiled LM fit reports through `jax.debug.callback`: numbered evaluations, the best cost never
+    increases and ends at the result's, the first step is from the start; without a callback (the same
+    compiled core) nothing is printed."""
+    reps = []
+    kw = dict(start={"mu": 0.3}, noise={"position": SIGMA})
+    res = identify(scenario, clean, ["mu"], progress=reps.append, **kw)
+    assert res.converged and len(reps) >= 2
+    assert [r["iteration"] for r in reps] == list(range(1, len(reps) + 1))
+    assert all(r["start"] == 0 and r["n_starts"] == 1 and r["solve_ok"] for r in reps)
+    best = [r["best_cost"] for r in reps]
+    assert all(b1 <= b0 for b0, b1 in zip(best, best[1:], strict=False))
+    assert best[-1] == pytest.approx(res.cost, rel=1e-9)
+    assert reps[0]["step"] == 0.0 and reps[0]["improved"] and reps[0]["cost"] > 10 * res.cost
+    assert any(r["step"] > 0 for r in reps[1:])
+    assert all(r["elapsed"] >= 0 and r["solver_steps"] > 0 for r in reps)
+    capfd.readouterr()
+    compiled = len(ident._COMPILED)
+    quiet = identify(scenario, clean, ["mu"], **kw)
+    assert len(ident._COMPILED) == compiled and quiet.cost == pytest.approx(res.cost, rel=1e-12)
+    out = capfd.readouterr()
+    assert out.out == "" and out.err == ""
+
+
 def test_covariance_matches_scatter(scenario, clean):
     """The Gauss-Newton standard error of μ̂ against the scatter of μ̂ over independent noise draws."""
     n = 12
@@ -143,7 +167,7 @@ def test_collinear_parameters_give_condition_number_and_direction():
     np.testing.assert_allclose(rep["covariance"], np.linalg.inv(J.T @ J), rtol=1e-10)
 
 
-def test_cli_identify_writes_estimates(scenario, clean, tmp_path):
+def test_cli_identify_writes_estimates(scenario, clean, tmp_path, capfd):
     from jaxhoist.apps.cli import main
 
     csv = write_measurement(tmp_path / "lift.csv", _noisy(clean, 100), units={"position_z": "mm"})
@@ -161,10 +185,11 @@ def test_cli_identify_writes_estimates(scenario, clean, tmp_path):
             "2",
             "--out",
             str(out),
-            "--quiet",
         ]
     )
     assert code == 0
+    err = capfd.readouterr().err  # one progress bar per start on stderr: evaluations, cost, best, step
+    assert "fit, start 1/2" in err and "fit, start 2/2" in err and "best" in err and "step" in err
     doc = json.loads((out / "estimates.json").read_text())
     est = doc["estimates"]["foundation.friction_coefficient"]
     assert abs(est["value"] - MU) < 4 * est["std_error"]
@@ -325,3 +350,23 @@ def test_bad_arguments_rejected_before_compiling(scenario, clean, no_compile):
         identify(scenario, clean, ["mu"], signals=["rope_tension"])
     with pytest.raises(jh.ScenarioError, match=r"not both"):
         identify(scenario, clean, ["mu"], noise={"position_x": 0.01}, weights={"position": 1.0})
+
+
+def test_plot_fit_shows_angles_in_degrees():
+    """Euler angles and angular velocities are drawn in deg and deg/s, like every other angle plot; lengths
+    stay in m. A stand-in result (no fit) carries only the fields `plot_fit` reads."""
+    t = np.linspace(0.0, 1.0, 11)
+    sig = {"euler_psi": 0.1 * t, "angular_velocity_xi": 0.2 + 0 * t, "position_x": 1.0 + t}
+    res = object.__new__(ident.IdentificationResult)
+    fields = dict(t=t, measured=sig, fitted={k: v + 1e-3 for k, v in sig.items()}, names=["mu"],
+                  values=np.array([0.25]), std_errors=np.array([0.01]))  # fmt: skip
+    for k, v in fields.items():
+        object.__setattr__(res, k, v)
+    fig = ident.plot_fit(res)
+    axes = [ax for ax in fig.axes if ax.get_visible()]
+    assert [ax.get_ylabel() for ax in axes] == [
+        "euler_psi [deg]", "angular_velocity_xi [deg/s]", "position_x [m]"
+    ]
+    np.testing.assert_allclose(axes[0].lines[0].get_ydata(), np.degrees(0.1 * t))
+    np.testing.assert_allclose(axes[1].lines[1].get_ydata(), np.degrees(0.2 + 1e-3))
+    np.testing.assert_allclose(axes[2].lines[0].get_ydata(), 1.0 + t)

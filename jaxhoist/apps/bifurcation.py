@@ -35,7 +35,7 @@ import json
 import math
 import sys
 import time
-from collections.abc import Sequence
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -390,6 +390,7 @@ def locate_bifurcation(
     max_solves: int = 200,
     points_per_round: int = 16,
     lanes: int = 16,
+    progress: Callable[[dict], None] | None = None,
 ) -> Bifurcation:
     """Refine a change of character of `observable` in `param` to a bracket no wider than `tol`.
 
@@ -409,6 +410,11 @@ def locate_bifurcation(
       the default solver here is `diffrax.Tsit5()` (rtol 1e-6, atol 1e-8): Newton steps need forward-mode
       sensitivities, which through the default Rosenbrock-W solver are not reliable yet at high friction.
     - `max_solves`: give up (converged=False) after this many solves.
+    - `progress`: called on the host after every evaluation (every round for "multisection") with a dict:
+      `iteration` (1, 2, ...: evaluations, or rounds), `param` (the value just solved; the round's values
+      for multisection), `value` (the observable there), `indicator` (g), `kind` ("end", "newton",
+      "bisect", "multisection"), `bracket` (lo, hi) after the update, `width`, `tol`, `n_solves`,
+      `elapsed` [s]. Default None: silent.
 
     **Returns** a `Bifurcation`.
 
@@ -458,11 +464,31 @@ def locate_bifurcation(
             n_uniform,
             unit,
             wall0,
+            progress,
         )
 
     ev = _Evaluator(scenario, param, obs, ts, options)
     use_d = method == "newton"
     history: list = []
+    n_eval = [0]
+
+    def report(x, y, g, tag, br):
+        n_eval[0] += 1
+        if progress is not None:
+            progress(
+                dict(
+                    iteration=n_eval[0],
+                    param=float(x),
+                    value=float(y),
+                    indicator=float(g),
+                    kind=tag,
+                    bracket=(float(br[0]), float(br[1])),
+                    width=float(br[1] - br[0]),
+                    tol=tol,
+                    n_solves=n_eval[0],  # one solve per evaluation
+                    elapsed=time.perf_counter() - wall0,
+                )
+            )
 
     def evaluate(x, tag):
         if use_d:  # reassigned below once the ends are known
@@ -480,6 +506,8 @@ def locate_bifurcation(
     g_a, g_b = _indicator(y_a, lev, y_lo_end), _indicator(y_b, lev, y_lo_end)
     slope_ok = use_d and np.isfinite(lev)
     history += [(lo, g_a, dy_a if slope_ok else None, "end"), (hi, g_b, dy_b if slope_ok else None, "end")]
+    report(lo, y_a, g_a, "end", (lo, hi))
+    report(hi, y_b, g_b, "end", (lo, hi))
     if g_a == 0.0 or g_b == 0.0 or np.sign(g_a) == np.sign(g_b):
         raise BifurcationError(
             f"{obs.name} - level has the same sign at both ends of the bracket ({param} = {lo:g}: {y_a:g}, "
@@ -517,11 +545,13 @@ def locate_bifurcation(
         history.append((x_new, g_new, dy_new if use_d else None, tag))
         if g_new == 0.0:
             a, b, ya, yb = x_new, x_new, y_new, y_new
+            report(x_new, y_new, g_new, tag, (a, b))
             break
         if np.sign(g_new) == np.sign(ga):
             a, ga, ya = x_new, g_new, y_new
         else:
             b, gb, yb = x_new, g_new, y_new
+        report(x_new, y_new, g_new, tag, (a, b))
         x, gx, dgx = x_new, g_new, dy_new
         n_bad_slopes = 0 if (dy_new is None or np.isfinite(dy_new)) else n_bad_slopes + 1
         if use_d and n_bad_slopes >= 2:
@@ -556,7 +586,8 @@ def locate_bifurcation(
 
 
 def _multisection(
-    scenario, param, obs, lo, hi, level, tol, ts, options, max_solves, k, lanes, n_uniform, unit, wall0
+    scenario, param, obs, lo, hi, level, tol, ts, options, max_solves, k, lanes, n_uniform, unit, wall0,
+    progress=None,
 ):
     """Each round solves `k` points in one vmapped scan and keeps the first sign change."""
     kw = dict(
@@ -599,6 +630,28 @@ def _multisection(
         if g1 == 0.0 or np.sign(g1) != np.sign(g0):
             a, ga, ya, b, gb, yb = x0, g0, y0, x1, g1, y1
             break
+    rounds = 0
+
+    def report(xs, ys, gs):
+        nonlocal rounds
+        rounds += 1
+        if progress is not None:
+            progress(
+                dict(
+                    iteration=rounds,
+                    param=[float(x) for x in xs],
+                    value=[float(y) for y in ys],
+                    indicator=[float(g) for g in gs],
+                    kind="multisection",
+                    bracket=(float(a), float(b)),
+                    width=float(b - a),
+                    tol=tol,
+                    n_solves=n_solves,
+                    elapsed=time.perf_counter() - wall0,
+                )
+            )
+
+    report(xs, ys, gs)
     while b - a > tol and n_solves + k <= max_solves:
         xs = a + (b - a) * np.arange(1, k + 1) / (k + 1)
         r = scan(scenario, {param: xs}, **kw)
@@ -614,6 +667,7 @@ def _multisection(
             if g1 == 0.0 or np.sign(g1) != np.sign(g0):
                 a, ga, ya, b, gb, yb = x0, g0, y0, x1, g1, y1
                 break
+        report(xs, ys, gs)
     return Bifurcation(
         param=param,
         unit=unit,
@@ -727,6 +781,7 @@ def trace_boundary(
     initial_half_width: float | None = None,
     max_expansions: int = 8,
     min_jump_fraction: float = 0.1,
+    progress: Callable[[dict], None] | None = None,
     **solve_kw,
 ) -> Boundary:
     """Follow the boundary p*(q) in the (p, q) plane by continuation, not a dense grid.
@@ -739,6 +794,9 @@ def trace_boundary(
     `min_jump_fraction` of the first point's is therefore reported as lost (NaN, with a note on the point):
     the jump has vanished or moved out of reach there, and a level crossing of a nearly flat observable is
     not the boundary.
+
+    `progress` (default None: silent) receives every report of the inner `locate_bifurcation` calls, with
+    `point` (index k of q), `n_points` and `along_value` (q) added.
 
     **Returns** a `Boundary`.
     """
@@ -768,9 +826,17 @@ def trace_boundary(
                 w = max(20 * tol, initial_half_width if initial_half_width else 0.05 * (hi - lo))
             candidates = [(pred - w * 2**i, pred + w * 2**i) for i in range(max_expansions)]
         pt = None
+        inner = None
+        if progress is not None:
+
+            def inner(d, k=k, q=q):
+                progress(d | {"point": k, "n_points": int(qs.size), "along_value": float(q)})
+
         for br in candidates:
             try:
-                pt = locate_bifurcation(sc, param, obs, br, level=level, tol=tol, method=method, **solve_kw)
+                pt = locate_bifurcation(
+                    sc, param, obs, br, level=level, tol=tol, method=method, progress=inner, **solve_kw
+                )
                 break
             except BifurcationError as e:  # no sign change in this bracket: widen it
                 n_solves += e.n_solves
@@ -869,6 +935,9 @@ def configure_parser(subparsers) -> None:
         "and scan_<observable>.png with the located values marked)",
     )
     p.add_argument("--no-plots", action="store_true", help="write no PNGs")
+    p.add_argument(
+        "--quiet", action="store_true", help="no progress bars on stderr (scan members, locator brackets)"
+    )
     p.set_defaults(func=run_cli)
 
 
@@ -913,7 +982,25 @@ def run_cli(args) -> int:
     kw = dict(t1=args.t1, n_save=args.n_save, rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     out = Path(args.out) if args.out else None
     lo, hi = args.bracket
-    boundary = None
+    bar = None
+    quiet = getattr(args, "quiet", False)
+    if not quiet:
+        from .cli import LocatorProgressBar
+
+        bar = LocatorProgressBar()
+    try:
+        found, boundary, res = _run_locator(args, scenario, observable, along_values, lo, hi, out, kw, bar)
+    finally:
+        if bar is not None:
+            bar.close()
+    for b in found:
+        print(b.summary())
+    return _write_cli(args, scenario, overrides, found, boundary, res, out)
+
+
+def _run_locator(args, scenario, observable, along_values, lo, hi, out, kw, bar):
+    boundary = res = None
+    quiet = getattr(args, "quiet", False)
     if (args.along is None) != (args.along_values is None):
         raise ScenarioError("--along and --along-values go together")
     if args.along is not None and args.scan:
@@ -929,8 +1016,11 @@ def run_cli(args) -> int:
             level=args.level,
             tol=args.tol,
             method=args.method,
+            progress=bar,
             **kw,
         )
+        if bar is not None:
+            bar.close()
         found = [b for b in boundary.points if b is not None]
         for r in boundary.rows():
             v = "lost or not found" if r["value"] is None else f"{r['value']:.10g}"
@@ -943,10 +1033,14 @@ def run_cli(args) -> int:
             {args.param: np.linspace(lo, hi, args.scan)},
             observables={name: observable},
             out_dir=None if out is None else out / "scan",
-            progress=True,
+            progress=not quiet,
             **kw,
         )
-        found = locate_jumps(scenario, res, name, level=args.level, tol=args.tol, method=args.method, **kw)
+        found = locate_jumps(
+            scenario, res, name, level=args.level, tol=args.tol, method=args.method, progress=bar, **kw
+        )
+        if bar is not None:
+            bar.close()
         print(
             f"{len(find_jumps(res, name))} candidate jumps"
             + ("" if args.level is None else f" and {len(find_crossings(res, name, args.level))} crossings")
@@ -962,11 +1056,14 @@ def run_cli(args) -> int:
                 level=args.level,
                 tol=args.tol,
                 method=args.method,
+                progress=bar,
                 **kw,
             )
         ]
-    for b in found:
-        print(b.summary())
+    return found, boundary, res
+
+
+def _write_cli(args, scenario, overrides, found, boundary, res, out) -> int:
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         rec = {

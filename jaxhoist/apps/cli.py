@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import contextlib
 import importlib
+import math
 import os
 import sys
 import time
@@ -171,6 +172,79 @@ class ScanProgressBar:
         self.bar.refresh()
         if p.done >= p.total:
             self.close()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+class LocatorProgressBar:
+    """Renders `locate_bifurcation` / `trace_boundary` progress reports as a tqdm bar on stderr: the bar is
+    the bracket's shrinking on a log scale (0 % at the first bracket, 100 % at `tol`), the postfix the
+    iteration, the last value solved and its indicator, the bracket width and the solves so far. A new bar
+    starts for every continuation point.
+
+    **Arguments**
+    - `stream`: where to draw (default stderr); `quiet`: draw nothing.
+    """
+
+    def __init__(self, stream=None, quiet: bool = False):
+        self.stream, self.quiet, self.bar, self.key, self.w0 = stream, quiet, None, None, None
+
+    def __call__(self, r: dict) -> None:
+        from tqdm import tqdm
+
+        key = r.get("point")
+        if self.bar is None or key != self.key:
+            self.close()
+            desc = "locating" if key is None else (
+                f"point {key + 1}/{r['n_points']} ({r['along_value']:.6g})")
+            self.bar = tqdm(total=100.0, desc=desc, unit="%", file=self.stream or sys.stderr,
+                            disable=self.quiet, dynamic_ncols=True,
+                            bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}, {postfix}]")
+            self.key = key
+        if r["iteration"] == 1:  # a new call (a wider retry, the next candidate jump): a new first bracket
+            self.w0 = r["width"]
+        w, tol = r["width"], r["tol"]
+        frac = 1.0 if w <= tol else 0.0
+        if tol < w < self.w0:
+            frac = math.log(self.w0 / w) / math.log(self.w0 / tol)
+        self.bar.n = round(100.0 * min(max(frac, 0.0), 1.0), 1)
+        x = r["param"][-1] if isinstance(r["param"], list) else r["param"]
+        g = r["indicator"][-1] if isinstance(r["indicator"], list) else r["indicator"]
+        self.bar.set_postfix_str(
+            f"it {r['iteration']} {r['kind']}, p = {x:.10g}, g = {g:.3g}, width {w:.3g}, "
+            f"{r['n_solves']} solves", refresh=False)
+        self.bar.refresh()
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+class FitProgressBar:
+    """Renders `identify` progress reports as a tqdm counter of Levenberg-Marquardt evaluations on stderr
+    (one bar per start, out of `max_iterations`) with the cost, the best cost and the step in the postfix."""
+
+    def __init__(self, total: int | None = None, stream=None, quiet: bool = False):
+        self.total, self.stream, self.quiet, self.bar, self.start = total, stream, quiet, None, None
+
+    def __call__(self, r: dict) -> None:
+        from tqdm import tqdm
+
+        if self.bar is None or r["start"] != self.start:
+            self.close()
+            desc = "fit" if r["n_starts"] == 1 else f"fit, start {r['start'] + 1}/{r['n_starts']}"
+            self.bar = tqdm(total=self.total, desc=desc, unit="eval", file=self.stream or sys.stderr,
+                            disable=self.quiet, dynamic_ncols=True)
+            self.start = r["start"]
+        self.bar.n = r["iteration"]
+        mark = "" if r["improved"] else " (rejected)"
+        self.bar.set_postfix_str(
+            f"cost {r['cost']:.6g}{mark}, best {r['best_cost']:.6g}, step {r['step']:.3g}", refresh=False)
+        self.bar.refresh()
 
     def close(self) -> None:
         if self.bar is not None:

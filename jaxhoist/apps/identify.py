@@ -34,7 +34,7 @@ import math
 import re
 import sys
 import time
-from collections.abc import Mapping, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
@@ -89,6 +89,54 @@ _POSITIVE = {
 }
 _PENALTY = 1e6  # whitened residual entry used when a trial solve fails: LM rejects such a step
 _VERBOSE = False
+
+
+class _FitReporter:
+    """Host side of the fit's progress reports. The compiled core always calls `_report` (through
+    `jax.debug.callback`, once or more per LM evaluation); `_report` forwards to the reporter installed by
+    `identify` for the duration of one LM run, so the compiled program does not depend on the callback and
+    nothing is reported (or printed) when none is installed."""
+
+    def __init__(self, progress, start: int, n_starts: int, t0: float):
+        self.progress, self.start, self.n_starts, self.t0 = progress, start, n_starts, t0
+        self.n, self.best_cost, self.best_z, self.last_z = 0, math.inf, None, None
+
+    def __call__(self, z, cost, info) -> None:
+        z = np.array(z, dtype=np.float64)
+        if self.last_z is not None and np.array_equal(z, self.last_z):
+            return  # the same evaluation seen again (its Jacobian pass)
+        self.last_z = z
+        self.n += 1
+        cost = float(cost)
+        step = 0.0 if self.best_z is None else float(np.linalg.norm(z - self.best_z))
+        improved = bool(np.isfinite(cost) and cost < self.best_cost)
+        if improved:
+            self.best_cost, self.best_z = cost, z
+        elif self.best_z is None:
+            self.best_z = z
+        self.progress(
+            dict(
+                start=self.start,
+                n_starts=self.n_starts,
+                iteration=self.n,
+                cost=cost,
+                best_cost=self.best_cost,
+                improved=improved,
+                step=step,
+                solve_ok=int(info[0]) == SolveStatus.OK,
+                solver_steps=int(info[1]),
+                elapsed=time.perf_counter() - self.t0,
+            )
+        )
+
+
+_REPORTER: list = [None]  # the active `_FitReporter`, or None
+
+
+def _report(z, cost, info) -> None:
+    rep = _REPORTER[0]
+    if rep is not None:
+        rep(z, cost, info)
 
 
 # ------------------------------------------------------------------------------------- parameters
@@ -493,6 +541,7 @@ def _fit_core(cfg: _Config, z0, args, lm_tol, scale):
 
     def fn(z, a):
         r, info = inner(z, a)
+        jax.debug.callback(_report, z, 0.5 * jnp.sum(r**2), info)
         return r * scale, info
 
     solver = optx.LevenbergMarquardt(rtol=lm_tol[0], atol=lm_tol[1], verbose=_VERBOSE)
@@ -908,6 +957,7 @@ def identify(
     max_iterations: int = 100,
     max_relative_se: float = 0.5,
     condition_limit: float = 1e12,
+    progress: Callable[[dict], None] | None = None,
 ) -> IdentificationResult:
     """Fit scenario leaves to measured time series by weighted nonlinear least squares.
 
@@ -934,6 +984,13 @@ def identify(
       variables z and the whitened residuals) and step budget.
     - `max_relative_se`, `condition_limit`: identifiability thresholds (relative standard error; condition
       number of JᵀJ in relative units).
+    - `progress`: called on the host (through `jax.debug.callback` from the compiled fit) after every
+      Levenberg-Marquardt evaluation, accepted or rejected, with a dict: `start` (0-based) and `n_starts`,
+      `iteration` (1, 2, ... within the start), `cost` (0.5 Σ r² of the whitened residuals there),
+      `best_cost` (the lowest so far, non-increasing), `improved` (this evaluation lowered it: LM accepts
+      such steps), `step` (|Δz| from the best point so far, in the fit variables z: log θ for positive
+      leaves), `solve_ok`, `solver_steps` (of that simulation) and `elapsed` [s] since the call. Default
+      None: silent.
 
     **Returns** an `IdentificationResult` (`summary()` prints a table).
 
@@ -988,7 +1045,13 @@ def identify(
         J0 = np.asarray(core(cfg, z0, args, probe_tol, one)[2])
         d = float(np.max(np.sum(J0**2, axis=0))) if np.all(np.isfinite(J0)) else 0.0
         scale = jnp.asarray(1.0 / math.sqrt(d) if d > 0 else 1.0)
-        z, r, J, info, n_steps, n_acc, codes = jax.block_until_ready(core(cfg, z0, args, lm_tol, scale))
+        if progress is not None:
+            _REPORTER[0] = _FitReporter(progress, len(runs), len(starts), wall0)
+        try:
+            z, r, J, info, n_steps, n_acc, codes = jax.block_until_ready(core(cfg, z0, args, lm_tol, scale))
+            jax.effects_barrier()  # every report delivered before the reporter goes
+        finally:
+            _REPORTER[0] = None
         z, r, J, info, codes = (np.asarray(x) for x in (z, r, J, info, codes))
         theta = _theta_of(plist, z)
         converged = bool(codes[0])
@@ -1267,8 +1330,12 @@ def synthetic_measurement(
 # ------------------------------------------------------------------------------------- plotting
 
 
+_DEGREES = {"rad": "deg", "rad/s": "deg/s"}  # SI angle units and how `plot_fit` shows them
+
+
 def plot_fit(result: IdentificationResult, *, max_signals: int = 12, title: str | None = None):
-    """Measured (dots) against fitted (line) signals, one panel per signal; returns a matplotlib Figure."""
+    """Measured (dots) against fitted (line) signals, one panel per signal, in SI units except angles
+    (Euler angles in deg, angular velocities in deg/s); returns a matplotlib Figure."""
     from matplotlib.figure import Figure
 
     names = list(result.measured)[:max_signals]
@@ -1278,8 +1345,11 @@ def plot_fit(result: IdentificationResult, *, max_signals: int = 12, title: str 
     axes = np.atleast_1d(fig.subplots(nrows, ncols, sharex=True, squeeze=False)).ravel()
     for ax, n in zip(axes, names, strict=False):
         unit = SIGNALS[n].unit
-        ax.plot(result.t, result.measured[n], ".", ms=2.5, color="0.45", label="measured")
-        ax.plot(result.t, result.fitted[n], "-", lw=1.2, color="tab:red", label="fitted")
+        k = 1.0
+        if unit in _DEGREES:  # angles in degrees, as in every other plot
+            unit, k = _DEGREES[unit], 180.0 / math.pi
+        ax.plot(result.t, k * result.measured[n], ".", ms=2.5, color="0.45", label="measured")
+        ax.plot(result.t, k * result.fitted[n], "-", lw=1.2, color="tab:red", label="fitted")
         ax.set_ylabel(f"{n} [{unit}]")
         ax.grid(alpha=0.3)
     for ax in axes[len(names) :]:
@@ -1370,7 +1440,7 @@ def configure_parser(subparsers) -> None:
     )
     p.add_argument("--out", default=None, help="output folder (default out/identify-<scenario name>)")
     p.add_argument("--no-plots", action="store_true", help="write only the JSON file")
-    p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
+    p.add_argument("--quiet", action="store_true", help="no progress line or bar on stderr")
     p.set_defaults(func=run)
 
 
@@ -1400,19 +1470,29 @@ def run(args: argparse.Namespace) -> int:
         f"fitting {', '.join(params)} of {scenario.name} to {len(measurement.names)} signals x "
         f"{measurement.t.size} samples of {args.measurement} (compiles once, then iterates) ..."
     )
-    res = identify(
-        scenario,
-        measurement,
-        params,
-        signals=signals,
-        noise=noise or None,
-        start=start,
-        n_starts=args.starts,
-        t1=args.t1,
-        rtol=args.rtol,
-        atol=args.atol,
-        max_iterations=args.max_iterations,
-    )
+    bar = None
+    if not quiet:
+        from .cli import FitProgressBar
+
+        bar = FitProgressBar(total=args.max_iterations)
+    try:
+        res = identify(
+            scenario,
+            measurement,
+            params,
+            signals=signals,
+            noise=noise or None,
+            start=start,
+            n_starts=args.starts,
+            t1=args.t1,
+            rtol=args.rtol,
+            atol=args.atol,
+            max_iterations=args.max_iterations,
+            progress=bar,
+        )
+    finally:
+        if bar is not None:
+            bar.close()
     out_dir.mkdir(parents=True, exist_ok=True)
     doc = res.to_dict() | {
         "command": ["jaxhoist", *args.argv] if getattr(args, "argv", None) is not None else sys.argv,
