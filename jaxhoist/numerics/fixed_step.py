@@ -32,6 +32,7 @@ from .._errors import SolveStatus
 from ..physics.elastic import vector_field
 from ..physics.equilibrium import initial_state
 from ..physics.params import Scenario
+from ._tree import lin_comb
 from .solve import outputs
 
 
@@ -40,21 +41,6 @@ def supports(solver) -> bool:
     tab = getattr(type(solver), "tableau", None)
     return (isinstance(solver, diffrax.AbstractERK) and isinstance(tab, diffrax.ButcherTableau)
             and not tab.implicit)
-
-
-def _tree_axpy(y, terms):
-    """y + Σ a_j k_j over pytrees, skipping zero coefficients (`terms`: list of (a_j, k_j))."""
-    terms = [(a, k) for a, k in terms if a != 0.0]
-    if not terms:
-        return y
-
-    def comb(y_leaf, *k_leaves):
-        acc = terms[0][0] * k_leaves[0]
-        for (a, _), k in zip(terms[1:], k_leaves[1:], strict=True):
-            acc = acc + a * k
-        return y_leaf + acc
-
-    return jax.tree_util.tree_map(comb, y, *[k for _, k in terms])
 
 
 def _scale(h, f):
@@ -73,14 +59,14 @@ def rk_step(f, tableau: diffrax.ButcherTableau, t, y, f0, h, args):
     ks = [_scale(h, f0)]
     fs = [f0]
     for i, (a_row, c_i) in enumerate(zip(a_lower, c, strict=True)):
-        yi = _tree_axpy(y, [(float(a), k) for a, k in zip(a_row, ks, strict=True)])
+        yi = lin_comb([(float(a), k) for a, k in zip(a_row, ks, strict=True)], base=y)
         fi = f(t + float(c_i) * h, yi, args)
         fs.append(fi)
         if i + 1 < len(c) or not tableau.fsal:
             ks.append(_scale(h, fi))
     if tableau.fsal:  # the last stage was evaluated at y1 = y + Σ b_j k_j (same coefficients)
         return yi, fs[-1]
-    y1 = _tree_axpy(y, [(float(bj), k) for bj, k in zip(b, ks, strict=True)])
+    y1 = lin_comb([(float(bj), k) for bj, k in zip(b, ks, strict=True)], base=y)
     return y1, f(t + h, y1, args)
 
 

@@ -34,6 +34,7 @@ import numpy as np
 from diffrax import AbstractTerm
 
 from ..physics.linearise import linearise as elastic_linearise
+from ._tree import lin_comb
 
 
 class WTableau(eqx.Module):
@@ -101,36 +102,6 @@ ROS34PW2 = w_tableau(
 )
 
 
-def _axpy(y, terms):
-    """y + Σ a_j x_j over pytrees, skipping zero coefficients (`terms`: list of (a_j, x_j))."""
-    terms = [(float(a), x) for a, x in terms if a != 0.0]
-    if not terms:
-        return y
-
-    def comb(yl, *xs):
-        acc = terms[0][0] * xs[0]
-        for (a, _), x in zip(terms[1:], xs[1:], strict=True):
-            acc = acc + a * x
-        return yl + acc
-
-    return jax.tree_util.tree_map(comb, y, *[x for _, x in terms])
-
-
-def _lin_comb(terms, like):
-    """Σ a_j x_j over pytrees (zero pytree like `like` if every a_j is 0)."""
-    terms = [(float(a), x) for a, x in terms if a != 0.0]
-    if not terms:
-        return jax.tree_util.tree_map(lambda x: 0.0 * x, like)
-
-    def comb(*xs):
-        acc = terms[0][0] * xs[0]
-        for (a, _), x in zip(terms[1:], xs[1:], strict=True):
-            acc = acc + a * x
-        return acc
-
-    return jax.tree_util.tree_map(comb, *[x for _, x in terms])
-
-
 def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None):
     """One Rosenbrock-W step of size h from (t, y).
 
@@ -161,18 +132,18 @@ def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None)
         if i == 0 and f0 is not None:
             fi = f0
         else:
-            yi = _axpy(y, [(tab.a[i][j], us[j]) for j in range(i)])
+            yi = lin_comb([(tab.a[i][j], us[j]) for j in range(i)], base=y)
             fi = f(t + float(tab.alpha[i]) * h, yi, args)
         if i == 0:
             f_start = fi
         if i:
-            cu = _lin_comb([(tab.c[i][j], us[j]) for j in range(i)], y)
+            cu = lin_comb([(tab.c[i][j], us[j]) for j in range(i)], like=y)
             ri = jax.tree_util.tree_map(lambda fl, cl: fl + cl / h, fi, cu)
         else:
             ri = fi
         us.append(jax.lax.optimization_barrier(lin.solve(lu, ri, hg)))
-    y1 = _axpy(y, list(zip(tab.m, us, strict=True)))
-    err = _lin_comb(list(zip(tab.m_err, us, strict=True)), y)
+    y1 = lin_comb(list(zip(tab.m, us, strict=True)), base=y)
+    err = lin_comb(list(zip(tab.m_err, us, strict=True)), like=y)
     if quadrature is None:
         return y1, err, None
     f1 = f(t + h, y1, args)
