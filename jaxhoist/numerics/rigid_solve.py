@@ -211,6 +211,35 @@ def _outputs(ts, ys, scenario, c, phases, settings, inextensible=False):
                                                                                                phases)
 
 
+#: Saved samples per output evaluation (`_chunked_outputs`): one compiled shape serves every `n_save`.
+OUTPUT_CHUNK = 1024
+
+
+def _chunked_outputs(ts, states, phase_index, phases, scenario, c, settings, inextensible):
+    """`rigid.output` at every saved time, in chunks of `OUTPUT_CHUNK` samples (the last one padded by
+    repeating its final sample), concatenated on the host. One compiled evaluation of fixed shape serves
+    every number of saved times; a single vmap over all of them (25 001 samples) did not return.
+
+    **Arguments**
+    - `ts` (n_t) [s]; `states`: the saved `State`, host arrays with a leading n_t axis; `phase_index` (n_t):
+      index into `phases` of each sample's phase; `scenario`, `c`, `settings`, `inextensible`: as for
+      `rigid.output`.
+
+    **Returns** a `rigid.Output` with a leading n_t axis.
+    """
+    n_t = ts.size
+    table = jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *phases)
+    parts = []
+    for start in range(0, n_t, OUTPUT_CHUNK):
+        sel = np.minimum(np.arange(start, start + OUTPUT_CHUNK), n_t - 1)
+        chunk_states = jax.tree_util.tree_map(lambda x: jnp.asarray(x[sel]), states)
+        chunk_phases = jax.tree_util.tree_map(lambda x: jnp.asarray(x[phase_index[sel]]), table)
+        out = _outputs(jnp.asarray(ts[sel]), chunk_states, scenario, c, chunk_phases, settings, inextensible)
+        m = min(OUTPUT_CHUNK, n_t - start)
+        parts.append(jax.tree_util.tree_map(lambda x: np.asarray(x)[:m], out))
+    return jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.concatenate(xs)), *parts)
+
+
 def _tree_index(tree, i):
     return jax.tree_util.tree_map(lambda x: x[i], tree)
 
@@ -842,7 +871,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
 
     n_t = ts.size
     filled = np.zeros(n_t, dtype=bool)
-    saved_states: list = [None] * n_t
+    saved_states = None  # per leaf an (n_t, ...) host array, allocated at the first phase
     saved_phase = np.zeros(n_t, dtype=np.int64)
     saved_impact = np.zeros(n_t)
     records: list[PhaseRecord] = []
@@ -885,11 +914,14 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         phases.append(phase)
         # Saved times of this phase: t <= ts <= t_end not yet filled.
         sys_np = jax.tree_util.tree_map(np.asarray, sys_)  # index on the host, not one dispatch per sample
-        for k in np.nonzero((ts >= t) & (ts <= t_end) & ~filled)[0]:
-            saved_states[k] = _tree_index(sys_np, k)
-            saved_phase[k] = idx
-            saved_impact[k] = impact_total
-            filled[k] = True
+        if saved_states is None:
+            saved_states = jax.tree_util.tree_map(lambda x: np.zeros((n_t,) + x.shape[1:], x.dtype), sys_np)
+        ks = np.nonzero((ts >= t) & (ts <= t_end) & ~filled)[0]
+        if ks.size:
+            jax.tree_util.tree_map(lambda dst, src: dst.__setitem__(ks, src[ks]), saved_states, sys_np)
+            saved_phase[ks] = idx
+            saved_impact[ks] = impact_total
+            filled[ks] = True
         modes = tuple(rigid.MODE_NAMES[int(m)] for m in _np(phase.contact))
         rope_name = rigid.ROPE_NAMES[int(phase.rope)]
         if not bool(event) or t_end >= t1:
@@ -952,11 +984,8 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
 
     for k in np.nonzero(~filled)[0]:  # cannot happen unless ts extends past the last phase
         raise RigidContactError(f"saved time {ts[k]} s was not reached")
-    # Stack on the host: jnp.stack of n_t arrays would compile one XLA program per leaf and length.
-    states = jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.stack(xs)), *saved_states)
-    # Outputs: one vmapped evaluation with every sample's own phase (rest phases included).
-    batch = jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.stack(xs)), *[phases[i] for i in saved_phase])
-    out = _outputs(jnp.asarray(ts), states, scenario, c, batch, settings, drv.inextensible)
+    states = jax.tree_util.tree_map(jnp.asarray, saved_states)
+    out = _chunked_outputs(ts, saved_states, saved_phase, phases, scenario, c, settings, drv.inextensible)
     euler = out.euler.at[:, :2].set(jnp.unwrap(out.euler[:, :2], axis=0))
     return RigidTrajectory(
         ts=jnp.asarray(ts), position=states.position, velocity=states.velocity, euler=euler,
