@@ -61,6 +61,10 @@ class PhaseRecord:
       taut, or "t1".
     - `state_end`: the state at `t_end` (before any impact).
     - `rope`: "elastic" (2.14), or the inextensible rope (2.15) "taut" or "slack".
+
+    A phase that lasted less than 1 µs (`min_phase`) has no record of its own: it is merged into the
+    previous one, whose `end` then reads "<its end> => <the short configuration> (<duration> s) -> <the
+    short phase's end>" (see `_merge`).
     """
 
     t_start: float
@@ -807,6 +811,7 @@ _DEFAULT_TOL = dict(
     accel=1e-7,        # consistency tolerance on accelerations [g]
     rest=1e-9,         # tolerance of the rest conditions (dimensionless guards)
     guard_start=1e-9,  # every guard starts at least this positive (offsets)
+    min_phase=1e-6,    # [s] a phase shorter than this is merged into the previous record (`_merge`)
     trigger=1e-6,      # guards within this of zero at an event count as fired
     lookahead=1e-5,    # the look-ahead runs until the fired guards are below -lookahead
     align=1e-2,        # a corner sliding from rest must accelerate along its sliding direction (relative)
@@ -828,7 +833,8 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
       ground is rigid, friction is exact Coulomb with μ = `foundation.friction_coefficient`).
     - `t1`: end time [s] (default `scenario.t1`); `ts` saved times (start 0, end t1), default `n_save` even.
     - `restitution`: Newton's coefficient e [-] of corner impacts (0: plastic).
-    - `rtol`, `atol`, `max_steps`: Tsit5 settings of each phase; `max_phases`: guard against Zeno sequences.
+    - `rtol`, `atol`, `max_steps`: Tsit5 settings of each phase; `max_phases`: guard against Zeno
+      sequences (counts phase solves, merged sub-microsecond ones included).
     - `settings`: `physics.rigid.Settings` (Baumgarte β, slip blend velocity, pseudo-inverse cut-off).
     - `verbose`: print each phase as it ends.
     - `rope`: "elastic" (the rope law (2.14), default) or "inextensible" (the constraint (2.15) with the
@@ -875,7 +881,18 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
     saved_phase = np.zeros(n_t, dtype=np.int64)
     saved_impact = np.zeros(n_t)
     records: list[PhaseRecord] = []
-    phases: list[Phase] = []
+    phases: list[Phase] = []   # one per phase solve (the outputs are evaluated with these)
+    record_of: list[int] = []  # per phase solve, its record in `records` (several when merged)
+
+    def log(rec: PhaseRecord):
+        """Append the record of the phase just solved, or merge it into the previous record when it lasted
+        less than `min_phase` (see `_merge`)."""
+        if records and rec.t_end - rec.t_start < drv.tol["min_phase"]:
+            records[-1] = _merge(records[-1], rec)
+        else:
+            records.append(rec)
+        record_of.append(len(records) - 1)
+
     impact_total = 0.0
 
     t, y = 0.0, y0
@@ -893,7 +910,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
             impact_total += loss
     phase = drv.select(t, y, "start")
     while True:
-        if len(records) >= max_phases:
+        if len(phases) >= max_phases:
             raise RigidContactError(
                 f"more than max_phases = {max_phases} phases before t = {t:.9g} s (a Zeno sequence of "
                 f"events?). Last phases:\n" + "\n".join(str(r) for r in records[-8:]))
@@ -925,7 +942,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         modes = tuple(rigid.MODE_NAMES[int(m)] for m in _np(phase.contact))
         rope_name = rigid.ROPE_NAMES[int(phase.rope)]
         if not bool(event) or t_end >= t1:
-            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), "t1", y_end, rope_name))
+            log(PhaseRecord(t, t_end, modes, bool(phase.rest), "t1", y_end, rope_name))
             break
         g = drv.guards(t_end, y_end, phase) + _np(phase.guard_offset)
         # Fired: near zero now, and well below where the guard started (a guard that started at its small
@@ -952,7 +969,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
                     raise RigidContactError(str(err)) from None
                 impact_total += loss
                 end += f" rope-jerk ({loss:.4g} J)"
-            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name))
+            log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name))
             new = drv.select(t_end, y_end, "after the rope became taut", phase)
         elif hard:
             y_before = y_end
@@ -973,10 +990,10 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
                     y_end, loss = drv._project(t_end, y_end, np.zeros(4, dtype=bool), near)
                     impact_total += loss
                 end += " settled"
-            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name))
+            log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name))
             new = drv.select(t_end, y_end, "after impact")
         else:
-            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_end, rope_name))
+            log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_end, rope_name))
             new = _transition(drv, t_end, y_end, phase, fired, ts)
         if verbose:
             print(records[-1], f"[{drv.accepted} steps so far]", flush=True)
@@ -995,7 +1012,21 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         hoist_work=states.hoist_work, damping_loss=states.damping_loss, friction_work=states.friction_work,
         impact_loss=jnp.asarray(saved_impact), states=states, status=jnp.asarray(SolveStatus.OK, jnp.int32),
         num_accepted_steps=jnp.asarray(drv.accepted), num_rejected_steps=jnp.asarray(drv.rejected),
-        phase_index=jnp.asarray(saved_phase), phases=tuple(records))
+        phase_index=jnp.asarray(np.asarray(record_of, dtype=np.int64)[saved_phase]), phases=tuple(records))
+
+
+def _merge(previous: PhaseRecord, short: PhaseRecord) -> PhaseRecord:
+    """One record for `previous` followed by a phase `short` that lasted less than `min_phase` (1 µs): two
+    events closer than the phase solves resolve time (their event root finder works to 1e-10 s, the
+    solution to rtol 1e-8) are one event of the log. The merged record keeps the previous phase's contact
+    modes and start, ends where `short` ended (its state and reason), and its `end` names both events and
+    the short configuration in between: "rest:tip => D:stick E:free F:stick H:free (4.1e-09 s) ->
+    normal:D,normal:F". The short phase is still solved and its impacts and losses are booked as usual;
+    only the log (and `RigidTrajectory.phase_index`) merge it."""
+    between = "rest" if short.rest else " ".join(f"{c}:{m}" for c, m in zip(rigid.CORNERS, short.contact,
+                                                                            strict=True))
+    end = f"{previous.end} => {between} ({short.t_end - short.t_start:.2g} s) -> {short.end}"
+    return dataclasses.replace(previous, t_end=short.t_end, end=end, state_end=short.state_end)
 
 
 def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[int], ts) -> Phase:
