@@ -61,6 +61,8 @@ class PhaseRecord:
       taut, or "t1".
     - `state_end`: the state at `t_end` (before any impact).
     - `rope`: "elastic" (2.14), or the inextensible rope (2.15) "taut" or "slack".
+    - `choice`: how the configuration was chosen where that needed more than consistency (several
+      consistent configurations: the rule that picked it; none: the regularised fallback), else "".
 
     A phase that lasted less than 1 µs (`min_phase`) has no record of its own: it is merged into the
     previous one, whose `end` then reads "<its end> => <the short configuration> (<duration> s) -> <the
@@ -74,13 +76,15 @@ class PhaseRecord:
     end: str
     state_end: State | None = dataclasses.field(default=None, compare=False, repr=False)
     rope: str = "elastic"
+    choice: str = ""
 
     def __str__(self) -> str:
         modes = "rest" if self.rest else " ".join(f"{c}:{m}" for c, m in zip(rigid.CORNERS, self.contact,
                                                                             strict=True))
         if self.rope != "elastic":
             modes += f"  rope:{self.rope}"
-        return f"{self.t_start:10.6f} - {self.t_end:10.6f} s  {modes:40s} -> {self.end}"
+        choice = f"  [{self.choice}]" if self.choice else ""
+        return f"{self.t_start:10.6f} - {self.t_end:10.6f} s  {modes:40s} -> {self.end}{choice}"
 
 
 class RigidTrajectory(eqx.Module):
@@ -200,6 +204,11 @@ def _rope_state(t, y, scenario, c):
     return ld.stretch, ld.rope_rate_error, ld.hoist_rate
 
 
+class _Jam(Exception):
+    """No consistent contact configuration while corners on the ground slide: resolve by a tangential
+    impact (`_Driver.jam`), then choose again."""
+
+
 class _RopeWouldPush(Exception):
     """No configuration (or impulse) with the taut inextensible rope has S >= 0: try the slack rope."""
 
@@ -269,10 +278,17 @@ class _Driver:
         self.accepted = 0
         self.rejected = 0
         self.debug = False
+        self.allow_jam = True  # fallback 2 of the configuration choice (off while choosing after a jam)
+        self.notes: list[str] = []  # how ambiguous or inconsistent contact choices were resolved (phase log)
         self.inextensible = False
         self.rope_taut = False  # the inextensible rope is at its length (taut, or may be): try taut first
 
     # ---------------------------------------------------------------------------- helpers
+    def take_notes(self) -> str:
+        """The resolution notes gathered since the last call, as one string (and forget them)."""
+        out, self.notes = "; ".join(self.notes), []
+        return out
+
     def guards(self, t, y, phase) -> np.ndarray:
         return _np(_raw_guards_jit(jnp.asarray(t), y, self.sc, self.c, phase, self.settings,
                                    self.inextensible))
@@ -378,6 +394,32 @@ class _Driver:
                 self.rope_taut = False
         return self._select(t, y, where, previous, rigid.ROPE_SLACK)
 
+    def select_or_jam(self, t, y, where: str, previous: Phase | None = None):
+        """`select` at (t, y); where no configuration is consistent while corners on the ground slide
+        (Painlevé), first a tangential impact at (t, y) (`jam`), then `select` again with fallback 2 off.
+
+        **Returns** `(phase, y, loss [J])`: `y` after the jam (or unchanged), its kinetic energy loss."""
+        try:
+            return self.select(t, y, where, previous), y, 0.0
+        except _Jam:
+            pass
+        y1, loss = self.jam(t, y)
+        self.allow_jam = False
+        try:
+            return self.select(t, y1, where + ", after a tangential impact", previous), y1, loss
+        finally:
+            self.allow_jam = True
+
+    def jam(self, t, y):
+        """The tangential impact of fallback 2: the corners on the ground take a plastic impulse (normal
+        velocity 0 after it) with Coulomb friction, as in `impact` (friction dropped if that has no
+        solution); the slip it stops is what made the contact problem inconsistent. Returns (y+, loss [J])."""
+        near, _, _, _ = self.near_ground(t, y)
+        taut = self.inextensible and self.rope_taut
+        y1, loss = self.impact(t, y, [i for i in range(4) if near[i]], taut=taut, normal_only=True)
+        self.notes.append(f"tangential impact ({loss:.3g} J)")
+        return y1, loss
+
     def _select(self, t, y, where: str, previous: Phase | None, rope: int) -> Phase:
         near, resting, corners, cv = self.near_ground(t, y)
         body_at_rest = bool(np.all(near) and np.all(resting))
@@ -396,70 +438,102 @@ class _Driver:
         mats = self.matrices(t, y, rope)
         near_idx = [i for i in range(4) if near[i]]
         combos, hints_list = [], []
+        reference = None  # the configuration with every corner on the ground in contact (see `_rank`)
         for r in range(len(near_idx), -1, -1):
             for subset in itertools.combinations(near_idx, r):
                 in_contact = np.zeros(4, dtype=bool)
                 in_contact[list(subset)] = True
                 modes, hints = coulomb_pattern(mats, in_contact, resting, self.mu, self.G, self.g,
                                                debug=self.debug)
+                if reference is None:
+                    reference = (modes, hints)
                 n_stick, n_contact = int(np.sum(modes == STICK)), int(np.sum(modes != FREE))
                 if np.all(near) and n_stick >= 2 and n_contact >= 3:
                     continue  # held fixed: the rest configuration, which failed above
                 combos.append(modes)
                 hints_list.append(hints)
+        ref_row = 0 if combos and np.array_equal(combos[0], reference[0]) else len(combos)
         n_max = 16
         contact = np.zeros((n_max, 4), dtype=np.int32)
         hints = np.zeros((n_max, 4, 2))
         contact[:len(combos)] = np.array(combos)
         hints[:len(combos)] = np.array(hints_list)
+        if ref_row == len(combos):  # a skipped (rest-like) configuration leaves room for it
+            contact[ref_row], hints[ref_row] = reference
         force, acc_c, accel, tension = _eval_candidates(jnp.asarray(t), y, self.sc, self.c, self.settings,
                                                         jnp.asarray(contact), jnp.asarray(hints),
                                                         jnp.asarray(rope, dtype=jnp.int32), self.inextensible)
         force, acc_c, accel, tension = map(_np, (force, acc_c, accel, tension))
+        n_ref = force[ref_row, :, 2]
 
-        tF, tA = self.tol["force"] * self.G, self.tol["accel"] * self.g
-        consistent, why = [], []
-        rope_rejected = False
-        for k, combo in enumerate(combos):
-            N = force[k, :, 2]
-            T = np.linalg.norm(force[k, :, :2], axis=1)
-            a = acc_c[k]
-            ok, reason = True, ""
-            for i in range(4):
-                if combo[i] != FREE and N[i] < -tF:
-                    ok, reason = False, f"N_{rigid.CORNERS[i]} = {N[i]:.4g} N < 0"
-                elif combo[i] == STICK and T[i] > self.mu * N[i] + tF:
-                    ok, reason = False, f"|T_{rigid.CORNERS[i]}| = {T[i]:.6g} N > μN = {self.mu * N[i]:.6g} N"
-                elif combo[i] == FREE and near[i] and a[i, 2] < -tA:
-                    ok, reason = False, f"free corner {rigid.CORNERS[i]} accelerates into the ground"
-                elif combo[i] == SLIDE and resting[i]:
-                    h = hints[k, i]
-                    ah = a[i, :2]
-                    along = float(ah @ h)
-                    perp = float(np.linalg.norm(ah - along * h))
-                    if along < -tA or perp > tA + self.tol["align"] * np.linalg.norm(ah):
-                        ok, reason = False, (f"{rigid.CORNERS[i]} would not slide along its friction "
-                                             f"direction (a_h = {ah}, t = {h})")
-                if not ok:
-                    break
-            if ok and rope == rigid.ROPE_TAUT and tension[k] < -tF:
-                ok, reason = False, f"the rope would push (S = {tension[k]:.4g} N)"
-                rope_rejected = True
-            (consistent if ok else why).append(k if ok else (combo, reason))
-            if self.debug:
-                print(f"  [{where} t={t:.9g}] {_fmt(combo)}: {'ok' if ok else reason}; N={np.round(N, 1)} "
-                      f"accel={np.round(accel[k], 6)}")
+        def check(scale: float):
+            """Consistency of every candidate with the tolerances times `scale`: (consistent indices,
+            [(combo, reason)] of the others, whether only the rope's S >= 0 failed somewhere, and per
+            candidate its largest violation in units of G or g)."""
+            tF, tA = scale * self.tol["force"] * self.G, scale * self.tol["accel"] * self.g
+            consistent, why, violation, reasons = [], [], np.zeros(len(combos)), [""] * len(combos)
+            rope_rejected = False
+            for k, combo in enumerate(combos):
+                N = force[k, :, 2]
+                T = np.linalg.norm(force[k, :, :2], axis=1)
+                a = acc_c[k]
+                ok, reason, worst = True, "", 0.0
+                for i in range(4):
+                    bad = ""
+                    if combo[i] != FREE and N[i] < -tF:
+                        bad, v = f"N_{rigid.CORNERS[i]} = {N[i]:.4g} N < 0", -N[i] / self.G
+                    elif combo[i] == STICK and T[i] > self.mu * N[i] + tF:
+                        bad = f"|T_{rigid.CORNERS[i]}| = {T[i]:.6g} N > μN = {self.mu * N[i]:.6g} N"
+                        v = (T[i] - self.mu * N[i]) / self.G
+                    elif combo[i] == FREE and near[i] and a[i, 2] < -tA:
+                        bad = f"free corner {rigid.CORNERS[i]} accelerates into the ground"
+                        v = -a[i, 2] / self.g
+                    elif combo[i] == SLIDE and resting[i]:
+                        h = hints[k, i]
+                        ah = a[i, :2]
+                        along = float(ah @ h)
+                        perp = float(np.linalg.norm(ah - along * h))
+                        if along < -tA or perp > tA + self.tol["align"] * np.linalg.norm(ah):
+                            bad = (f"{rigid.CORNERS[i]} would not slide along its friction direction "
+                                   f"(a_h = {ah}, t = {h})")
+                            v = max(-along, perp - self.tol["align"] * np.linalg.norm(ah)) / self.g
+                    if bad:
+                        ok, worst = False, max(worst, v)
+                        reason = reason or bad
+                if ok and rope == rigid.ROPE_TAUT and tension[k] < -tF:
+                    ok, reason = False, f"the rope would push (S = {tension[k]:.4g} N)"
+                    worst = max(worst, -tension[k] / self.G)
+                    rope_rejected = True
+                violation[k], reasons[k] = worst, reason
+                (consistent if ok else why).append(k if ok else (combo, reason))
+                if self.debug and scale == 1.0:
+                    print(f"  [{where} t={t:.9g}] {_fmt(combo)}: {'ok' if ok else reason}; "
+                          f"N={np.round(N, 1)} accel={np.round(accel[k], 6)}")
+            return consistent, why, rope_rejected, (violation, reasons)
+
+        consistent, why, rope_rejected, (violation, reasons) = check(1.0)
         if not consistent and rope_rejected:
             raise _RopeWouldPush  # only the rope's S >= 0 failed: it goes slack
         if not consistent:
-            tried = "; ".join(f"{_fmt(cb)}: {r}" for cb, r in why[:12])
-            raise RigidContactError(
-                f"t = {t:.9g} s ({where}): no consistent contact configuration (Painlevé-type inconsistency "
-                f"or a degenerate contact). Corners on the ground: "
-                f"{[rigid.CORNERS[i] for i in range(4) if near[i]]}. Tried: {tried}")
-        # Prefer the most corners in contact (every corner that can carry load does, as with (2.3)); among
-        # those, the one whose normal forces continue the previous phase's (the rigid limit of a stiff
-        # ground: the corner whose load has vanished is the one that unloads); then the most sticking.
+            # Fallbacks, in order (each recorded in the phase log; see docs/rigid-model.md, "Resolution"):
+            # 1. a degenerate contact (a load, acceleration or slip direction within rounding of its limit):
+            #    the consistency tolerances relaxed by `relax`;
+            relaxed, _, _, _ = check(self.tol["relax"])
+            if relaxed:
+                consistent = relaxed
+                self.notes.append(f"tolerances x{self.tol['relax']:g} (degenerate contact)")
+            elif self.allow_jam and np.any(near & ~resting):
+                # 2. Painlevé-type inconsistency of sliding contacts: a tangential impact (dynamic
+                #    jamming; an impulse at the corners on the ground with zero normal velocity after it,
+                #    sticking where the cone allows, friction dropped if that has no solution), then choose
+                #    again.
+                raise _Jam(why)
+            else:
+                # 3. the least inconsistent configuration, as a short regularised phase (its guards end it).
+                k = int(np.argmin(violation))
+                consistent = [k]
+                self.notes.append(f"regularised: no consistent configuration, least violation "
+                                  f"{violation[k]:.2g} ({reasons[k]})")
         if previous is not None and int(previous.rope) != rope:
             previous = eqx.tree_at(lambda p: p.rope, previous, jnp.asarray(rope, dtype=jnp.int32))
         if previous is not None:
@@ -467,40 +541,72 @@ class _Driver:
                                  self.inextensible))[:, 2]
         else:
             prev_N = None
-        jump = lambda k: 0.0 if prev_N is None else float(np.linalg.norm(force[k, :, 2] - prev_N))  # noqa: E731
-        n_contacts = lambda k: int(np.sum(combos[k] != FREE))  # noqa: E731
-        top = max(n_contacts(k) for k in consistent)
-        group = sorted([k for k in consistent if n_contacts(k) == top],
-                       key=lambda k: (round(jump(k) / (self.tol["jump"] * self.G)),
-                                      -int(np.sum(combos[k] == STICK))))
-        best = group[0]
-        a_scale = np.linalg.norm(accel[best]) + tA
-        for k in group[1:]:
-            if abs(jump(k) - jump(best)) > self.tol["jump"] * self.G:
-                break
-            if np.linalg.norm(accel[k] - accel[best]) > 1e-5 * a_scale + 10 * tA:
-                raise RigidContactError(
-                    f"t = {t:.9g} s ({where}): two consistent contact configurations with different "
-                    f"accelerations and equally continuous contact forces, {_fmt(combos[best])} and "
-                    f"{_fmt(combos[k])} (non-uniqueness of the rigid contact problem with Coulomb friction, "
-                    f"Painlevé type)")
+        best = self._rank(combos, consistent, force, accel, prev_N, n_ref, near, mats)
         combo = combos[best]
         hint = np.where((combo == SLIDE)[:, None], hints[best], 0.0)
         flat3 = bool(np.all(near)) and int(np.sum(combo != FREE)) == 3
         return rigid.make_phase(combo, rest=False, slip_hint=hint, starting=(combo == SLIDE) & resting,
                                 free_on_ground=(combo == FREE) & near & flat3, rope=rope)
 
+    def _rank(self, combos, consistent, force, accel, prev_N, n_ref, near, mats) -> int:
+        """The resolution rule among consistent configurations (docs/rigid-model.md, "Resolution"):
+
+        1. the most corners in contact (every corner that can carry load does);
+        2. the most continuous normal forces, |N - N_prev| within `jump` G (after an event: the corner whose
+           load vanished is the one that unloads, as on a stiff foundation);
+        3. the stiff-foundation rule: release the corners whose load is the most negative in the reference
+           solution with every corner on the ground in contact (four corners: the linear law (2.3), the flat
+           bottom compressing a stiff foundation linearly), Σ_free N_ref,i smallest;
+        4. the most sticking corners;
+        5. least constraint (Gauss): the body acceleration closest, in the kinetic metric M, to the
+           unconstrained one M⁻¹f.
+
+        Steps 3 and 5 are recorded in the phase log when they decided between configurations whose
+        accelerations differ (the contact problem with Coulomb friction was not unique).
+        """
+        tJ = self.tol["jump"] * self.G
+        jump = lambda k: 0.0 if prev_N is None else float(np.linalg.norm(force[k, :, 2] - prev_N))  # noqa: E731
+        released = lambda k: float(np.sum(np.where(near & (combos[k] == FREE), n_ref, 0.0)))  # noqa: E731
+        M, f = mats.mass[:6, :6], mats.force[:6]
+        a_free = np.linalg.solve(M, f)
+        gauss = lambda k: float((accel[k] - a_free) @ M @ (accel[k] - a_free))  # noqa: E731
+        n_contacts = lambda k: int(np.sum(combos[k] != FREE))  # noqa: E731
+        top = max(n_contacts(k) for k in consistent)
+        group = [k for k in consistent if n_contacts(k) == top]
+        keys = {k: (round(jump(k) / tJ), round(released(k) / tJ), -int(np.sum(combos[k] == STICK)),
+                    gauss(k)) for k in group}
+        group.sort(key=lambda k: keys[k])
+        best = group[0]
+        tA = self.tol["accel"] * self.g
+        a_scale = np.linalg.norm(accel[best]) + tA
+        rivals = [k for k in group[1:] if keys[k][0] == keys[best][0]
+                  and np.linalg.norm(accel[k] - accel[best]) > 1e-5 * a_scale + 10 * tA]
+        if rivals:
+            k = rivals[0]
+            rule = ("stiff-foundation rule" if keys[k][1] != keys[best][1] else
+                    "most sticking" if keys[k][2] != keys[best][2] else "least constraint")
+            ref = f" (N_ref = {np.round(n_ref, 1).tolist()} N)" if rule.startswith("stiff") else ""
+            self.notes.append(f"{rule}: {_fmt(combos[best])} over {_fmt(combos[k])}{ref}")
+        return best
+
     # ---------------------------------------------------------------------------- impacts
-    def impact(self, t, y, striking: list[int], taut: bool = False):
+    def impact(self, t, y, striking: list[int], taut: bool = False, normal_only: bool = False):
         """Velocity jump at an impact of the `striking` corners; returns (y+, loss [J]). With the taut
         inextensible rope (`taut`) the rope takes an impulse too (it keeps its rate), unless that would
-        need a push: then it goes slack in the impact."""
+        need a push: then it goes slack in the impact. `normal_only`: no restitution (every involved
+        corner ends with zero normal velocity; the tangential impact of `jam`).
+
+        Resolution (docs/rigid-model.md, "Resolution"), each step after the first recorded in `notes`:
+        the consistent Coulomb impulse with the most contacts, then the most sticking corners, then the
+        largest kinetic energy loss (maximal dissipation) where several remain; if none is consistent
+        (a grazing touch, a Painlevé-type impact), the frictionless impulse ("friction dropped"); if that
+        too fails, the M-orthogonal projection onto zero normal velocity of the involved corners."""
         corners, cv, ke0 = self.kin(t, y)
         near = corners[:, 2] < self.tol["z"] * self.L
         involved = [i for i in range(4) if near[i] or i in striking]
         normal_target = np.zeros(4)
         for i in striking:
-            if cv[i, 2] < -self.tol["bounce"] * self.V:
+            if cv[i, 2] < -self.tol["bounce"] * self.V and not normal_only:
                 normal_target[i] = -self.e * cv[i, 2]
         if taut:
             try:
@@ -513,35 +619,59 @@ class _Driver:
         slipping = speed >= self.tol["v"] * self.V
         dirs = np.where(slipping[:, None], vh / np.maximum(speed, 1e-300)[:, None], 0.0)
         mask = np.isin(np.arange(4), involved)
-        combos = _impulse_combinations(mask)
-        # Sliding impulses need a direction: the pre-impact slip, else the opposite of the sticking impulse.
-        sticking = _modes([np.where(cb == SLIDE, STICK, cb) for cb in combos])
-        _, _, imp0, _ = map(_np, _eval_impulses(y, self.sc, self.c, jnp.asarray(sticking),
-                                                jnp.asarray(np.zeros((81, 4, 2))),
-                                                jnp.asarray(normal_target), self.settings.rcond))
-        sd = _slide_directions(combos, slipping, dirs, imp0)
-        modes = _modes(combos)
-        v1, w1, imp, cv1 = map(_np, _eval_impulses(y, self.sc, self.c, jnp.asarray(modes), jnp.asarray(sd),
-                                                   jnp.asarray(normal_target), self.settings.rcond))
         tP = self.tol["force"] * self.G * 1e-3  # impulses [N s]
         tV = self.tol["v"] * self.V
-        consistent = _consistent_impulses(combos, imp, cv1, sd, mask, self.mu, tP, tV)
+
+        def solve(sc, mu, combos):
+            # Sliding impulses need a direction: the pre-impact slip, else the opposite of the sticking one.
+            sticking = _modes([np.where(cb == SLIDE, STICK, cb) for cb in combos])
+            _, _, imp0, _ = map(_np, _eval_impulses(y, sc, self.c, jnp.asarray(sticking),
+                                                    jnp.asarray(np.zeros((81, 4, 2))),
+                                                    jnp.asarray(normal_target), self.settings.rcond))
+            sd = _slide_directions(combos, slipping, dirs, imp0) if mu > 0 else np.zeros((81, 4, 2))
+            out = map(_np, _eval_impulses(y, sc, self.c, jnp.asarray(_modes(combos)), jnp.asarray(sd),
+                                          jnp.asarray(normal_target), self.settings.rcond))
+            v1, w1, imp, cv1 = out
+            return v1, w1, _consistent_impulses(combos, imp, cv1, sd, mask, mu, tP, tV)
+
+        combos = _impulse_combinations(mask)
+        v1, w1, consistent = solve(self.sc, self.mu, combos)
+        names = "".join(rigid.CORNERS[i] for i in involved)
         if not consistent:
-            raise RigidContactError(
-                f"t = {t:.9g} s: impact of corner(s) {[rigid.CORNERS[i] for i in striking]} has no "
-                f"consistent impulse (Painlevé-type impact inconsistency)")
+            # A grazing touch or a Painlevé-type impact: the frictionless impulse (contacts FREE or SLIDE
+            # with μ = 0), which a plastic impact always has.
+            sc0 = eqx.tree_at(lambda s: s.foundation.friction_coefficient, self.sc,
+                              jnp.zeros((), dtype=jnp.float64))
+            combos = [cb for cb in combos if not np.any(cb == STICK)]
+            v1, w1, consistent = solve(sc0, 0.0, combos)
+            if consistent:
+                self.notes.append(f"no Coulomb impulse at {names}: friction dropped")
+        if not consistent:
+            y1, _ = self._project(t, y, np.zeros(4, dtype=bool), mask)
+            self.notes.append(f"no impulse at {names}: normal velocities projected out")
+            v1, w1 = _np(y1.velocity)[None], _np(y1.angular_velocity)[None]
+            consistent = [0]
         best = consistent[0]
         u_best = np.concatenate([v1[best], w1[best]])
-        for k in consistent[1:]:
-            if (np.sum(combos[k] != FREE), np.sum(combos[k] == STICK)) != (
-                    np.sum(combos[best] != FREE), np.sum(combos[best] == STICK)):
-                break
-            if np.linalg.norm(np.concatenate([v1[k], w1[k]]) - u_best) > 1e-6 * (np.linalg.norm(u_best) + tV):
-                raise RigidContactError(
-                    f"t = {t:.9g} s: impact of corner(s) {[rigid.CORNERS[i] for i in striking]} has two "
-                    f"consistent impulses, {_fmt(combos[best])} and {_fmt(combos[k])} (Newton's restitution "
-                    f"law is not unique for simultaneous multi-corner impacts; restitution = 0, or a larger "
-                    f"Settings.rest_velocity to let a rocking load settle, avoids this)")
+        def counts(k):
+            return int(np.sum(combos[k] != FREE)), int(np.sum(combos[k] == STICK))
+
+        def differs(k):
+            du = np.linalg.norm(np.concatenate([v1[k], w1[k]]) - u_best)
+            return du > 1e-6 * (np.linalg.norm(u_best) + tV)
+
+        def after(k):
+            return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
+                               (jnp.asarray(v1[k]), jnp.asarray(w1[k])))
+
+        tied = [k for k in consistent[1:] if counts(k) == counts(best) and differs(k)]
+        if tied:
+            # Newton's law is not unique for simultaneous multi-corner impacts: maximal dissipation.
+            ke = {k: self.kin(t, after(k))[2] for k in [best, *tied]}
+            new = min(ke, key=ke.get)
+            self.notes.append(f"{len(tied) + 1} consistent impulses: maximal dissipation, "
+                              f"{_fmt(combos[new])}")
+            best = new
         y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
                          (jnp.asarray(v1[best]), jnp.asarray(w1[best])))
         _, _, ke1 = self.kin(t, y1)
@@ -550,7 +680,7 @@ class _Driver:
             raise RigidContactError(
                 f"t = {t:.9g} s: the impact of corner(s) {[rigid.CORNERS[i] for i in striking]} would gain "
                 f"kinetic energy ({-loss:.4g} J) with restitution {self.e} and friction μ = {self.mu}: "
-                "Newton's restitution law is not energy-consistent here")
+                "Newton's restitution law is not energy-consistent here; lower the restitution")
         return y1, loss
 
 
@@ -817,6 +947,7 @@ _DEFAULT_TOL = dict(
     align=1e-2,        # a corner sliding from rest must accelerate along its sliding direction (relative)
     jump=1e-3,         # normal-force jumps closer than this [G] count as equally continuous
     bounce=1e-4,       # impacts slower than bounce V are plastic (no restitution): avoids Zeno bouncing
+    relax=1e3,         # fallback 1 of the configuration choice: tolerances times this (degenerate contacts)
 )
 
 
@@ -908,7 +1039,9 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
             except _RopeWouldPush as err:
                 raise RigidContactError(str(err)) from None
             impact_total += loss
-    phase = drv.select(t, y, "start")
+    phase, y, loss = drv.select_or_jam(t, y, "start")
+    impact_total += loss
+    choice = drv.take_notes()
     while True:
         if len(phases) >= max_phases:
             raise RigidContactError(
@@ -942,7 +1075,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         modes = tuple(rigid.MODE_NAMES[int(m)] for m in _np(phase.contact))
         rope_name = rigid.ROPE_NAMES[int(phase.rope)]
         if not bool(event) or t_end >= t1:
-            log(PhaseRecord(t, t_end, modes, bool(phase.rest), "t1", y_end, rope_name))
+            log(PhaseRecord(t, t_end, modes, bool(phase.rest), "t1", y_end, rope_name, choice))
             break
         g = drv.guards(t_end, y_end, phase) + _np(phase.guard_offset)
         # Fired: near zero now, and well below where the guard started (a guard that started at its small
@@ -969,13 +1102,16 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
                     raise RigidContactError(str(err)) from None
                 impact_total += loss
                 end += f" rope-jerk ({loss:.4g} J)"
-            log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name))
-            new = drv.select(t_end, y_end, "after the rope became taut", phase)
+            log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name, choice))
+            new, y_end, loss = drv.select_or_jam(t_end, y_end, "after the rope became taut", phase)
+            impact_total += loss
         elif hard:
             y_before = y_end
             y_end, loss = drv.impact(t_end, y_end, hard, taut=int(phase.rope) == rigid.ROPE_TAUT)
             impact_total += loss
-            end += f" impact:{''.join(rigid.CORNERS[i] for i in hard)} ({loss:.4g} J)"
+            how = drv.take_notes()
+            how = f", {how}" if how else ""
+            end += f" impact:{''.join(rigid.CORNERS[i] for i in hard)} ({loss:.4g} J{how})"
             # Settling: if every corner on the ground leaves the impact slower than rest_velocity, the
             # impact is plastic for all of them (their normal velocities are removed; flat on the ground,
             # the load stops). This ends the otherwise endless sequence of ever smaller rocking impacts.
@@ -990,14 +1126,16 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
                     y_end, loss = drv._project(t_end, y_end, np.zeros(4, dtype=bool), near)
                     impact_total += loss
                 end += " settled"
-            log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name))
-            new = drv.select(t_end, y_end, "after impact")
+            log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name, choice))
+            new, y_end, loss = drv.select_or_jam(t_end, y_end, "after impact")
+            impact_total += loss
         else:
-            log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_end, rope_name))
-            new = _transition(drv, t_end, y_end, phase, fired, ts)
+            log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_end, rope_name, choice))
+            new, y_end, loss = _transition(drv, t_end, y_end, phase, fired, ts)
+            impact_total += loss
         if verbose:
             print(records[-1], f"[{drv.accepted} steps so far]", flush=True)
-        t, y, phase = t_end, y_end, new
+        t, y, phase, choice = t_end, y_end, new, drv.take_notes()
 
     for k in np.nonzero(~filled)[0]:  # cannot happen unless ts extends past the last phase
         raise RigidContactError(f"saved time {ts[k]} s was not reached")
@@ -1029,8 +1167,11 @@ def _merge(previous: PhaseRecord, short: PhaseRecord) -> PhaseRecord:
     return dataclasses.replace(previous, t_end=short.t_end, end=end, state_end=short.state_end)
 
 
-def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[int], ts) -> Phase:
-    """The next phase after the guards `fired` of `phase` reached zero at (t_e, y_e) (no impact)."""
+def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[int], ts):
+    """The next phase after the guards `fired` of `phase` reached zero at (t_e, y_e) (no impact).
+
+    **Returns** `(phase, y, loss [J])`: `y` is `y_e`, or `y_e` after a tangential impact (`_Driver.jam`)
+    where no configuration was consistent."""
     contact, starting = _np(phase.contact), _np(phase.starting)
     _, cv, _ = drv.kin(t_e, y_e)
     speed = np.linalg.norm(cv[:, :2], axis=1)
@@ -1047,11 +1188,11 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
         for i in grown:
             start[i] = False
         return rigid.make_phase(contact, rest=False, slip_hint=hint, starting=start,
-                                free_on_ground=_np(phase.free_on_ground), rope=int(phase.rope))
+                                free_on_ground=_np(phase.free_on_ground), rope=int(phase.rope)), y_e, 0.0
     where = f"after {','.join(rigid.GUARD_NAMES[k] for k in fired)}"
     # A slip that died out: choose at the event itself (the corner is now resting).
     if any(speed[i] < 1.5 * drv.v_stop for i in tangential):
-        return drv.select(t_e, y_e, where, phase)
+        return drv.select_or_jam(t_e, y_e, where, phase)
     # Otherwise look ahead: continue the old phase (guards disabled) until the fired guards are clearly
     # negative, and choose there.
     blind = eqx.tree_at(lambda p: p.guard_offset, phase, jnp.full(rigid.N_GUARDS, 1e6, dtype=jnp.float64))
@@ -1065,4 +1206,8 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
         if all(g[k] < -drv.tol["lookahead"] for k in fired):
             break
         dt *= 2.0
-    return drv.select(t_la, y_la, where, phase)
+    try:
+        return drv.select(t_la, y_la, where, phase), y_e, 0.0
+    except _Jam:
+        # The tangential impact where the event happened, then choose there.
+        return drv.select_or_jam(t_e, y_e, where, phase)
