@@ -15,13 +15,20 @@ root finding). Between phases, on the host:
    modes (free / slide / stick) of the corners on the ground is evaluated, and the ones that are
    consistent (N_i >= 0, friction of sticking corners within μN_i, sliding from rest in the direction of the
    resulting acceleration, free corners on the ground not accelerating into it, or, for a load at rest on
-   all four corners, the rest conditions of `statics`) are kept. Among them the one that changes the
-   fewest corners (then the most sticking, then the most contacts) is chosen. The next phase starts from the
-   event state.
+   all four corners, the rest conditions of `statics`) are kept. Among them the resolution rule
+   (`_Driver._rank`) picks one: the most contacts, then the most continuous normal forces, then the
+   stiff-foundation rule (free the corners whose load is most negative when every corner on the ground is
+   in contact: the linear law (2.3) on four corners), then the most sticking corners, then least
+   constraint (Gauss). The next phase starts from the event state.
 
-No consistent configuration (a Painlevé-type inconsistency, or contacts too close to degenerate for the
-tolerances) or two consistent ones with different accelerations (non-uniqueness) raise `RigidContactError`
-naming the time, the corners and what was tried; nothing is silently guessed.
+Where no configuration is consistent, documented fallbacks take over, in order: the tolerances relaxed
+(degenerate contacts), a tangential impact of the sliding corners on the ground (Painlevé-type
+inconsistency; "dynamic jamming"), the least-violating configuration as a short phase. Impacts with no
+consistent Coulomb impulse (a grazing touch) take the frictionless one; several consistent impulses, the
+most dissipative. Each such step is recorded in the phase log (`PhaseRecord.choice`, or the impact's
+`end`); see docs/rigid-model.md, "Resolution of contact choices and impacts". `RigidContactError` is left
+for inputs that cannot be continued: too many phases, a failed phase solve, an impact that would gain
+energy with the given restitution, an inextensible rope that cannot start.
 """
 
 from __future__ import annotations
@@ -46,8 +53,10 @@ from ..physics.rigid import FREE, SLIDE, STICK, Phase
 
 
 class RigidContactError(RuntimeError):
-    """The rigid contact problem has no consistent solution, or several (Painlevé-type situations), or a
-    phase could not be continued (solver failure, too many phases)."""
+    """The rigid model cannot continue with these inputs: more than `max_phases` phases (a Zeno sequence),
+    a phase solve that failed (`max_steps`, tolerances), an impact that would gain energy with the given
+    restitution, or an inextensible rope whose start has no consistent jerk. The message names what to
+    change. Ambiguous or inconsistent contact problems are resolved, not raised (module docstring)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -1046,7 +1055,8 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         if len(phases) >= max_phases:
             raise RigidContactError(
                 f"more than max_phases = {max_phases} phases before t = {t:.9g} s (a Zeno sequence of "
-                f"events?). Last phases:\n" + "\n".join(str(r) for r in records[-8:]))
+                f"events? raise max_phases, or Settings.rest_velocity to let rocking settle). "
+                f"Last phases:\n" + "\n".join(str(r) for r in records[-8:]))
         y, loss = drv.project(t, y, phase)
         impact_total += loss
         phase = drv.with_offsets(t, y, phase)
