@@ -14,15 +14,17 @@ Each finished run is appended to `runs.jsonl` at once (a restarted sweep skips t
 completed or the error, the number of phases (records) and of phase solves, how many contact choices and
 impacts needed a resolution step beyond consistency (`PhaseRecord.choice`, impact notes; see
 docs/rigid-model.md, "Resolution"), the largest |energy residual| [J], the hoist work and the impact losses
-[J], and the wall time [s]. A run "closes" when max |residual| <= 1e-6 x the hoist work (the tolerance of
-`tests/test_rigid.py`). Figures: `rigid_sweep.png` (completion, phase counts and relative energy residual over
-μ, per preset and rope).
+[J], and the wall time [s]. A run "closes" as today when max |residual| <= 1e-6 x the hoist work (the
+tolerance of `tests/test_rigid.py`) or <= 2.5e-3 x the impact losses (the preset paper-2.3 before issue 15:
+0.027 J against 11 J of impact losses; the residual of the rigid model grows with the number of impacts in
+a rocking train, not with the solver tolerance). Figures: `rigid_sweep.png` (completion, phase counts and
+the energy residual over its tolerance, over μ, per preset and rope).
 
 `--elastic`: the elastic model at k = 1.5e9 N/m per corner (critically damped, h = sqrt(k m)), ε = 1e-4 m/s,
 p_0 = 1e-6 m (the stiffest row of the convergence table in docs/rigid-model.md) against the rigid model on
-paper-2.3 at μ = 0.252, 0.26, 0.27 (where the rigid model needed the resolution rule), to t1 = 11.3 s (just
-past the landing at 11.0 s that used to raise): max |Δr_C| and, after the landing, which corner carries the
-least load in each model. Writes `rigid_elastic.json`.
+paper-2.3 at μ = 0.252, 0.255, 0.27 (the landings that raised "non-uniqueness") and 0.26 (the grazing
+impact), each to just past that moment (`ELASTIC_CASES`), saved every 2 ms: max |Δr_C| and, after every
+resolved contact choice, which corners carry load in each model. Writes `rigid_elastic.json`.
 """
 
 from __future__ import annotations
@@ -49,6 +51,12 @@ ROPES = ("elastic", "inextensible")
 MUS = np.round(np.arange(0.10, 0.50 + 1e-9, 0.005), 3)
 N_SAVE = 501
 CLOSE = 1e-6  # a run closes when max |energy residual| <= CLOSE x hoist work (tests/test_rigid.py)
+CLOSE_IMPACT = 2.5e-3  # ... or <= CLOSE_IMPACT x impact losses (paper-2.3 before issue 15: 0.027 J / 11 J)
+
+
+def closes(r: dict) -> bool:
+    """The energy balance of run record `r` closes to today's tolerance (see the module docstring)."""
+    return r["residual_J"] <= max(CLOSE * r["hoist_work_J"], CLOSE_IMPACT * r["impact_loss_J"])
 
 
 def coarse_to_fine(values):
@@ -133,7 +141,7 @@ def one_run(r: dict) -> dict:
             residual_J=resid,
             hoist_work_J=hoist,
             impact_loss_J=float(np.asarray(tr.impact_loss)[-1]),
-            closes=bool(resid <= CLOSE * hoist),
+            closes=bool(resid <= max(CLOSE * hoist, CLOSE_IMPACT * float(np.asarray(tr.impact_loss)[-1]))),
             steps=int(tr.num_accepted_steps),
         )
     except Exception as err:  # the sweep records failures instead of stopping
@@ -197,7 +205,12 @@ def plot(out: Path, records: list[dict]):
                 label=f"{rope}: resolution steps (0 drawn at 0.5)",
             )
             rel = np.array(
-                [r.get("residual_J", np.nan) / max(r.get("hoist_work_J", np.nan), 1e-300) for r in rs]
+                [
+                    r["residual_J"] / max(CLOSE * r["hoist_work_J"], CLOSE_IMPACT * r["impact_loss_J"])
+                    if r["completed"]
+                    else np.nan
+                    for r in rs
+                ]
             )
             axs[2, j].semilogy(mu[ok], rel[ok], "o-", ms=3, color=c, label=rope)
         t1s = sorted({r["t1"] for r in records if r["preset"] == preset and not r["variant"]})
@@ -207,8 +220,8 @@ def plot(out: Path, records: list[dict]):
         axs[0, j].legend(fontsize=7, loc="center right")
         axs[1, j].set_ylabel("count [-]")
         axs[1, j].legend(fontsize=7)
-        axs[2, j].axhline(CLOSE, color="k", lw=0.8, ls="--")
-        axs[2, j].set_ylabel("max |energy residual| / hoist work [-]")
+        axs[2, j].axhline(1.0, color="k", lw=0.8, ls="--")
+        axs[2, j].set_ylabel("max |residual| / tolerance [-]")
         axs[2, j].legend(fontsize=7)
         axs[2, j].set_xlabel("friction coefficient μ [-]")
     fig.suptitle("Rigid model over μ: completion (x: failed), phase counts, energy balance", fontsize=10)
@@ -223,11 +236,12 @@ def summary(records: list[dict]) -> str:
             if not rs:
                 continue
             ok = [r for r in rs if r["completed"]]
-            closes = [r for r in ok if r["closes"]]
+            closing = [r for r in ok if closes(r)]
             worst = max(ok, key=lambda r: r["residual_J"] / r["hoist_work_J"], default=None)
             lines.append(
-                f"{preset:9s} {rope:12s}: {len(ok)}/{len(rs)} complete, {len(closes)}/{len(ok)} close "
-                f"(|resid| <= {CLOSE:g} W_hoist), phases {min((r['phases'] for r in ok), default=0)}-"
+                f"{preset:9s} {rope:12s}: {len(ok)}/{len(rs)} complete, {len(closing)}/{len(ok)} close "
+                f"(|resid| <= {CLOSE:g} W_hoist or {CLOSE_IMPACT:g} W_impact), "
+                f"phases {min((r['phases'] for r in ok), default=0)}-"
                 f"{max((r['phases'] for r in ok), default=0)}, resolution steps in "
                 f"{sum(1 for r in ok if r['resolved'] or r['resolved_impacts'])} runs"
                 + (
@@ -247,18 +261,34 @@ def summary(records: list[dict]) -> str:
 # ------------------------------------------------------------------------------ rigid vs elastic
 
 
-def elastic_check(out: Path, mus=(0.252, 0.26, 0.27), t1=11.3, k=1.5e9, eps=1e-4):
+#: (μ, t1 [s]) of the elastic comparison: the landings that raised "non-uniqueness" (0.252: 11.004 s,
+#: 0.255: 11.046 s, 0.27: 9.665 s) and the grazing impact of E (0.26: 16.916 s).
+ELASTIC_CASES = ((0.252, 11.3), (0.255, 11.3), (0.27, 10.0), (0.26, 17.2))
+
+
+def resolved_phases(tr) -> list[int]:
+    """Indices of the phases whose configuration needed a resolution step: a `choice` note, or the phase
+    after an impact resolved by a fallback."""
+    out = []
+    for k, p in enumerate(tr.phases):
+        if p.choice:
+            out.append(k)
+        elif k > 0 and ("friction dropped" in tr.phases[k - 1].end or "projected" in tr.phases[k - 1].end):
+            out.append(k)
+    return out
+
+
+def elastic_check(out: Path, cases=ELASTIC_CASES, k=1.5e9, eps=1e-4, dt=0.002):
+    """Rigid vs elastic (k, critically damped, ε, p_0 = 1e-4 m x 1.5e7/k) on paper-2.3 at the `cases`:
+    the mass-centre distance, and in a window of up to 0.2 s after each resolved choice (from 10 ms after
+    its start) the corners that carry load (mean N > 1e-3 G) in both models."""
     preset = jaxhoist.load_scenario("paper-2.3")
-    ts = np.linspace(0.0, t1, int(round(t1 / 0.002)) + 1)
     rows = []
-    for mu in mus:
+    for mu, t1 in cases:
+        ts = np.linspace(0.0, t1, int(round(t1 / dt)) + 1)
         sc = preset.replace(**{"foundation.friction_coefficient": mu})
+        G = float(sc.load.mass) * float(sc.gravity)
         rig = simulate_rigid(sc, t1, ts=ts)
-        landing = [
-            p
-            for p in rig.phases
-            if p.t_start > 10.9 and not p.rest and sum(m != "free" for m in p.contact) == 3
-        ]
         el_sc = sc.replace(
             **{
                 "foundation.stiffness": k,
@@ -273,6 +303,7 @@ def elastic_check(out: Path, mus=(0.252, 0.26, 0.27), t1=11.3, k=1.5e9, eps=1e-4
         d = np.linalg.norm(np.asarray(el.position) - np.asarray(rig.position), axis=-1)
         row = dict(
             mu=mu,
+            t1=t1,
             k=k,
             eps=eps,
             elastic_status=int(el.status),
@@ -280,25 +311,31 @@ def elastic_check(out: Path, mus=(0.252, 0.26, 0.27), t1=11.3, k=1.5e9, eps=1e-4
             max_dr_mm=float(d.max() * 1e3),
             t_of_max_s=float(ts[np.argmax(d)]),
             rms_dr_mm=float(np.sqrt(np.mean(d**2)) * 1e3),
-            rigid_phases=[str(p) for p in rig.phases if p.t_end > 10.9],
+            checks=[],
         )
-        if landing:
-            p = landing[0]
+        for i in resolved_phases(rig):
+            p = rig.phases[i]
             w = (ts > p.t_start + 0.01) & (ts < min(p.t_end, p.t_start + 0.2))
-            if w.any():
-                n_el = np.asarray(el.normal_forces)[w].mean(axis=0)
-                n_rig = np.asarray(rig.normal_forces)[w].mean(axis=0)
-                row.update(
+            if not w.any():
+                continue
+            n_el = np.asarray(el.normal_forces)[w].mean(axis=0)
+            n_rig = np.asarray(rig.normal_forces)[w].mean(axis=0)
+            loaded_rig = "".join(c for c, n in zip("DEFH", n_rig, strict=True) if n > 1e-3 * G)
+            loaded_el = "".join(c for c, n in zip("DEFH", n_el, strict=True) if n > 1e-3 * G)
+            row["checks"].append(
+                dict(
+                    phase=str(p),
+                    after=rig.phases[i - 1].end,
                     window_s=[float(ts[w][0]), float(ts[w][-1])],
-                    rigid_contact=list(p.contact),
-                    rigid_choice=p.choice,
                     mean_N_rigid=n_rig.round(1).tolist(),
                     mean_N_elastic=n_el.round(1).tolist(),
-                    least_loaded_rigid="DEFH"[int(np.argmin(n_rig))],
-                    least_loaded_elastic="DEFH"[int(np.argmin(n_el))],
+                    loaded_rigid=loaded_rig,
+                    loaded_elastic=loaded_el,
+                    same=loaded_rig == loaded_el,
                 )
+            )
         rows.append(row)
-        print(json.dumps({k_: v for k_, v in row.items() if k_ != "rigid_phases"}), flush=True)
+        print(json.dumps(row), flush=True)
     (out / "rigid_elastic.json").write_text(json.dumps(rows, indent=1))
     return rows
 
