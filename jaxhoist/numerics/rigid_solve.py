@@ -72,6 +72,7 @@ class PhaseRecord:
     - `rope`: "elastic" (2.14), or the inextensible rope (2.15) "taut" or "slack".
     - `choice`: how the configuration was chosen where that needed more than consistency (several
       consistent configurations: the rule that picked it; none: the regularised fallback), else "".
+    - `merged`: how many sub-microsecond phases were merged into this record (below).
 
     A phase that lasted less than 1 µs (`min_phase`) has no record of its own: it is merged into the
     previous one, whose `end` then reads "<its end> => <the short configuration> (<duration> s) -> <the
@@ -86,6 +87,7 @@ class PhaseRecord:
     state_end: State | None = dataclasses.field(default=None, compare=False, repr=False)
     rope: str = "elastic"
     choice: str = ""
+    merged: int = 0
 
     def __str__(self) -> str:
         modes = "rest" if self.rest else " ".join(f"{c}:{m}" for c, m in zip(rigid.CORNERS, self.contact,
@@ -288,6 +290,7 @@ class _Driver:
         self.rejected = 0
         self.debug = False
         self.allow_jam = True  # fallback 2 of the configuration choice (off while choosing after a jam)
+        self.exclude = None  # contact modes not to choose again at once (`_transition`)
         self.notes: list[str] = []  # how ambiguous or inconsistent contact choices were resolved (phase log)
         self.inextensible = False
         self.rope_taut = False  # the inextensible rope is at its length (taut, or may be): try taut first
@@ -295,7 +298,7 @@ class _Driver:
     # ---------------------------------------------------------------------------- helpers
     def take_notes(self) -> str:
         """The resolution notes gathered since the last call, as one string (and forget them)."""
-        out, self.notes = "; ".join(self.notes), []
+        out, self.notes = "; ".join(dict.fromkeys(self.notes)), []
         return out
 
     def guards(self, t, y, phase) -> np.ndarray:
@@ -520,17 +523,32 @@ class _Driver:
                           f"N={np.round(N, 1)} accel={np.round(accel[k], 6)}")
             return consistent, why, rope_rejected, (violation, reasons)
 
-        consistent, why, rope_rejected, (violation, reasons) = check(1.0)
+        def not_again(consistent):
+            # A guard of the configuration that just ended fired (a contact's load vanished, a sticking
+            # corner's friction reached μN): the same configuration again would end within nanoseconds,
+            # over and over (a Zeno loop of the look-ahead). Take it only if nothing else is consistent.
+            if self.exclude is None:
+                return consistent
+            others = [k for k in consistent if not np.array_equal(combos[k], self.exclude)]
+            if len(others) < len(consistent):
+                self.notes.append(f"{_fmt(self.exclude)} not repeated after its guard fired")
+            return others
+
+        strict, why, rope_rejected, (violation, reasons) = check(1.0)
+        consistent = not_again(strict)
         if not consistent and rope_rejected:
             raise _RopeWouldPush  # only the rope's S >= 0 failed: it goes slack
         if not consistent:
             # Fallbacks, in order (each recorded in the phase log; see docs/rigid-model.md, "Resolution"):
             # 1. a degenerate contact (a load, acceleration or slip direction within rounding of its limit):
             #    the consistency tolerances relaxed by `relax`;
-            relaxed, _, _, _ = check(self.tol["relax"])
+            relaxed = not_again(check(self.tol["relax"])[0])
             if relaxed:
                 consistent = relaxed
                 self.notes.append(f"tolerances x{self.tol['relax']:g} (degenerate contact)")
+            elif strict:
+                consistent = strict  # only the configuration that just ended is consistent: repeat it
+                self.notes.append("repeated: nothing else consistent")
             elif self.allow_jam and np.any(near & ~resting):
                 # 2. Painlevé-type inconsistency of sliding contacts: a tangential impact (dynamic
                 #    jamming; an impulse at the corners on the ground with zero normal velocity after it,
@@ -807,6 +825,19 @@ def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None
         y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work), y,
                          (jnp.zeros(3), jnp.zeros(3), jnp.asarray(v_A - (P_tip / m0) * e),
                           y.hoist_work + work))
+    elif not striking and np.all(near) and float(np.max(np.linalg.norm(cv1[best] - cv, axis=1))) < float(
+            drv.settings.rest_velocity):
+        # The same for a load sliding flat on the ground: a jerk that would change its corner velocities by
+        # less than rest_velocity leaves them unchanged (the ground takes the load's share) and jerks the
+        # tip alone, to d|AB|/dt = dl/dt (an inextensible rope over a sliding load chattered at ~3 kHz:
+        # jerk, the load tips onto one corner for 30 µs, falls back, the rope slackens; paper-2.3, μ = 0.1).
+        e = _np(_rope_direction(tj, y, drv.sc, drv.c))
+        _, rate_error, _ = map(float, _rope_state(tj, y, drv.sc, drv.c))
+        P_tip = m0 * rate_error  # e·(v_A+ - v_B) = -ds/dt
+        work = P_tip * s_dot
+        y1 = eqx.tree_at(lambda s: (s.tip_velocity, s.hoist_work), y,
+                         (jnp.asarray(_np(y.tip_velocity) - (P_tip / m0) * e), y.hoist_work + work))
+        drv.notes.append("jerk on the tip alone")
     loss = work - (ke(y1) - ke(y))
     if loss < -1e-9 * max(abs(work), 1.0):
         raise RigidContactError(f"t = {t:.9g} s: the rope jerk would gain energy ({-loss:.4g} J)")
@@ -1111,7 +1142,8 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
                 except _RopeWouldPush as err:
                     raise RigidContactError(str(err)) from None
                 impact_total += loss
-                end += f" rope-jerk ({loss:.4g} J)"
+                how = drv.take_notes()
+                end += f" rope-jerk ({loss:.4g} J{', ' + how if how else ''})"
             log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name, choice))
             new, y_end, loss = drv.select_or_jam(t_end, y_end, "after the rope became taut", phase)
             impact_total += loss
@@ -1173,8 +1205,12 @@ def _merge(previous: PhaseRecord, short: PhaseRecord) -> PhaseRecord:
     only the log (and `RigidTrajectory.phase_index`) merge it."""
     between = "rest" if short.rest else " ".join(f"{c}:{m}" for c, m in zip(rigid.CORNERS, short.contact,
                                                                             strict=True))
-    end = f"{previous.end} => {between} ({short.t_end - short.t_start:.2g} s) -> {short.end}"
-    return dataclasses.replace(previous, t_end=short.t_end, end=end, state_end=short.state_end)
+    n = previous.merged + 1
+    first = previous.end if n == 1 else previous.end.split(" => ")[0]
+    dt = short.t_end - short.t_start
+    what = f"{between} ({dt:.2g} s)" if n == 1 else f"{n} phases < 1 µs, last {between}"
+    end = f"{first} => {what} -> {short.end}"
+    return dataclasses.replace(previous, t_end=short.t_end, end=end, state_end=short.state_end, merged=n)
 
 
 def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[int], ts):
@@ -1216,8 +1252,14 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
         if all(g[k] < -drv.tol["lookahead"] for k in fired):
             break
         dt *= 2.0
+    # A contact whose load vanished, a free corner that reached the ground (or, lying on it, would take
+    # load) or a sticking corner whose friction reached μN: not the same configuration again (`_select`).
+    hard = [k for k in fired if k < 4 or (4 <= k < 8 and contact[k - 4] == STICK)]
+    drv.exclude = contact.copy() if hard and not bool(phase.rest) else None
     try:
         return drv.select(t_la, y_la, where, phase), y_e, 0.0
     except _Jam:
         # The tangential impact where the event happened, then choose there.
         return drv.select_or_jam(t_e, y_e, where, phase)
+    finally:
+        drv.exclude = None
