@@ -531,8 +531,10 @@ class _Driver:
                 return consistent
             others = [k for k in consistent if not np.array_equal(combos[k], self.exclude)]
             if len(others) < len(consistent):
-                self.notes.append(f"{_fmt(self.exclude)} not repeated after its guard fired")
+                excluded.extend(k for k in consistent if k not in others)
             return others
+
+        excluded: list[int] = []  # consistent but not repeated (noted where that changed the choice)
 
         strict, why, rope_rejected, (violation, reasons) = check(1.0)
         consistent = not_again(strict)
@@ -548,6 +550,7 @@ class _Driver:
                 self.notes.append(f"tolerances x{self.tol['relax']:g} (degenerate contact)")
             elif strict:
                 consistent = strict  # only the configuration that just ended is consistent: repeat it
+                excluded.clear()
                 self.notes.append("repeated: nothing else consistent")
             elif self.allow_jam and np.any(near & ~resting):
                 # 2. Painlevé-type inconsistency of sliding contacts: a tangential impact (dynamic
@@ -569,13 +572,16 @@ class _Driver:
         else:
             prev_N = None
         best = self._rank(combos, consistent, force, accel, prev_N, n_ref, near, mats)
+        if excluded and self._rank(combos, consistent + excluded, force, accel, prev_N, n_ref, near, mats,
+                                   quiet=True) in excluded:
+            self.notes.append(f"{_fmt(self.exclude)} not repeated after its guard fired")
         combo = combos[best]
         hint = np.where((combo == SLIDE)[:, None], hints[best], 0.0)
         flat3 = bool(np.all(near)) and int(np.sum(combo != FREE)) == 3
         return rigid.make_phase(combo, rest=False, slip_hint=hint, starting=(combo == SLIDE) & resting,
                                 free_on_ground=(combo == FREE) & near & flat3, rope=rope)
 
-    def _rank(self, combos, consistent, force, accel, prev_N, n_ref, near, mats) -> int:
+    def _rank(self, combos, consistent, force, accel, prev_N, n_ref, near, mats, quiet=False) -> int:
         """The resolution rule among consistent configurations (docs/rigid-model.md, "Resolution"):
 
         1. the most corners in contact (every corner that can carry load does);
@@ -588,7 +594,7 @@ class _Driver:
         5. least constraint (Gauss): the body acceleration closest, in the kinetic metric M, to the
            unconstrained one M⁻¹f.
 
-        Steps 3 and 5 are recorded in the phase log when they decided between configurations whose
+        Steps 3-5 are recorded in the phase log when they decided between configurations whose
         accelerations differ (the contact problem with Coulomb friction was not unique).
         """
         tJ = self.tol["jump"] * self.G
@@ -608,7 +614,7 @@ class _Driver:
         a_scale = np.linalg.norm(accel[best]) + tA
         rivals = [k for k in group[1:] if keys[k][0] == keys[best][0]
                   and np.linalg.norm(accel[k] - accel[best]) > 1e-5 * a_scale + 10 * tA]
-        if rivals:
+        if rivals and not quiet:
             k = rivals[0]
             rule = ("stiff-foundation rule" if keys[k][1] != keys[best][1] else
                     "most sticking" if keys[k][2] != keys[best][2] else "least constraint")
