@@ -769,14 +769,17 @@ def _consistent_impulses(combos, imp, cv1, sd, involved, mu, tP, tV) -> list[int
     return consistent
 
 
-def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None, t_rate=None):
+def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None, t_rate=None,
+               fallback: bool = False):
     """The inextensible rope snapping taut (or the hoist starting with a speed jump): a plastic jerk that
     sets d|AB|/dt = dl/dt, with the corners on the ground taking impulses as in `_Driver.impact` (every
     combination of free / slide / stick tried; consistent: P >= 0, normal impulses >= 0, sticking ones in
     the friction cone, sliding ones not reversing the slip, free corners on the ground not driven into
     it; the most contacts, then the most sticking win). With `striking` corners and their post-impact
     normal velocities `normal_target`, it is a corner impact while the rope is taut (the rope keeps its
-    rate; P >= 0 is its impulse). `t_rate`: where to take dl/dt (the start uses t = 0+).
+    rate; P >= 0 is its impulse). `t_rate`: where to take dl/dt (the start uses t = 0+). `fallback`: where
+    no Coulomb impulse is consistent, take the frictionless one, else jerk the boom tip alone (noted), instead
+    of raising `_RopeWouldPush` (which a corner impact answers by letting the rope go slack).
 
     **Returns** `(y+, hoist work P ds/dt [J], loss [J])`: the hoist pays P ds/dt during the jerk (the drum
     runs at ds/dt), the kinetic energy of load and boom tip grows by less; the difference is the loss.
@@ -804,6 +807,23 @@ def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None
     tP = drv.tol["force"] * drv.G * 1e-3  # impulses [N s]
     tV = drv.tol["v"] * drv.V
     consistent = [k for k in _consistent_impulses(combos, imp, cv1, sd, near, drv.mu, tP, tV) if P[k] >= -tP]
+    tip_alone = False
+    if not consistent and fallback:
+        # As for corner impacts: the frictionless jerk (contacts FREE or SLIDE with μ = 0); if even that has
+        # none, the jerk on the boom tip alone (below).
+        sc0 = eqx.tree_at(lambda s: s.foundation.friction_coefficient, drv.sc,
+                          jnp.zeros((), dtype=jnp.float64))
+        combos = [cb for cb in combos if not np.any(cb == STICK)]
+        sd = np.zeros((81, 4, 2))
+        out = _eval_rope_impulses(tj, y, sc0, drv.c, jnp.asarray(_modes(combos)), jnp.asarray(sd),
+                                  jnp.asarray(normal_target), drv.settings.rcond)
+        v1, w1, tip1, imp, P, cv1 = map(_np, out)
+        consistent = [k for k in _consistent_impulses(combos, imp, cv1, sd, near, 0.0, tP, tV) if P[k] >= -tP]
+        if consistent:
+            drv.notes.append("no Coulomb jerk: friction dropped")
+        else:
+            consistent, tip_alone = [0], True
+            drv.notes.append("no consistent jerk: on the tip alone")
     if not consistent:
         raise _RopeWouldPush(f"t = {t:.9g} s: the jerk of the inextensible rope has no consistent impulse "
                              "(Painlevé-type impact inconsistency)")
@@ -831,8 +851,8 @@ def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None
         y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work), y,
                          (jnp.zeros(3), jnp.zeros(3), jnp.asarray(v_A - (P_tip / m0) * e),
                           y.hoist_work + work))
-    elif not striking and np.all(near) and float(np.max(np.linalg.norm(cv1[best] - cv, axis=1))) < float(
-            drv.settings.rest_velocity):
+    elif tip_alone or (not striking and np.all(near) and float(np.max(np.linalg.norm(cv1[best] - cv, axis=1)))
+                       < float(drv.settings.rest_velocity)):
         # The same for a load sliding flat on the ground: a jerk that would change its corner velocities by
         # less than rest_velocity leaves them unchanged (the ground takes the load's share) and jerks the
         # tip alone, to d|AB|/dt = dl/dt (an inextensible rope over a sliding load chattered at ~3 kHz:
@@ -843,7 +863,8 @@ def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None
         work = P_tip * s_dot
         y1 = eqx.tree_at(lambda s: (s.tip_velocity, s.hoist_work), y,
                          (jnp.asarray(_np(y.tip_velocity) - (P_tip / m0) * e), y.hoist_work + work))
-        drv.notes.append("jerk on the tip alone")
+        if not tip_alone:
+            drv.notes.append("jerk on the tip alone")
     loss = work - (ke(y1) - ke(y))
     if loss < -1e-9 * max(abs(work), 1.0):
         raise RigidContactError(f"t = {t:.9g} s: the rope jerk would gain energy ({-loss:.4g} J)")
@@ -1144,7 +1165,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
             drv.rope_taut = True
             if rate_error > drv.tol["v"] * drv.V:
                 try:
-                    y_end, _, loss = _rope_jerk(drv, t_end, y_end)
+                    y_end, _, loss = _rope_jerk(drv, t_end, y_end, fallback=True)
                 except _RopeWouldPush as err:
                     raise RigidContactError(str(err)) from None
                 impact_total += loss
