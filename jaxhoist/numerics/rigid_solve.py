@@ -1109,6 +1109,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
     phase, y, loss = drv.select_or_jam(t, y, "start")
     impact_total += loss
     choice = drv.take_notes()
+    retried_at = None  # start time of a stalled phase chosen again (once)
     while True:
         if len(phases) >= max_phases:
             raise RigidContactError(
@@ -1126,6 +1127,21 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         ok = result == diffrax.RESULTS.successful
         event = result == diffrax.RESULTS.event_occurred
         if not (bool(ok) or bool(event)):
+            if retried_at != t and not bool(phase.rest):
+                # A stalled phase (typically a corner sliding with a slip speed near zero, where the slip
+                # direction turns quickly): choose again at its start without that configuration.
+                retried_at = t
+                stalled = _fmt(_np(phase.contact))
+                drv.exclude = _np(phase.contact).copy()
+                try:
+                    phase, y, loss = drv.select_or_jam(t, y, "after a stalled phase")
+                finally:
+                    drv.exclude = None
+                impact_total += loss
+                how = drv.take_notes()
+                choice = f"{stalled} stalled at max_steps, chosen again without it"
+                choice += f"; {how}" if how else ""
+                continue
             raise RigidContactError(f"the phase starting at t = {t:.9g} s failed: {result} "
                                     f"(raise max_steps = {max_steps} or loosen rtol/atol)")
         idx = len(phases)
