@@ -25,7 +25,8 @@ Where no configuration is consistent, documented fallbacks take over, in order: 
 (degenerate contacts), a tangential impact of the sliding corners on the ground (Painlevé-type
 inconsistency; "dynamic jamming"), the least-violating configuration as a short phase. Impacts with no
 consistent Coulomb impulse (a grazing touch) take the frictionless one; several consistent impulses, the
-most dissipative. Each such step is recorded in the phase log (`PhaseRecord.choice`, or the impact's
+most dissipative. A phase that stalls at `max_steps` is chosen again once without its configuration.
+Each such step is recorded in the phase log (`PhaseRecord.choice`, or the impact's
 `end`); see docs/rigid-model.md, "Resolution of contact choices and impacts". `RigidContactError` is left
 for inputs that cannot be continued: too many phases, a failed phase solve, an impact that would gain
 energy with the given restitution, an inextensible rope that cannot start.
