@@ -156,6 +156,32 @@ def test_sliding_under_steady_pull_matches_analytic_motion(slide_run):
     assert resid.max() < 1e-6 * float(np.asarray(tr.hoist_work)[-1])
 
 
+def test_outputs_of_any_size(slide_run):
+    """100 001 saved times on the 1.5 s pull (the outputs are evaluated in chunks; one vmap over 25 001
+    samples never returned): every sample is the same motion as the 61-sample run's phases and follows the
+    one-dimensional reference, and the per-sample forces and the energy balance are those of sliding."""
+    sc, ref = slide_run
+    n = 100_001
+    tr = simulate_rigid(sc, T1, n_save=n)
+    ts = np.asarray(tr.ts)
+    assert ts.shape == (n,) and np.asarray(tr.normal_forces).shape == (n, 4)
+    assert [(p.contact, p.rest) for p in tr.phases] == [(p.contact, p.rest) for p in ref.phases]
+    assert tr.phases[0].t_end == pytest.approx(ref.phases[0].t_end, abs=1e-9)
+    u_ref, t_s = _reference_slide(ts, 1000.0, 0.3, 9.81, 1e5, 1e4, 0.1, 10.0, 1e9, 2e5)
+    np.testing.assert_allclose(0.5 - np.asarray(tr.position[:, 1]), u_ref, atol=1e-8)
+    # The last chunk is padded: its samples are still the right ones (the final state, at t1).
+    np.testing.assert_allclose(np.asarray(tr.position)[-1], np.asarray(ref.position)[-1], atol=1e-9)
+    np.testing.assert_allclose(np.asarray(tr.ground_reaction), 1000.0 * 9.81, rtol=1e-9)
+    # Coulomb friction μN once the slip is well under way (the first ms after the start, at slip speeds
+    # below 1e-8 m/s, the slip direction still blends with the phase's starting hint).
+    sliding = ts > t_s + 0.05
+    np.testing.assert_allclose(np.asarray(tr.friction_forces)[sliding, :, 1].sum(axis=1), 0.3 * 1000.0 * 9.81,
+                               rtol=1e-9)
+    assert np.all(np.asarray(tr.phase_index)[ts < t_s - 1e-3] == 0)
+    resid = np.abs(np.asarray(tr.energy_residual()))
+    assert resid.max() < 1e-6 * float(np.asarray(tr.hoist_work)[-1])
+
+
 def test_tipping_about_an_edge_at_the_statics_threshold():
     """A tall box with high friction, pulled obliquely upwards from the middle of its top front edge, tips
     about its front bottom edge DE (F, H lift) when the pull reaches the statics tip threshold."""

@@ -15,13 +15,21 @@ root finding). Between phases, on the host:
    modes (free / slide / stick) of the corners on the ground is evaluated, and the ones that are
    consistent (N_i >= 0, friction of sticking corners within μN_i, sliding from rest in the direction of the
    resulting acceleration, free corners on the ground not accelerating into it, or, for a load at rest on
-   all four corners, the rest conditions of `statics`) are kept. Among them the one that changes the
-   fewest corners (then the most sticking, then the most contacts) is chosen. The next phase starts from the
-   event state.
+   all four corners, the rest conditions of `statics`) are kept. Among them the resolution rule
+   (`_Driver._rank`) picks one: the most contacts, then the most continuous normal forces, then the
+   stiff-foundation rule (free the corners whose load is most negative when every corner on the ground is
+   in contact: the linear law (2.3) on four corners), then the most sticking corners, then least
+   constraint (Gauss). The next phase starts from the event state.
 
-No consistent configuration (a Painlevé-type inconsistency, or contacts too close to degenerate for the
-tolerances) or two consistent ones with different accelerations (non-uniqueness) raise `RigidContactError`
-naming the time, the corners and what was tried; nothing is silently guessed.
+Where no configuration is consistent, documented fallbacks take over, in order: the tolerances relaxed
+(degenerate contacts), a tangential impact of the sliding corners on the ground (Painlevé-type
+inconsistency; "dynamic jamming"), the least-violating configuration as a short phase. Impacts with no
+consistent Coulomb impulse (a grazing touch) take the frictionless one; several consistent impulses, the
+most dissipative. A phase that stalls at `max_steps` is chosen again once without its configuration.
+Each such step is recorded in the phase log (`PhaseRecord.choice`, or the impact's
+`end`); see docs/rigid-model.md, "Resolution of contact choices and impacts". `RigidContactError` is left
+for inputs that cannot be continued: too many phases, a failed phase solve, an impact that would gain
+energy with the given restitution, an inextensible rope that cannot start.
 """
 
 from __future__ import annotations
@@ -46,8 +54,10 @@ from ..physics.rigid import FREE, SLIDE, STICK, Phase
 
 
 class RigidContactError(RuntimeError):
-    """The rigid contact problem has no consistent solution, or several (Painlevé-type situations), or a
-    phase could not be continued (solver failure, too many phases)."""
+    """The rigid model cannot continue with these inputs: more than `max_phases` phases (a Zeno sequence),
+    a phase solve that failed (`max_steps`, tolerances), an impact that would gain energy with the given
+    restitution, or an inextensible rope whose start has no consistent jerk. The message names what to
+    change. Ambiguous or inconsistent contact problems are resolved, not raised (module docstring)."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -61,6 +71,13 @@ class PhaseRecord:
       taut, or "t1".
     - `state_end`: the state at `t_end` (before any impact).
     - `rope`: "elastic" (2.14), or the inextensible rope (2.15) "taut" or "slack".
+    - `choice`: how the configuration was chosen where that needed more than consistency (several
+      consistent configurations: the rule that picked it; none: the regularised fallback), else "".
+    - `merged`: how many sub-microsecond phases were merged into this record (below).
+
+    A phase that lasted less than 1 µs (`min_phase`) has no record of its own: it is merged into the
+    previous one, whose `end` then reads "<its end> => <the short configuration> (<duration> s) -> <the
+    short phase's end>" (see `_merge`).
     """
 
     t_start: float
@@ -70,13 +87,16 @@ class PhaseRecord:
     end: str
     state_end: State | None = dataclasses.field(default=None, compare=False, repr=False)
     rope: str = "elastic"
+    choice: str = ""
+    merged: int = 0
 
     def __str__(self) -> str:
         modes = "rest" if self.rest else " ".join(f"{c}:{m}" for c, m in zip(rigid.CORNERS, self.contact,
                                                                             strict=True))
         if self.rope != "elastic":
             modes += f"  rope:{self.rope}"
-        return f"{self.t_start:10.6f} - {self.t_end:10.6f} s  {modes:40s} -> {self.end}"
+        choice = f"  [{self.choice}]" if self.choice else ""
+        return f"{self.t_start:10.6f} - {self.t_end:10.6f} s  {modes:40s} -> {self.end}{choice}"
 
 
 class RigidTrajectory(eqx.Module):
@@ -196,6 +216,11 @@ def _rope_state(t, y, scenario, c):
     return ld.stretch, ld.rope_rate_error, ld.hoist_rate
 
 
+class _Jam(Exception):
+    """No consistent contact configuration while corners on the ground slide: resolve by a tangential
+    impact (`_Driver.jam`), then choose again."""
+
+
 class _RopeWouldPush(Exception):
     """No configuration (or impulse) with the taut inextensible rope has S >= 0: try the slack rope."""
 
@@ -209,6 +234,35 @@ def _forces(t, y, scenario, c, phase, settings, inextensible=False):
 def _outputs(ts, ys, scenario, c, phases, settings, inextensible=False):
     return jax.vmap(lambda t, y, ph: rigid.output(t, y, scenario, c, ph, settings, inextensible))(ts, ys,
                                                                                                phases)
+
+
+#: Saved samples per output evaluation (`_chunked_outputs`): one compiled shape serves every `n_save`.
+OUTPUT_CHUNK = 1024
+
+
+def _chunked_outputs(ts, states, phase_index, phases, scenario, c, settings, inextensible):
+    """`rigid.output` at every saved time, in chunks of `OUTPUT_CHUNK` samples (the last one padded by
+    repeating its final sample), concatenated on the host. One compiled evaluation of fixed shape serves
+    every number of saved times; a single vmap over all of them (25 001 samples) did not return.
+
+    **Arguments**
+    - `ts` (n_t) [s]; `states`: the saved `State`, host arrays with a leading n_t axis; `phase_index` (n_t):
+      index into `phases` of each sample's phase; `scenario`, `c`, `settings`, `inextensible`: as for
+      `rigid.output`.
+
+    **Returns** a `rigid.Output` with a leading n_t axis.
+    """
+    n_t = ts.size
+    table = jax.tree_util.tree_map(lambda *xs: np.stack([np.asarray(x) for x in xs]), *phases)
+    parts = []
+    for start in range(0, n_t, OUTPUT_CHUNK):
+        sel = np.minimum(np.arange(start, start + OUTPUT_CHUNK), n_t - 1)
+        chunk_states = jax.tree_util.tree_map(lambda x: jnp.asarray(x[sel]), states)
+        chunk_phases = jax.tree_util.tree_map(lambda x: jnp.asarray(x[phase_index[sel]]), table)
+        out = _outputs(jnp.asarray(ts[sel]), chunk_states, scenario, c, chunk_phases, settings, inextensible)
+        m = min(OUTPUT_CHUNK, n_t - start)
+        parts.append(jax.tree_util.tree_map(lambda x: np.asarray(x)[:m], out))
+    return jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.concatenate(xs)), *parts)
 
 
 def _tree_index(tree, i):
@@ -236,10 +290,18 @@ class _Driver:
         self.accepted = 0
         self.rejected = 0
         self.debug = False
+        self.allow_jam = True  # fallback 2 of the configuration choice (off while choosing after a jam)
+        self.exclude = None  # contact modes not to choose again at once (`_transition`)
+        self.notes: list[str] = []  # how ambiguous or inconsistent contact choices were resolved (phase log)
         self.inextensible = False
         self.rope_taut = False  # the inextensible rope is at its length (taut, or may be): try taut first
 
     # ---------------------------------------------------------------------------- helpers
+    def take_notes(self) -> str:
+        """The resolution notes gathered since the last call, as one string (and forget them)."""
+        out, self.notes = "; ".join(dict.fromkeys(self.notes)), []
+        return out
+
     def guards(self, t, y, phase) -> np.ndarray:
         return _np(_raw_guards_jit(jnp.asarray(t), y, self.sc, self.c, phase, self.settings,
                                    self.inextensible))
@@ -345,6 +407,32 @@ class _Driver:
                 self.rope_taut = False
         return self._select(t, y, where, previous, rigid.ROPE_SLACK)
 
+    def select_or_jam(self, t, y, where: str, previous: Phase | None = None):
+        """`select` at (t, y); where no configuration is consistent while corners on the ground slide
+        (Painlevé), first a tangential impact at (t, y) (`jam`), then `select` again with fallback 2 off.
+
+        **Returns** `(phase, y, loss [J])`: `y` after the jam (or unchanged), its kinetic energy loss."""
+        try:
+            return self.select(t, y, where, previous), y, 0.0
+        except _Jam:
+            pass
+        y1, loss = self.jam(t, y)
+        self.allow_jam = False
+        try:
+            return self.select(t, y1, where + ", after a tangential impact", previous), y1, loss
+        finally:
+            self.allow_jam = True
+
+    def jam(self, t, y):
+        """The tangential impact of fallback 2: the corners on the ground take a plastic impulse (normal
+        velocity 0 after it) with Coulomb friction, as in `impact` (friction dropped if that has no
+        solution); the slip it stops is what made the contact problem inconsistent. Returns (y+, loss [J])."""
+        near, _, _, _ = self.near_ground(t, y)
+        taut = self.inextensible and self.rope_taut
+        y1, loss = self.impact(t, y, [i for i in range(4) if near[i]], taut=taut, normal_only=True)
+        self.notes.append(f"tangential impact ({loss:.3g} J)")
+        return y1, loss
+
     def _select(self, t, y, where: str, previous: Phase | None, rope: int) -> Phase:
         near, resting, corners, cv = self.near_ground(t, y)
         body_at_rest = bool(np.all(near) and np.all(resting))
@@ -363,70 +451,120 @@ class _Driver:
         mats = self.matrices(t, y, rope)
         near_idx = [i for i in range(4) if near[i]]
         combos, hints_list = [], []
+        reference = None  # the configuration with every corner on the ground in contact (see `_rank`)
         for r in range(len(near_idx), -1, -1):
             for subset in itertools.combinations(near_idx, r):
                 in_contact = np.zeros(4, dtype=bool)
                 in_contact[list(subset)] = True
                 modes, hints = coulomb_pattern(mats, in_contact, resting, self.mu, self.G, self.g,
                                                debug=self.debug)
+                if reference is None:
+                    reference = (modes, hints)
                 n_stick, n_contact = int(np.sum(modes == STICK)), int(np.sum(modes != FREE))
                 if np.all(near) and n_stick >= 2 and n_contact >= 3:
                     continue  # held fixed: the rest configuration, which failed above
                 combos.append(modes)
                 hints_list.append(hints)
+        ref_row = 0 if combos and np.array_equal(combos[0], reference[0]) else len(combos)
         n_max = 16
         contact = np.zeros((n_max, 4), dtype=np.int32)
         hints = np.zeros((n_max, 4, 2))
         contact[:len(combos)] = np.array(combos)
         hints[:len(combos)] = np.array(hints_list)
+        if ref_row == len(combos):  # a skipped (rest-like) configuration leaves room for it
+            contact[ref_row], hints[ref_row] = reference
         force, acc_c, accel, tension = _eval_candidates(jnp.asarray(t), y, self.sc, self.c, self.settings,
                                                         jnp.asarray(contact), jnp.asarray(hints),
                                                         jnp.asarray(rope, dtype=jnp.int32), self.inextensible)
         force, acc_c, accel, tension = map(_np, (force, acc_c, accel, tension))
+        n_ref = force[ref_row, :, 2]
 
-        tF, tA = self.tol["force"] * self.G, self.tol["accel"] * self.g
-        consistent, why = [], []
-        rope_rejected = False
-        for k, combo in enumerate(combos):
-            N = force[k, :, 2]
-            T = np.linalg.norm(force[k, :, :2], axis=1)
-            a = acc_c[k]
-            ok, reason = True, ""
-            for i in range(4):
-                if combo[i] != FREE and N[i] < -tF:
-                    ok, reason = False, f"N_{rigid.CORNERS[i]} = {N[i]:.4g} N < 0"
-                elif combo[i] == STICK and T[i] > self.mu * N[i] + tF:
-                    ok, reason = False, f"|T_{rigid.CORNERS[i]}| = {T[i]:.6g} N > μN = {self.mu * N[i]:.6g} N"
-                elif combo[i] == FREE and near[i] and a[i, 2] < -tA:
-                    ok, reason = False, f"free corner {rigid.CORNERS[i]} accelerates into the ground"
-                elif combo[i] == SLIDE and resting[i]:
-                    h = hints[k, i]
-                    ah = a[i, :2]
-                    along = float(ah @ h)
-                    perp = float(np.linalg.norm(ah - along * h))
-                    if along < -tA or perp > tA + self.tol["align"] * np.linalg.norm(ah):
-                        ok, reason = False, (f"{rigid.CORNERS[i]} would not slide along its friction "
-                                             f"direction (a_h = {ah}, t = {h})")
-                if not ok:
-                    break
-            if ok and rope == rigid.ROPE_TAUT and tension[k] < -tF:
-                ok, reason = False, f"the rope would push (S = {tension[k]:.4g} N)"
-                rope_rejected = True
-            (consistent if ok else why).append(k if ok else (combo, reason))
-            if self.debug:
-                print(f"  [{where} t={t:.9g}] {_fmt(combo)}: {'ok' if ok else reason}; N={np.round(N, 1)} "
-                      f"accel={np.round(accel[k], 6)}")
+        def check(scale: float):
+            """Consistency of every candidate with the tolerances times `scale`: (consistent indices,
+            [(combo, reason)] of the others, whether only the rope's S >= 0 failed somewhere, and per
+            candidate its largest violation in units of G or g)."""
+            tF, tA = scale * self.tol["force"] * self.G, scale * self.tol["accel"] * self.g
+            consistent, why, violation, reasons = [], [], np.zeros(len(combos)), [""] * len(combos)
+            rope_rejected = False
+            for k, combo in enumerate(combos):
+                N = force[k, :, 2]
+                T = np.linalg.norm(force[k, :, :2], axis=1)
+                a = acc_c[k]
+                ok, reason, worst = True, "", 0.0
+                for i in range(4):
+                    bad = ""
+                    if combo[i] != FREE and N[i] < -tF:
+                        bad, v = f"N_{rigid.CORNERS[i]} = {N[i]:.4g} N < 0", -N[i] / self.G
+                    elif combo[i] == STICK and T[i] > self.mu * N[i] + tF:
+                        bad = f"|T_{rigid.CORNERS[i]}| = {T[i]:.6g} N > μN = {self.mu * N[i]:.6g} N"
+                        v = (T[i] - self.mu * N[i]) / self.G
+                    elif combo[i] == FREE and near[i] and a[i, 2] < -tA:
+                        bad = f"free corner {rigid.CORNERS[i]} accelerates into the ground"
+                        v = -a[i, 2] / self.g
+                    elif combo[i] == SLIDE and resting[i]:
+                        h = hints[k, i]
+                        ah = a[i, :2]
+                        along = float(ah @ h)
+                        perp = float(np.linalg.norm(ah - along * h))
+                        if along < -tA or perp > tA + self.tol["align"] * np.linalg.norm(ah):
+                            bad = (f"{rigid.CORNERS[i]} would not slide along its friction direction "
+                                   f"(a_h = {ah}, t = {h})")
+                            v = max(-along, perp - self.tol["align"] * np.linalg.norm(ah)) / self.g
+                    if bad:
+                        ok, worst = False, max(worst, v)
+                        reason = reason or bad
+                if ok and rope == rigid.ROPE_TAUT and tension[k] < -tF:
+                    ok, reason = False, f"the rope would push (S = {tension[k]:.4g} N)"
+                    worst = max(worst, -tension[k] / self.G)
+                    rope_rejected = True
+                violation[k], reasons[k] = worst, reason
+                (consistent if ok else why).append(k if ok else (combo, reason))
+                if self.debug and scale == 1.0:
+                    print(f"  [{where} t={t:.9g}] {_fmt(combo)}: {'ok' if ok else reason}; "
+                          f"N={np.round(N, 1)} accel={np.round(accel[k], 6)}")
+            return consistent, why, rope_rejected, (violation, reasons)
+
+        def not_again(consistent):
+            # A guard of the configuration that just ended fired (a contact's load vanished, a sticking
+            # corner's friction reached μN): the same configuration again would end within nanoseconds,
+            # over and over (a Zeno loop of the look-ahead). Take it only if nothing else is consistent.
+            if self.exclude is None:
+                return consistent
+            others = [k for k in consistent if not np.array_equal(combos[k], self.exclude)]
+            if len(others) < len(consistent):
+                excluded.extend(k for k in consistent if k not in others)
+            return others
+
+        excluded: list[int] = []  # consistent but not repeated (noted where that changed the choice)
+
+        strict, why, rope_rejected, (violation, reasons) = check(1.0)
+        consistent = not_again(strict)
         if not consistent and rope_rejected:
             raise _RopeWouldPush  # only the rope's S >= 0 failed: it goes slack
         if not consistent:
-            tried = "; ".join(f"{_fmt(cb)}: {r}" for cb, r in why[:12])
-            raise RigidContactError(
-                f"t = {t:.9g} s ({where}): no consistent contact configuration (Painlevé-type inconsistency "
-                f"or a degenerate contact). Corners on the ground: "
-                f"{[rigid.CORNERS[i] for i in range(4) if near[i]]}. Tried: {tried}")
-        # Prefer the most corners in contact (every corner that can carry load does, as with (2.3)); among
-        # those, the one whose normal forces continue the previous phase's (the rigid limit of a stiff
-        # ground: the corner whose load has vanished is the one that unloads); then the most sticking.
+            # Fallbacks, in order (each recorded in the phase log; see docs/rigid-model.md, "Resolution"):
+            # 1. a degenerate contact (a load, acceleration or slip direction within rounding of its limit):
+            #    the consistency tolerances relaxed by `relax`;
+            relaxed = not_again(check(self.tol["relax"])[0])
+            if relaxed:
+                consistent = relaxed
+                self.notes.append(f"tolerances x{self.tol['relax']:g} (degenerate contact)")
+            elif strict:
+                consistent = strict  # only the configuration that just ended is consistent: repeat it
+                excluded.clear()
+                self.notes.append("repeated: nothing else consistent")
+            elif self.allow_jam and np.any(near & ~resting):
+                # 2. Painlevé-type inconsistency of sliding contacts: a tangential impact (dynamic
+                #    jamming; an impulse at the corners on the ground with zero normal velocity after it,
+                #    sticking where the cone allows, friction dropped if that has no solution), then choose
+                #    again.
+                raise _Jam(why)
+            else:
+                # 3. the least inconsistent configuration, as a short regularised phase (its guards end it).
+                k = int(np.argmin(violation))
+                consistent = [k]
+                self.notes.append(f"regularised: no consistent configuration, least violation "
+                                  f"{violation[k]:.2g} ({reasons[k]})")
         if previous is not None and int(previous.rope) != rope:
             previous = eqx.tree_at(lambda p: p.rope, previous, jnp.asarray(rope, dtype=jnp.int32))
         if previous is not None:
@@ -434,40 +572,75 @@ class _Driver:
                                  self.inextensible))[:, 2]
         else:
             prev_N = None
-        jump = lambda k: 0.0 if prev_N is None else float(np.linalg.norm(force[k, :, 2] - prev_N))  # noqa: E731
-        n_contacts = lambda k: int(np.sum(combos[k] != FREE))  # noqa: E731
-        top = max(n_contacts(k) for k in consistent)
-        group = sorted([k for k in consistent if n_contacts(k) == top],
-                       key=lambda k: (round(jump(k) / (self.tol["jump"] * self.G)),
-                                      -int(np.sum(combos[k] == STICK))))
-        best = group[0]
-        a_scale = np.linalg.norm(accel[best]) + tA
-        for k in group[1:]:
-            if abs(jump(k) - jump(best)) > self.tol["jump"] * self.G:
-                break
-            if np.linalg.norm(accel[k] - accel[best]) > 1e-5 * a_scale + 10 * tA:
-                raise RigidContactError(
-                    f"t = {t:.9g} s ({where}): two consistent contact configurations with different "
-                    f"accelerations and equally continuous contact forces, {_fmt(combos[best])} and "
-                    f"{_fmt(combos[k])} (non-uniqueness of the rigid contact problem with Coulomb friction, "
-                    f"Painlevé type)")
+        best = self._rank(combos, consistent, force, accel, prev_N, n_ref, near, mats)
+        if excluded and self._rank(combos, consistent + excluded, force, accel, prev_N, n_ref, near, mats,
+                                   quiet=True) in excluded:
+            self.notes.append(f"{_fmt(self.exclude)} not repeated after its guard fired")
         combo = combos[best]
         hint = np.where((combo == SLIDE)[:, None], hints[best], 0.0)
         flat3 = bool(np.all(near)) and int(np.sum(combo != FREE)) == 3
         return rigid.make_phase(combo, rest=False, slip_hint=hint, starting=(combo == SLIDE) & resting,
                                 free_on_ground=(combo == FREE) & near & flat3, rope=rope)
 
+    def _rank(self, combos, consistent, force, accel, prev_N, n_ref, near, mats, quiet=False) -> int:
+        """The resolution rule among consistent configurations (docs/rigid-model.md, "Resolution"):
+
+        1. the most corners in contact (every corner that can carry load does);
+        2. the most continuous normal forces, |N - N_prev| within `jump` G (after an event: the corner whose
+           load vanished is the one that unloads, as on a stiff foundation);
+        3. the stiff-foundation rule: release the corners whose load is the most negative in the reference
+           solution with every corner on the ground in contact (four corners: the linear law (2.3), the flat
+           bottom compressing a stiff foundation linearly), Σ_free N_ref,i smallest;
+        4. the most sticking corners;
+        5. least constraint (Gauss): the body acceleration closest, in the kinetic metric M, to the
+           unconstrained one M⁻¹f.
+
+        Steps 3-5 are recorded in the phase log when they decided between configurations whose
+        accelerations differ (the contact problem with Coulomb friction was not unique).
+        """
+        tJ = self.tol["jump"] * self.G
+        jump = lambda k: 0.0 if prev_N is None else float(np.linalg.norm(force[k, :, 2] - prev_N))  # noqa: E731
+        released = lambda k: float(np.sum(np.where(near & (combos[k] == FREE), n_ref, 0.0)))  # noqa: E731
+        M, f = mats.mass[:6, :6], mats.force[:6]
+        a_free = np.linalg.solve(M, f)
+        gauss = lambda k: float((accel[k] - a_free) @ M @ (accel[k] - a_free))  # noqa: E731
+        n_contacts = lambda k: int(np.sum(combos[k] != FREE))  # noqa: E731
+        top = max(n_contacts(k) for k in consistent)
+        group = [k for k in consistent if n_contacts(k) == top]
+        keys = {k: (round(jump(k) / tJ), round(released(k) / tJ), -int(np.sum(combos[k] == STICK)),
+                    gauss(k)) for k in group}
+        group.sort(key=lambda k: keys[k])
+        best = group[0]
+        tA = self.tol["accel"] * self.g
+        a_scale = np.linalg.norm(accel[best]) + tA
+        rivals = [k for k in group[1:] if keys[k][0] == keys[best][0]
+                  and np.linalg.norm(accel[k] - accel[best]) > 1e-5 * a_scale + 10 * tA]
+        if rivals and not quiet:
+            k = rivals[0]
+            rule = ("stiff-foundation rule" if keys[k][1] != keys[best][1] else
+                    "most sticking" if keys[k][2] != keys[best][2] else "least constraint")
+            ref = f" (N_ref = {np.round(n_ref, 1).tolist()} N)" if rule.startswith("stiff") else ""
+            self.notes.append(f"{rule}: {_fmt(combos[best])} over {_fmt(combos[k])}{ref}")
+        return best
+
     # ---------------------------------------------------------------------------- impacts
-    def impact(self, t, y, striking: list[int], taut: bool = False):
+    def impact(self, t, y, striking: list[int], taut: bool = False, normal_only: bool = False):
         """Velocity jump at an impact of the `striking` corners; returns (y+, loss [J]). With the taut
         inextensible rope (`taut`) the rope takes an impulse too (it keeps its rate), unless that would
-        need a push: then it goes slack in the impact."""
+        need a push: then it goes slack in the impact. `normal_only`: no restitution (every involved
+        corner ends with zero normal velocity; the tangential impact of `jam`).
+
+        Resolution (docs/rigid-model.md, "Resolution"), each step after the first recorded in `notes`:
+        the consistent Coulomb impulse with the most contacts, then the most sticking corners, then the
+        largest kinetic energy loss (maximal dissipation) where several remain; if none is consistent
+        (a grazing touch, a Painlevé-type impact), the frictionless impulse ("friction dropped"); if that
+        too fails, the M-orthogonal projection onto zero normal velocity of the involved corners."""
         corners, cv, ke0 = self.kin(t, y)
         near = corners[:, 2] < self.tol["z"] * self.L
         involved = [i for i in range(4) if near[i] or i in striking]
         normal_target = np.zeros(4)
         for i in striking:
-            if cv[i, 2] < -self.tol["bounce"] * self.V:
+            if cv[i, 2] < -self.tol["bounce"] * self.V and not normal_only:
                 normal_target[i] = -self.e * cv[i, 2]
         if taut:
             try:
@@ -480,35 +653,59 @@ class _Driver:
         slipping = speed >= self.tol["v"] * self.V
         dirs = np.where(slipping[:, None], vh / np.maximum(speed, 1e-300)[:, None], 0.0)
         mask = np.isin(np.arange(4), involved)
-        combos = _impulse_combinations(mask)
-        # Sliding impulses need a direction: the pre-impact slip, else the opposite of the sticking impulse.
-        sticking = _modes([np.where(cb == SLIDE, STICK, cb) for cb in combos])
-        _, _, imp0, _ = map(_np, _eval_impulses(y, self.sc, self.c, jnp.asarray(sticking),
-                                                jnp.asarray(np.zeros((81, 4, 2))),
-                                                jnp.asarray(normal_target), self.settings.rcond))
-        sd = _slide_directions(combos, slipping, dirs, imp0)
-        modes = _modes(combos)
-        v1, w1, imp, cv1 = map(_np, _eval_impulses(y, self.sc, self.c, jnp.asarray(modes), jnp.asarray(sd),
-                                                   jnp.asarray(normal_target), self.settings.rcond))
         tP = self.tol["force"] * self.G * 1e-3  # impulses [N s]
         tV = self.tol["v"] * self.V
-        consistent = _consistent_impulses(combos, imp, cv1, sd, mask, self.mu, tP, tV)
+
+        def solve(sc, mu, combos):
+            # Sliding impulses need a direction: the pre-impact slip, else the opposite of the sticking one.
+            sticking = _modes([np.where(cb == SLIDE, STICK, cb) for cb in combos])
+            _, _, imp0, _ = map(_np, _eval_impulses(y, sc, self.c, jnp.asarray(sticking),
+                                                    jnp.asarray(np.zeros((81, 4, 2))),
+                                                    jnp.asarray(normal_target), self.settings.rcond))
+            sd = _slide_directions(combos, slipping, dirs, imp0) if mu > 0 else np.zeros((81, 4, 2))
+            out = map(_np, _eval_impulses(y, sc, self.c, jnp.asarray(_modes(combos)), jnp.asarray(sd),
+                                          jnp.asarray(normal_target), self.settings.rcond))
+            v1, w1, imp, cv1 = out
+            return v1, w1, _consistent_impulses(combos, imp, cv1, sd, mask, mu, tP, tV)
+
+        combos = _impulse_combinations(mask)
+        v1, w1, consistent = solve(self.sc, self.mu, combos)
+        names = "".join(rigid.CORNERS[i] for i in involved)
         if not consistent:
-            raise RigidContactError(
-                f"t = {t:.9g} s: impact of corner(s) {[rigid.CORNERS[i] for i in striking]} has no "
-                f"consistent impulse (Painlevé-type impact inconsistency)")
+            # A grazing touch or a Painlevé-type impact: the frictionless impulse (contacts FREE or SLIDE
+            # with μ = 0), which a plastic impact always has.
+            sc0 = eqx.tree_at(lambda s: s.foundation.friction_coefficient, self.sc,
+                              jnp.zeros((), dtype=jnp.float64))
+            combos = [cb for cb in combos if not np.any(cb == STICK)]
+            v1, w1, consistent = solve(sc0, 0.0, combos)
+            if consistent:
+                self.notes.append(f"no Coulomb impulse at {names}: friction dropped")
+        if not consistent:
+            y1, _ = self._project(t, y, np.zeros(4, dtype=bool), mask)
+            self.notes.append(f"no impulse at {names}: normal velocities projected out")
+            v1, w1 = _np(y1.velocity)[None], _np(y1.angular_velocity)[None]
+            consistent = [0]
         best = consistent[0]
         u_best = np.concatenate([v1[best], w1[best]])
-        for k in consistent[1:]:
-            if (np.sum(combos[k] != FREE), np.sum(combos[k] == STICK)) != (
-                    np.sum(combos[best] != FREE), np.sum(combos[best] == STICK)):
-                break
-            if np.linalg.norm(np.concatenate([v1[k], w1[k]]) - u_best) > 1e-6 * (np.linalg.norm(u_best) + tV):
-                raise RigidContactError(
-                    f"t = {t:.9g} s: impact of corner(s) {[rigid.CORNERS[i] for i in striking]} has two "
-                    f"consistent impulses, {_fmt(combos[best])} and {_fmt(combos[k])} (Newton's restitution "
-                    f"law is not unique for simultaneous multi-corner impacts; restitution = 0, or a larger "
-                    f"Settings.rest_velocity to let a rocking load settle, avoids this)")
+        def counts(k):
+            return int(np.sum(combos[k] != FREE)), int(np.sum(combos[k] == STICK))
+
+        def differs(k):
+            du = np.linalg.norm(np.concatenate([v1[k], w1[k]]) - u_best)
+            return du > 1e-6 * (np.linalg.norm(u_best) + tV)
+
+        def after(k):
+            return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
+                               (jnp.asarray(v1[k]), jnp.asarray(w1[k])))
+
+        tied = [k for k in consistent[1:] if counts(k) == counts(best) and differs(k)]
+        if tied:
+            # Newton's law is not unique for simultaneous multi-corner impacts: maximal dissipation.
+            ke = {k: self.kin(t, after(k))[2] for k in [best, *tied]}
+            new = min(ke, key=ke.get)
+            self.notes.append(f"{len(tied) + 1} consistent impulses: maximal dissipation, "
+                              f"{_fmt(combos[new])}")
+            best = new
         y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
                          (jnp.asarray(v1[best]), jnp.asarray(w1[best])))
         _, _, ke1 = self.kin(t, y1)
@@ -517,7 +714,7 @@ class _Driver:
             raise RigidContactError(
                 f"t = {t:.9g} s: the impact of corner(s) {[rigid.CORNERS[i] for i in striking]} would gain "
                 f"kinetic energy ({-loss:.4g} J) with restitution {self.e} and friction μ = {self.mu}: "
-                "Newton's restitution law is not energy-consistent here")
+                "Newton's restitution law is not energy-consistent here; lower the restitution")
         return y1, loss
 
 
@@ -573,14 +770,17 @@ def _consistent_impulses(combos, imp, cv1, sd, involved, mu, tP, tV) -> list[int
     return consistent
 
 
-def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None, t_rate=None):
+def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None, t_rate=None,
+               fallback: bool = False):
     """The inextensible rope snapping taut (or the hoist starting with a speed jump): a plastic jerk that
     sets d|AB|/dt = dl/dt, with the corners on the ground taking impulses as in `_Driver.impact` (every
     combination of free / slide / stick tried; consistent: P >= 0, normal impulses >= 0, sticking ones in
     the friction cone, sliding ones not reversing the slip, free corners on the ground not driven into
     it; the most contacts, then the most sticking win). With `striking` corners and their post-impact
     normal velocities `normal_target`, it is a corner impact while the rope is taut (the rope keeps its
-    rate; P >= 0 is its impulse). `t_rate`: where to take dl/dt (the start uses t = 0+).
+    rate; P >= 0 is its impulse). `t_rate`: where to take dl/dt (the start uses t = 0+). `fallback`: where
+    no Coulomb impulse is consistent, take the frictionless one, else jerk the boom tip alone (noted), instead
+    of raising `_RopeWouldPush` (which a corner impact answers by letting the rope go slack).
 
     **Returns** `(y+, hoist work P ds/dt [J], loss [J])`: the hoist pays P ds/dt during the jerk (the drum
     runs at ds/dt), the kinetic energy of load and boom tip grows by less; the difference is the loss.
@@ -608,6 +808,23 @@ def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None
     tP = drv.tol["force"] * drv.G * 1e-3  # impulses [N s]
     tV = drv.tol["v"] * drv.V
     consistent = [k for k in _consistent_impulses(combos, imp, cv1, sd, near, drv.mu, tP, tV) if P[k] >= -tP]
+    tip_alone = False
+    if not consistent and fallback:
+        # As for corner impacts: the frictionless jerk (contacts FREE or SLIDE with μ = 0); if even that has
+        # none, the jerk on the boom tip alone (below).
+        sc0 = eqx.tree_at(lambda s: s.foundation.friction_coefficient, drv.sc,
+                          jnp.zeros((), dtype=jnp.float64))
+        combos = [cb for cb in combos if not np.any(cb == STICK)]
+        sd = np.zeros((81, 4, 2))
+        out = _eval_rope_impulses(tj, y, sc0, drv.c, jnp.asarray(_modes(combos)), jnp.asarray(sd),
+                                  jnp.asarray(normal_target), drv.settings.rcond)
+        v1, w1, tip1, imp, P, cv1 = map(_np, out)
+        consistent = [k for k in _consistent_impulses(combos, imp, cv1, sd, near, 0.0, tP, tV) if P[k] >= -tP]
+        if consistent:
+            drv.notes.append("no Coulomb jerk: friction dropped")
+        else:
+            consistent, tip_alone = [0], True
+            drv.notes.append("no consistent jerk: on the tip alone")
     if not consistent:
         raise _RopeWouldPush(f"t = {t:.9g} s: the jerk of the inextensible rope has no consistent impulse "
                              "(Painlevé-type impact inconsistency)")
@@ -635,6 +852,20 @@ def _rope_jerk(drv: _Driver, t: float, y: State, striking=(), normal_target=None
         y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work), y,
                          (jnp.zeros(3), jnp.zeros(3), jnp.asarray(v_A - (P_tip / m0) * e),
                           y.hoist_work + work))
+    elif tip_alone or (not striking and np.all(near) and float(np.max(np.linalg.norm(cv1[best] - cv, axis=1)))
+                       < float(drv.settings.rest_velocity)):
+        # The same for a load sliding flat on the ground: a jerk that would change its corner velocities by
+        # less than rest_velocity leaves them unchanged (the ground takes the load's share) and jerks the
+        # tip alone, to d|AB|/dt = dl/dt (an inextensible rope over a sliding load chattered at ~3 kHz:
+        # jerk, the load tips onto one corner for 30 µs, falls back, the rope slackens; paper-2.3, μ = 0.1).
+        e = _np(_rope_direction(tj, y, drv.sc, drv.c))
+        _, rate_error, _ = map(float, _rope_state(tj, y, drv.sc, drv.c))
+        P_tip = m0 * rate_error  # e·(v_A+ - v_B) = -ds/dt
+        work = P_tip * s_dot
+        y1 = eqx.tree_at(lambda s: (s.tip_velocity, s.hoist_work), y,
+                         (jnp.asarray(_np(y.tip_velocity) - (P_tip / m0) * e), y.hoist_work + work))
+        if not tip_alone:
+            drv.notes.append("jerk on the tip alone")
     loss = work - (ke(y1) - ke(y))
     if loss < -1e-9 * max(abs(work), 1.0):
         raise RigidContactError(f"t = {t:.9g} s: the rope jerk would gain energy ({-loss:.4g} J)")
@@ -778,11 +1009,13 @@ _DEFAULT_TOL = dict(
     accel=1e-7,        # consistency tolerance on accelerations [g]
     rest=1e-9,         # tolerance of the rest conditions (dimensionless guards)
     guard_start=1e-9,  # every guard starts at least this positive (offsets)
+    min_phase=1e-6,    # [s] a phase shorter than this is merged into the previous record (`_merge`)
     trigger=1e-6,      # guards within this of zero at an event count as fired
     lookahead=1e-5,    # the look-ahead runs until the fired guards are below -lookahead
     align=1e-2,        # a corner sliding from rest must accelerate along its sliding direction (relative)
     jump=1e-3,         # normal-force jumps closer than this [G] count as equally continuous
     bounce=1e-4,       # impacts slower than bounce V are plastic (no restitution): avoids Zeno bouncing
+    relax=1e3,         # fallback 1 of the configuration choice: tolerances times this (degenerate contacts)
 )
 
 
@@ -799,7 +1032,8 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
       ground is rigid, friction is exact Coulomb with μ = `foundation.friction_coefficient`).
     - `t1`: end time [s] (default `scenario.t1`); `ts` saved times (start 0, end t1), default `n_save` even.
     - `restitution`: Newton's coefficient e [-] of corner impacts (0: plastic).
-    - `rtol`, `atol`, `max_steps`: Tsit5 settings of each phase; `max_phases`: guard against Zeno sequences.
+    - `rtol`, `atol`, `max_steps`: Tsit5 settings of each phase; `max_phases`: guard against Zeno
+      sequences (counts phase solves, merged sub-microsecond ones included).
     - `settings`: `physics.rigid.Settings` (Baumgarte β, slip blend velocity, pseudo-inverse cut-off).
     - `verbose`: print each phase as it ends.
     - `rope`: "elastic" (the rope law (2.14), default) or "inextensible" (the constraint (2.15) with the
@@ -842,11 +1076,22 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
 
     n_t = ts.size
     filled = np.zeros(n_t, dtype=bool)
-    saved_states: list = [None] * n_t
+    saved_states = None  # per leaf an (n_t, ...) host array, allocated at the first phase
     saved_phase = np.zeros(n_t, dtype=np.int64)
     saved_impact = np.zeros(n_t)
     records: list[PhaseRecord] = []
-    phases: list[Phase] = []
+    phases: list[Phase] = []   # one per phase solve (the outputs are evaluated with these)
+    record_of: list[int] = []  # per phase solve, its record in `records` (several when merged)
+
+    def log(rec: PhaseRecord):
+        """Append the record of the phase just solved, or merge it into the previous record when it lasted
+        less than `min_phase` (see `_merge`)."""
+        if records and rec.t_end - rec.t_start < drv.tol["min_phase"]:
+            records[-1] = _merge(records[-1], rec)
+        else:
+            records.append(rec)
+        record_of.append(len(records) - 1)
+
     impact_total = 0.0
 
     t, y = 0.0, y0
@@ -862,12 +1107,16 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
             except _RopeWouldPush as err:
                 raise RigidContactError(str(err)) from None
             impact_total += loss
-    phase = drv.select(t, y, "start")
+    phase, y, loss = drv.select_or_jam(t, y, "start")
+    impact_total += loss
+    choice = drv.take_notes()
+    retried_at = None  # start time of a stalled phase chosen again (once)
     while True:
-        if len(records) >= max_phases:
+        if len(phases) >= max_phases:
             raise RigidContactError(
                 f"more than max_phases = {max_phases} phases before t = {t:.9g} s (a Zeno sequence of "
-                f"events?). Last phases:\n" + "\n".join(str(r) for r in records[-8:]))
+                f"events? raise max_phases, or Settings.rest_velocity to let rocking settle). "
+                f"Last phases:\n" + "\n".join(str(r) for r in records[-8:]))
         y, loss = drv.project(t, y, phase)
         impact_total += loss
         phase = drv.with_offsets(t, y, phase)
@@ -879,21 +1128,39 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         ok = result == diffrax.RESULTS.successful
         event = result == diffrax.RESULTS.event_occurred
         if not (bool(ok) or bool(event)):
+            if retried_at != t and not bool(phase.rest):
+                # A stalled phase (typically a corner sliding with a slip speed near zero, where the slip
+                # direction turns quickly): choose again at its start without that configuration.
+                retried_at = t
+                stalled = _fmt(_np(phase.contact))
+                drv.exclude = _np(phase.contact).copy()
+                try:
+                    phase, y, loss = drv.select_or_jam(t, y, "after a stalled phase")
+                finally:
+                    drv.exclude = None
+                impact_total += loss
+                how = drv.take_notes()
+                choice = f"{stalled} stalled at max_steps, chosen again without it"
+                choice += f"; {how}" if how else ""
+                continue
             raise RigidContactError(f"the phase starting at t = {t:.9g} s failed: {result} "
                                     f"(raise max_steps = {max_steps} or loosen rtol/atol)")
         idx = len(phases)
         phases.append(phase)
         # Saved times of this phase: t <= ts <= t_end not yet filled.
         sys_np = jax.tree_util.tree_map(np.asarray, sys_)  # index on the host, not one dispatch per sample
-        for k in np.nonzero((ts >= t) & (ts <= t_end) & ~filled)[0]:
-            saved_states[k] = _tree_index(sys_np, k)
-            saved_phase[k] = idx
-            saved_impact[k] = impact_total
-            filled[k] = True
+        if saved_states is None:
+            saved_states = jax.tree_util.tree_map(lambda x: np.zeros((n_t,) + x.shape[1:], x.dtype), sys_np)
+        ks = np.nonzero((ts >= t) & (ts <= t_end) & ~filled)[0]
+        if ks.size:
+            jax.tree_util.tree_map(lambda dst, src: dst.__setitem__(ks, src[ks]), saved_states, sys_np)
+            saved_phase[ks] = idx
+            saved_impact[ks] = impact_total
+            filled[ks] = True
         modes = tuple(rigid.MODE_NAMES[int(m)] for m in _np(phase.contact))
         rope_name = rigid.ROPE_NAMES[int(phase.rope)]
         if not bool(event) or t_end >= t1:
-            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), "t1", y_end, rope_name))
+            log(PhaseRecord(t, t_end, modes, bool(phase.rest), "t1", y_end, rope_name, choice))
             break
         g = drv.guards(t_end, y_end, phase) + _np(phase.guard_offset)
         # Fired: near zero now, and well below where the guard started (a guard that started at its small
@@ -915,18 +1182,22 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
             drv.rope_taut = True
             if rate_error > drv.tol["v"] * drv.V:
                 try:
-                    y_end, _, loss = _rope_jerk(drv, t_end, y_end)
+                    y_end, _, loss = _rope_jerk(drv, t_end, y_end, fallback=True)
                 except _RopeWouldPush as err:
                     raise RigidContactError(str(err)) from None
                 impact_total += loss
-                end += f" rope-jerk ({loss:.4g} J)"
-            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name))
-            new = drv.select(t_end, y_end, "after the rope became taut", phase)
+                how = drv.take_notes()
+                end += f" rope-jerk ({loss:.4g} J{', ' + how if how else ''})"
+            log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name, choice))
+            new, y_end, loss = drv.select_or_jam(t_end, y_end, "after the rope became taut", phase)
+            impact_total += loss
         elif hard:
             y_before = y_end
             y_end, loss = drv.impact(t_end, y_end, hard, taut=int(phase.rope) == rigid.ROPE_TAUT)
             impact_total += loss
-            end += f" impact:{''.join(rigid.CORNERS[i] for i in hard)} ({loss:.4g} J)"
+            how = drv.take_notes()
+            how = f", {how}" if how else ""
+            end += f" impact:{''.join(rigid.CORNERS[i] for i in hard)} ({loss:.4g} J{how})"
             # Settling: if every corner on the ground leaves the impact slower than rest_velocity, the
             # impact is plastic for all of them (their normal velocities are removed; flat on the ground,
             # the load stops). This ends the otherwise endless sequence of ever smaller rocking impacts.
@@ -941,22 +1212,21 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
                     y_end, loss = drv._project(t_end, y_end, np.zeros(4, dtype=bool), near)
                     impact_total += loss
                 end += " settled"
-            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name))
-            new = drv.select(t_end, y_end, "after impact")
+            log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name, choice))
+            new, y_end, loss = drv.select_or_jam(t_end, y_end, "after impact")
+            impact_total += loss
         else:
-            records.append(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_end, rope_name))
-            new = _transition(drv, t_end, y_end, phase, fired, ts)
+            log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_end, rope_name, choice))
+            new, y_end, loss = _transition(drv, t_end, y_end, phase, fired, ts)
+            impact_total += loss
         if verbose:
             print(records[-1], f"[{drv.accepted} steps so far]", flush=True)
-        t, y, phase = t_end, y_end, new
+        t, y, phase, choice = t_end, y_end, new, drv.take_notes()
 
     for k in np.nonzero(~filled)[0]:  # cannot happen unless ts extends past the last phase
         raise RigidContactError(f"saved time {ts[k]} s was not reached")
-    # Stack on the host: jnp.stack of n_t arrays would compile one XLA program per leaf and length.
-    states = jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.stack(xs)), *saved_states)
-    # Outputs: one vmapped evaluation with every sample's own phase (rest phases included).
-    batch = jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.stack(xs)), *[phases[i] for i in saved_phase])
-    out = _outputs(jnp.asarray(ts), states, scenario, c, batch, settings, drv.inextensible)
+    states = jax.tree_util.tree_map(jnp.asarray, saved_states)
+    out = _chunked_outputs(ts, saved_states, saved_phase, phases, scenario, c, settings, drv.inextensible)
     euler = out.euler.at[:, :2].set(jnp.unwrap(out.euler[:, :2], axis=0))
     return RigidTrajectory(
         ts=jnp.asarray(ts), position=states.position, velocity=states.velocity, euler=euler,
@@ -966,11 +1236,32 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         hoist_work=states.hoist_work, damping_loss=states.damping_loss, friction_work=states.friction_work,
         impact_loss=jnp.asarray(saved_impact), states=states, status=jnp.asarray(SolveStatus.OK, jnp.int32),
         num_accepted_steps=jnp.asarray(drv.accepted), num_rejected_steps=jnp.asarray(drv.rejected),
-        phase_index=jnp.asarray(saved_phase), phases=tuple(records))
+        phase_index=jnp.asarray(np.asarray(record_of, dtype=np.int64)[saved_phase]), phases=tuple(records))
 
 
-def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[int], ts) -> Phase:
-    """The next phase after the guards `fired` of `phase` reached zero at (t_e, y_e) (no impact)."""
+def _merge(previous: PhaseRecord, short: PhaseRecord) -> PhaseRecord:
+    """One record for `previous` followed by a phase `short` that lasted less than `min_phase` (1 µs): two
+    events closer than the phase solves resolve time (their event root finder works to 1e-10 s, the
+    solution to rtol 1e-8) are one event of the log. The merged record keeps the previous phase's contact
+    modes and start, ends where `short` ended (its state and reason), and its `end` names both events and
+    the short configuration in between: "rest:tip => D:stick E:free F:stick H:free (4.1e-09 s) ->
+    normal:D,normal:F". The short phase is still solved and its impacts and losses are booked as usual;
+    only the log (and `RigidTrajectory.phase_index`) merge it."""
+    between = "rest" if short.rest else " ".join(f"{c}:{m}" for c, m in zip(rigid.CORNERS, short.contact,
+                                                                            strict=True))
+    n = previous.merged + 1
+    first = previous.end if n == 1 else previous.end.split(" => ")[0]
+    dt = short.t_end - short.t_start
+    what = f"{between} ({dt:.2g} s)" if n == 1 else f"{n} phases < 1 µs, last {between}"
+    end = f"{first} => {what} -> {short.end}"
+    return dataclasses.replace(previous, t_end=short.t_end, end=end, state_end=short.state_end, merged=n)
+
+
+def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[int], ts):
+    """The next phase after the guards `fired` of `phase` reached zero at (t_e, y_e) (no impact).
+
+    **Returns** `(phase, y, loss [J])`: `y` is `y_e`, or `y_e` after a tangential impact (`_Driver.jam`)
+    where no configuration was consistent."""
     contact, starting = _np(phase.contact), _np(phase.starting)
     _, cv, _ = drv.kin(t_e, y_e)
     speed = np.linalg.norm(cv[:, :2], axis=1)
@@ -987,11 +1278,11 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
         for i in grown:
             start[i] = False
         return rigid.make_phase(contact, rest=False, slip_hint=hint, starting=start,
-                                free_on_ground=_np(phase.free_on_ground), rope=int(phase.rope))
+                                free_on_ground=_np(phase.free_on_ground), rope=int(phase.rope)), y_e, 0.0
     where = f"after {','.join(rigid.GUARD_NAMES[k] for k in fired)}"
     # A slip that died out: choose at the event itself (the corner is now resting).
     if any(speed[i] < 1.5 * drv.v_stop for i in tangential):
-        return drv.select(t_e, y_e, where, phase)
+        return drv.select_or_jam(t_e, y_e, where, phase)
     # Otherwise look ahead: continue the old phase (guards disabled) until the fired guards are clearly
     # negative, and choose there.
     blind = eqx.tree_at(lambda p: p.guard_offset, phase, jnp.full(rigid.N_GUARDS, 1e6, dtype=jnp.float64))
@@ -1005,4 +1296,14 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
         if all(g[k] < -drv.tol["lookahead"] for k in fired):
             break
         dt *= 2.0
-    return drv.select(t_la, y_la, where, phase)
+    # A contact whose load vanished, a free corner that reached the ground (or, lying on it, would take
+    # load) or a sticking corner whose friction reached μN: not the same configuration again (`_select`).
+    hard = [k for k in fired if k < 4 or (4 <= k < 8 and contact[k - 4] == STICK)]
+    drv.exclude = contact.copy() if hard and not bool(phase.rest) else None
+    try:
+        return drv.select(t_la, y_la, where, phase), y_e, 0.0
+    except _Jam:
+        # The tangential impact where the event happened, then choose there.
+        return drv.select_or_jam(t_e, y_e, where, phase)
+    finally:
+        drv.exclude = None
