@@ -485,3 +485,27 @@ def test_four_devices_and_resumes_across_device_counts(clean, tmp_path):
     with np.load(tmp_path / "twelve.npz") as want:
         for k in res.data:
             np.testing.assert_array_equal(res[k], want[k], err_msg=k)
+
+
+def test_fingerprint_sees_constants_and_closures_of_custom_observables():
+    """Issue 14: a custom observable whose constant or closed-over value changed must not reuse the chunks
+    of the old one (the fingerprint hashed only the bytecode)."""
+    from jaxhoist.numerics.observables import resolve
+    from jaxhoist.numerics.scan import _fingerprint, _Spec
+
+    sc = oblique_box()
+    ts = np.linspace(0.0, T1, 3)
+    members = MUS[:, None]
+
+    def fp(fn):
+        spec = _Spec(paths=(MU,), observables=tuple(resolve({"x": fn})), histories=(),
+                     options=jh.SolverOptions(), lanes=2, devices=(), derivatives=False)
+        return _fingerprint(sc, spec, members, ts, True)
+
+    def closure(scale):
+        return lambda traj: traj.position[-1, 0] * scale
+
+    assert fp(lambda traj: traj.position[-1, 0] + 1.0) != fp(lambda traj: traj.position[-1, 0] + 2.0)
+    assert fp(closure(1.0)) != fp(closure(2.0))
+    assert fp(closure(np.array([1.0]))) != fp(closure(np.array([2.0])))
+    assert fp(closure(1.0)) == fp(closure(1.0))

@@ -38,13 +38,10 @@ is `INVALID_PARAMETER` and `ScanResult.reason(i)` gives the message.
 from __future__ import annotations
 
 import dataclasses
-import enum
-import functools
 import hashlib
 import json
 import math
 import os
-import re
 import sys
 import time
 from collections.abc import Callable, Mapping, Sequence
@@ -57,109 +54,29 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
-from .._errors import ScenarioError, SolveStatus, require_x64
+from .._errors import ScenarioError, require_x64
 from ..physics.params import Scenario, get_leaf
 from . import fixed_step as fixed_mod
+from .batch import HISTORY_UNITS as _HISTORY_UNITS
+from .batch import BatchSpec as _Spec
+from .batch import ScanStatus as ScanStatus
+from .batch import chunk_fn as _chunk_fn
+from .batch import flatten_out as _flatten_out
+from .batch import hist_shape as _hist_shape
 from .options import SolverOptions
-from .solve import saved_times, solve
+from .paths import _getter
+from .paths import check_path as check_path
+from .paths import get_param as get_param
+from .paths import param_unit as param_unit
+from .paths import parse_path as parse_path
+from .paths import set_param as set_param
+from .solve import saved_times
 
 FORMAT = "jaxhoist-scan/1"
 MANIFEST = "manifest.json"
 
 
-class ScanStatus(enum.IntEnum):
-    """Outcome of one member of a scan (0-3 are the `SolveStatus` codes)."""
-
-    OK = 0
-    MAX_STEPS = 1
-    NONFINITE = 2
-    SOLVER_FAILED = 3
-    INVALID_PARAMETER = 4
-    NAN_OBSERVABLE = 5
-
-    @property
-    def message(self) -> str:
-        if self.value < 4:
-            return SolveStatus(self.value).message
-        return {
-            4: "invalid parameter values (not solved)",
-            5: "the solve succeeded but an observable is NaN",
-        }[self.value]
-
-
 # ------------------------------------------------------------------------------------ parameter paths
-
-_PATH_RE = re.compile(r"^([A-Za-z_][\w]*(?:\.[A-Za-z_][\w]*)*)(?:\[(\d+)\])?$")
-
-
-def parse_path(path: str) -> tuple[str, int | None]:
-    """`"load.mass_centre[0]"` -> `("load.mass_centre", 0)`; `"hoist.speed"` -> `("hoist.speed", None)`."""
-    m = _PATH_RE.match(path.strip())
-    if not m:
-        raise ScenarioError(
-            f"{path!r} is not a parameter path: use dotted field names with an optional "
-            f"component index, e.g. 'foundation.friction_coefficient' or 'load.mass_centre[0]'"
-        )
-    return m.group(1), (None if m.group(2) is None else int(m.group(2)))
-
-
-def check_path(scenario: Scenario, path: str) -> None:
-    """Raise `ScenarioError` unless `path` names a float scalar leaf or one component of a float vector
-    leaf."""
-    dotted, index = parse_path(path)
-    leaf = np.asarray(get_leaf(scenario, dotted))
-    if not np.issubdtype(leaf.dtype, np.floating):
-        raise ScenarioError(f"{path!r} is not a float leaf (dtype {leaf.dtype})")
-    if index is None and leaf.ndim != 0:
-        raise ScenarioError(
-            f"{path!r} is a vector of shape {leaf.shape}: sweep one component, e.g. '{dotted}[0]'"
-        )
-    if index is not None and (leaf.ndim != 1 or not 0 <= index < leaf.shape[0]):
-        raise ScenarioError(f"{path!r}: index {index} out of range for a leaf of shape {leaf.shape}")
-
-
-def _getter(dotted: str):
-    parts = dotted.split(".")
-
-    def where(s):
-        for p in parts:
-            s = getattr(s, p)
-        return s
-
-    return where
-
-
-def set_param(scenario: Scenario, path: str, value) -> Scenario:
-    """A copy of `scenario` with the leaf (or leaf component) at `path` set to `value` (traceable)."""
-    dotted, index = parse_path(path)
-    where = _getter(dotted)
-    value = jnp.asarray(value, dtype=jnp.float64)
-    if index is not None:
-        value = where(scenario).at[index].set(value)
-    return eqx.tree_at(where, scenario, value)
-
-
-def get_param(scenario: Scenario, path: str):
-    """The value of the leaf (or leaf component) at `path`, the counterpart of `set_param`."""
-    check_path(scenario, path)
-    dotted, index = parse_path(path)
-    leaf = get_leaf(scenario, dotted)
-    return leaf if index is None else leaf[index]
-
-
-def param_unit(scenario: Scenario, path: str) -> str:
-    """The SI unit of a parameter, read from the docstring of the class that owns the field."""
-    dotted, _ = parse_path(path)
-    *owner_path, field = dotted.split(".")
-    owner = scenario
-    for p in owner_path:
-        owner = getattr(owner, p)
-    for cls in type(owner).__mro__:
-        m = re.search(rf"`{re.escape(field)}`:[^\n]*?\[([^\]\n]+)\]", cls.__doc__ or "")
-        if m:
-            return m.group(1)
-    return "?"
-
 
 def parse_values(spec) -> np.ndarray:
     """Values of a swept parameter: an array-like, or a string `"start:stop:num"` (inclusive, like
@@ -257,102 +174,6 @@ def _validate_members(scenario: Scenario, paths: Sequence[str], members: np.ndar
 
 
 # ---------------------------------------------------------------------------------------- the core
-
-
-_HISTORY_UNITS = {
-    "position": "m",
-    "velocity": "m/s",
-    "euler": "rad",
-    "angular_velocity": "rad/s",
-    "corners": "m",
-    "normal_forces": "N",
-    "friction_forces": "N",
-    "ground_reaction": "N",
-    "rope_tension": "N",
-    "tip_position": "m",
-    "hoist_work": "J",
-    "damping_loss": "J",
-    "friction_work": "J",
-}
-
-
-@dataclasses.dataclass(frozen=True)
-class _Spec:
-    """Everything static about one scan's compiled computation."""
-
-    paths: tuple[str, ...]
-    observables: tuple  # tuple[Observable, ...]
-    histories: tuple[str, ...]
-    options: SolverOptions
-    lanes: int
-    devices: tuple
-    derivatives: bool = False
-
-
-def _member(scenario, ts, row, spec: _Spec):
-    def run(row):
-        sc = scenario
-        for k, p in enumerate(spec.paths):
-            sc = set_param(sc, p, row[k])
-        o = spec.options
-        lean = o.fixed_step and fixed_mod.supports(o.solver)
-        traj = fixed_mod.solve_fixed(sc, ts, o) if lean else solve(sc, ts, o)
-        obs = {o.name: o(traj, sc) for o in spec.observables}
-        return obs, (obs, traj)
-
-    if spec.derivatives:  # forward-mode sensitivities d observable / d parameter, one tangent per parameter
-        jac, (obs, traj) = jax.jacfwd(run, has_aux=True)(row)
-    else:
-        _, (obs, traj) = run(row)
-        jac = {}
-    ok = traj.status == SolveStatus.OK
-    # a NaN observable or sensitivity of a solve that succeeded is flagged, never silent (values are kept)
-    checked = [*obs.values(), *jac.values()]
-    nan_obs = jnp.any(jnp.stack([jnp.any(jnp.isnan(v)) for v in checked])) if checked else False
-    status = jnp.where(ok & nan_obs, ScanStatus.NAN_OBSERVABLE, traj.status).astype(jnp.int32)
-    obs = {k: jnp.where(ok, v, jnp.nan) for k, v in obs.items()}
-    obs.update({f"d_{k}": jnp.where(ok, v, jnp.nan) for k, v in jac.items()})
-    hist = {h: jnp.where(ok, getattr(traj, h), jnp.nan) for h in spec.histories}
-    return {
-        "obs": obs,
-        "hist": hist,
-        "status": status,
-        "num_accepted_steps": traj.num_accepted_steps.astype(jnp.int32),
-        "num_rejected_steps": traj.num_rejected_steps.astype(jnp.int32),
-    }
-
-
-def _device_fn(scenario, ts, values, active, spec: _Spec):
-    """values (G, L, P), active (G,) -> outputs with leading (G, L). Groups run one after another."""
-    group = jax.vmap(lambda row: _member(scenario, ts, row, spec))
-    shapes = jax.eval_shape(group, values[0])
-
-    def body(args):
-        v, a = args
-        return jax.lax.cond(
-            a, group, lambda _: jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes), v
-        )
-
-    return jax.lax.map(body, (values, active))
-
-
-@functools.lru_cache(maxsize=32)
-def _chunk_fn(spec: _Spec):
-    # One code path for any device count: a mesh of one device too. XLA compiles a plain jit of the same
-    # function with other fusion decisions, which rounded differently (1e-5 relative in final Euler angles on
-    # paper-4.2, issue 14; 1.6e-7 m with the Rosenbrock-W solver).
-    from jax.sharding import Mesh
-    from jax.sharding import PartitionSpec as P
-
-    mesh = Mesh(np.array(spec.devices), ("members",))
-    f = jax.shard_map(
-        lambda sc, ts, v, a: _device_fn(sc, ts, v, a, spec),
-        mesh=mesh,
-        in_specs=(P(), P(), P("members"), P("members")),
-        out_specs=P("members"),
-        check_vma=False,
-    )
-    return eqx.filter_jit(f)
 
 
 # ------------------------------------------------------------------------------------------ results
@@ -736,6 +557,17 @@ def _fingerprint(scenario, spec: _Spec, members, ts, sort) -> str:
         )
         if code is not None:
             h.update(code.co_code)
+            # constants, defaults and closed-over values too: `+ 1.0` -> `+ 2.0` in a custom observable
+            # keeps the bytecode and used to reuse the stale chunks (issue 14)
+            h.update(repr(code.co_consts).encode())
+            h.update(repr(getattr(ob.fn, "__defaults__", None)).encode())
+            for cell in getattr(ob.fn, "__closure__", None) or ():
+                try:
+                    v = cell.cell_contents
+                except ValueError:  # an empty cell
+                    continue
+                array = isinstance(v, np.ndarray | jax.Array)
+                h.update(np.asarray(v).tobytes() if array else repr(v).encode())
     return h.hexdigest()[:32]
 
 
@@ -771,18 +603,6 @@ def _write_manifest(out: Path, manifest: dict) -> None:
     tmp = out / (MANIFEST + ".tmp")
     tmp.write_text(json.dumps(manifest, indent=1, default=_json_default) + "\n")
     os.replace(tmp, out / MANIFEST)
-
-
-def _flatten_out(out: Mapping, n: int) -> dict[str, np.ndarray]:
-    """Device output {obs:{}, hist:{}, ...} with leading (G, L) -> flat numpy arrays, first n members."""
-    flat: dict[str, np.ndarray] = {}
-    for k, v in out["obs"].items():
-        flat[f"obs:{k}"] = np.asarray(v).reshape(-1, *np.shape(v)[2:])[:n]
-    for k, v in out["hist"].items():
-        flat[f"hist:{k}"] = np.asarray(v).reshape(-1, *np.shape(v)[2:])[:n]
-    for k in ("status", "num_accepted_steps", "num_rejected_steps"):
-        flat[k] = np.asarray(out[k]).reshape(-1)[:n]
-    return flat
 
 
 def scan(
@@ -1162,19 +982,6 @@ _COMPILED: dict = {}
 def _cache_key(spec, scenario, ts, vals):
     leaves, treedef = jax.tree_util.tree_flatten(scenario)
     return (spec, treedef, tuple(np.shape(x) for x in leaves), ts.shape, vals.shape)
-
-
-def _hist_shape(name: str) -> tuple[int, ...]:
-    return {
-        "corners": (4, 3),
-        "friction_forces": (4, 3),
-        "normal_forces": (4,),
-        "ground_reaction": (),
-        "rope_tension": (),
-        "hoist_work": (),
-        "damping_loss": (),
-        "friction_work": (),
-    }.get(name, (3,))
 
 
 # ---------------------------------------------------------------------------------------------- CLI
