@@ -509,3 +509,42 @@ def test_fingerprint_sees_constants_and_closures_of_custom_observables():
     assert fp(closure(1.0)) != fp(closure(2.0))
     assert fp(closure(np.array([1.0]))) != fp(closure(np.array([2.0])))
     assert fp(closure(1.0)) == fp(closure(1.0))
+
+
+def test_a_damaged_or_foreign_store_is_recomputed_with_a_warning(box, clean, tmp_path):
+    """Issue 14: chunk files are verified on resume (content checksum from the manifest, the scan's
+    fingerprint and the member indices inside the file); a truncated or emptied chunk, a chunk copied over
+    another, a chunk whose values were changed (NaNs marked ok) and a truncated manifest are each recomputed
+    with a `ScanStoreWarning` naming the file, and the result equals the clean scan."""
+    from jaxhoist.numerics.scan import ScanStoreWarning
+
+    out = tmp_path / "store"
+    first = scan(box, {MU: MUS}, T1, chunk_size=4, out_dir=out, **KW)  # 2 chunks (4 and 2 members)
+    for k in clean.data:
+        np.testing.assert_array_equal(first[k], clean[k], err_msg=k)
+    c0, c1 = (out / f"chunk_{i:05d}.npz" for i in range(2))
+
+    def resume_expecting(match):
+        with pytest.warns(ScanStoreWarning, match=match):
+            again = scan(box, {MU: MUS}, T1, chunk_size=4, out_dir=out, **KW)
+        for k in clean.data:
+            np.testing.assert_array_equal(again[k], clean[k], err_msg=k)
+
+    c0.write_bytes(c0.read_bytes()[:100])  # truncated
+    resume_expecting(r"chunk_00000\.npz: its content changed")
+    c1.write_bytes(b"")  # emptied
+    resume_expecting(r"chunk_00001\.npz: its content changed")
+    # a chunk copied over another, with the manifest's checksum updated to match: the member indices and
+    # the fingerprint inside the file give it away
+    c1.write_bytes(c0.read_bytes())
+    man = json.loads((out / "manifest.json").read_text())
+    man["chunks"]["1"]["sha256"] = man["chunks"]["0"]["sha256"]
+    (out / "manifest.json").write_text(json.dumps(man))
+    resume_expecting(r"chunk_00001\.npz: holds other members")
+    # values changed behind the manifest's back (a chunk of NaNs still marked ok)
+    with np.load(c1) as z:
+        arrays = {k: z[k] for k in z.files}
+    np.savez(c1, **{k: (np.full_like(v, np.nan) if k.startswith("obs:") else v) for k, v in arrays.items()})
+    resume_expecting(r"chunk_00001\.npz: its content changed")
+    (out / "manifest.json").write_text((out / "manifest.json").read_text()[:40])  # truncated manifest
+    resume_expecting(r"manifest\.json is unreadable")

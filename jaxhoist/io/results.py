@@ -17,6 +17,7 @@ from __future__ import annotations
 import dataclasses
 import datetime
 import json
+import os
 import platform
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -243,7 +244,11 @@ def save_arrays(path: str | Path, arrays: Mapping[str, Any], units: Mapping[str,
         unit, meaning = (u, "") if isinstance(u, str) else u
         described[k] = {"unit": unit, "meaning": meaning, "shape": list(a.shape), "dtype": str(a.dtype)}
     npz_path, json_path = stem.with_suffix(".npz"), stem.with_suffix(".json")
-    np.savez_compressed(npz_path, **arrs)
+    # atomically (temporary file, then rename): a run killed while saving leaves the old file or none,
+    # never a truncated one
+    tmp = npz_path.with_name(npz_path.name + ".tmp.npz")
+    np.savez_compressed(tmp, **arrs)
+    os.replace(tmp, npz_path)
     sidecar = {
         "format": kind,
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
@@ -252,7 +257,9 @@ def save_arrays(path: str | Path, arrays: Mapping[str, Any], units: Mapping[str,
         "arrays": described,
         **_jsonable(dict(metadata or {})),
     }
-    json_path.write_text(json.dumps(sidecar, indent=2, allow_nan=True) + "\n")
+    tmp = json_path.with_name(json_path.name + ".tmp")
+    tmp.write_text(json.dumps(sidecar, indent=2, allow_nan=True) + "\n")
+    os.replace(tmp, json_path)
     return npz_path, json_path
 
 

@@ -44,6 +44,9 @@ import math
 import os
 import sys
 import time
+import warnings
+import zipfile
+import zlib
 from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
@@ -577,14 +580,33 @@ def _write_atomic_npz(path: Path, arrays: Mapping[str, np.ndarray]) -> None:
     os.replace(tmp, path)
 
 
-def _read_chunk(path: Path) -> dict[str, np.ndarray] | None:
-    """A finished chunk file's arrays, or None if it is missing or unreadable (chunk files are written
-    atomically, so a file that exists is complete)."""
+class ScanStoreWarning(UserWarning):
+    """A chunk file or the manifest in a scan's `out_dir` was damaged, foreign or stale; it is recomputed."""
+
+
+def _file_sha256(path: Path) -> str:
+    return hashlib.sha256(path.read_bytes()).hexdigest()
+
+
+def _read_chunk(path: Path, fingerprint: str, members: np.ndarray, sha256: str | None = None):
+    """A finished chunk file's arrays, checked, as `(arrays, None)`, or `(None, why)`: missing, unreadable
+    (truncated, empty, not an npz), its content changed since it was written (`sha256` from the manifest),
+    or written for another scan or other members (a chunk copied over another). Chunk files are written
+    atomically, so a file that exists was complete when written."""
+    if not path.exists():
+        return None, "missing"
     try:
+        if sha256 is not None and _file_sha256(path) != sha256:
+            return None, "its content changed since it was written (checksum)"
         with np.load(path, allow_pickle=False) as z:
-            return {k: z[k] for k in z.files}
-    except (OSError, ValueError, KeyError):
-        return None
+            arrays = {k: z[k] for k in z.files}
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile, zlib.error) as e:
+        return None, f"unreadable ({type(e).__name__})"
+    if str(arrays.pop("_fingerprint", "")) != fingerprint:
+        return None, "written for another scan"
+    if not np.array_equal(arrays.pop("_members", np.array([-1])), members):
+        return None, "holds other members (copied over from another chunk?)"
+    return arrays, None
 
 
 def _wait_for(get, timeout: float, what: str, poll: float = 0.5):
@@ -788,8 +810,18 @@ def scan(
                 wait_timeout,
                 f"process 0's {mpath} of this scan",
             )
+        old = None
         if mpath.exists() and resume:
-            old = json.loads(mpath.read_text())
+            try:
+                old = json.loads(mpath.read_text())
+                int(old["chunk_size"])
+            except (OSError, ValueError, KeyError, TypeError) as e:
+                warnings.warn(
+                    f"{mpath} is unreadable ({type(e).__name__}); the scan starts afresh", ScanStoreWarning,
+                    stacklevel=2,
+                )
+                old = None
+        if old is not None:
             if old.get("fingerprint") != fp:
                 raise ScenarioError(
                     f"{out} holds chunks of a different scan (other scenario, values, times, "
@@ -797,10 +829,16 @@ def scan(
                     f"overwrite it"
                 )
             chunk = int(old["chunk_size"])  # the files' layout wins
-            for k_str in old.get("chunks", {}):
-                res = _read_chunk(out / f"chunk_{int(k_str):05d}.npz")
-                if res is not None:  # else missing or truncated: recompute
-                    done_chunks[int(k_str)] = res
+            for k_str, entry in old.get("chunks", {}).items():
+                k = int(k_str)
+                path_k = out / f"chunk_{k:05d}.npz"
+                res, why = _read_chunk(
+                    path_k, fp, order[k * chunk : (k + 1) * chunk], (entry or {}).get("sha256")
+                )
+                if res is not None:
+                    done_chunks[k] = res
+                elif why != "missing":
+                    warnings.warn(f"{path_k}: {why}; recomputed", ScanStoreWarning, stacklevel=2)
         manifest = {
             "format": FORMAT + "-manifest",
             "fingerprint": fp,
@@ -810,7 +848,10 @@ def scan(
             "mode": mode,
             "t1": float(ts[-1]),
             "lanes": lanes,
-            "chunks": {str(k): {"file": f"chunk_{k:05d}.npz"} for k in sorted(done_chunks)},
+            "chunks": {  # the verified chunks keep their records (checksum included)
+                str(k): (old or {}).get("chunks", {}).get(str(k)) or {"file": f"chunk_{k:05d}.npz"}
+                for k in sorted(done_chunks)
+            },
         }
         if proc == 0:
             _write_manifest(out, manifest)
@@ -834,7 +875,7 @@ def scan(
         if not loaded and k % n_proc != proc:  # another process's chunk: wait for its file
             path_k = out / f"chunk_{k:05d}.npz"
             done_chunks[k] = _wait_for(
-                lambda: _read_chunk(path_k), wait_timeout, f"{path_k} from process {k % n_proc}"
+                lambda: _read_chunk(path_k, fp, idx)[0], wait_timeout, f"{path_k} from process {k % n_proc}"
             )
             loaded = True
         if loaded:
@@ -858,9 +899,11 @@ def scan(
             computed += rows.shape[0]
             compute_time += time.perf_counter() - t_start
             if out is not None:
-                _write_atomic_npz(out / f"chunk_{k:05d}.npz", res)
+                path_k = out / f"chunk_{k:05d}.npz"
+                _write_atomic_npz(path_k, {**res, "_members": idx, "_fingerprint": np.array(fp)})
                 manifest["chunks"][str(k)] = {
-                    "file": f"chunk_{k:05d}.npz",
+                    "file": path_k.name,
+                    "sha256": _file_sha256(path_k),
                     "members": [lo, hi],
                     "wall_s": round(time.perf_counter() - t_start, 4),
                 }
