@@ -141,16 +141,26 @@ def _phase_to_bar(bar):
     return on_line
 
 
-class ScanProgressBar:
+class _TqdmReport:
+    """What the progress renderers share: a tqdm bar on `stream` (default stderr), none when `quiet`, opened
+    on the first report and closed by `close()`."""
+
+    def __init__(self, stream=None, quiet: bool = False):
+        self.stream, self.quiet, self.bar = stream, quiet, None
+
+    def close(self) -> None:
+        if self.bar is not None:
+            self.bar.close()
+            self.bar = None
+
+
+class ScanProgressBar(_TqdmReport):
     """Renders `jaxhoist.numerics.scan.Progress` reports (one per chunk) as a tqdm bar on stderr: members
     done of the total, members per second, ETA, failures so far (and chunks read back from disk).
 
     **Arguments**
     - `stream`: where to draw (default stderr); `quiet`: draw nothing.
     """
-
-    def __init__(self, stream=None, quiet: bool = False):
-        self.stream, self.quiet, self.bar = stream, quiet, None
 
     def __call__(self, p) -> None:
         from tqdm import tqdm
@@ -173,13 +183,9 @@ class ScanProgressBar:
         if p.done >= p.total:
             self.close()
 
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
 
 
-class LocatorProgressBar:
+class LocatorProgressBar(_TqdmReport):
     """Renders `locate_bifurcation` / `trace_boundary` progress reports as a tqdm bar on stderr: the bar is
     the bracket's shrinking on a log scale (0 % at the first bracket, 100 % at `tol`), the postfix the
     iteration, the last value solved and its indicator, the bracket width and the solves so far. A new bar
@@ -190,7 +196,8 @@ class LocatorProgressBar:
     """
 
     def __init__(self, stream=None, quiet: bool = False):
-        self.stream, self.quiet, self.bar, self.key, self.w0 = stream, quiet, None, None, None
+        super().__init__(stream, quiet)
+        self.key, self.w0 = None, None
 
     def __call__(self, r: dict) -> None:
         from tqdm import tqdm
@@ -218,18 +225,15 @@ class LocatorProgressBar:
             f"{r['n_solves']} solves", refresh=False)
         self.bar.refresh()
 
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
 
 
-class FitProgressBar:
+class FitProgressBar(_TqdmReport):
     """Renders `identify` progress reports as a tqdm counter of Levenberg-Marquardt evaluations on stderr
     (one bar per start, out of `max_iterations`) with the cost, the best cost and the step in the postfix."""
 
     def __init__(self, total: int | None = None, stream=None, quiet: bool = False):
-        self.total, self.stream, self.quiet, self.bar, self.start = total, stream, quiet, None, None
+        super().__init__(stream, quiet)
+        self.total, self.start = total, None
 
     def __call__(self, r: dict) -> None:
         from tqdm import tqdm
@@ -246,10 +250,6 @@ class FitProgressBar:
             f"cost {r['cost']:.6g}{mark}, best {r['best_cost']:.6g}, step {r['step']:.3g}", refresh=False)
         self.bar.refresh()
 
-    def close(self) -> None:
-        if self.bar is not None:
-            self.bar.close()
-            self.bar = None
 
 
 def _fmt_seconds(s: float) -> str:
