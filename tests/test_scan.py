@@ -548,3 +548,41 @@ def test_a_damaged_or_foreign_store_is_recomputed_with_a_warning(box, clean, tmp
     resume_expecting(r"chunk_00001\.npz: its content changed")
     (out / "manifest.json").write_text((out / "manifest.json").read_text()[:40])  # truncated manifest
     resume_expecting(r"manifest\.json is unreadable")
+
+
+_FP_WORKER = """
+import sys
+import jax
+jax.config.update("jax_enable_x64", True)
+import numpy as np
+sys.path.insert(0, sys.argv[1])
+# the same run-time type checking as under pytest: it rewrites the library's bytecode, which is hashed
+from jaxtyping import install_import_hook
+install_import_hook("jaxhoist", "beartype.beartype")
+from test_scan import KW, MU, MUS, T1, oblique_box
+from jaxhoist.numerics.observables import resolve
+from jaxhoist.numerics.scan import _fingerprint, _Spec
+import jaxhoist as jh
+spec = _Spec(paths=(MU,), observables=tuple(resolve(KW["observables"])), histories=(),
+             options=jh.SolverOptions(), lanes=2, devices=(), derivatives=False)
+print(_fingerprint(oblique_box(), spec, MUS[:, None], np.linspace(0.0, T1, 3), True))
+"""
+
+
+def test_fingerprint_is_the_same_in_every_process():
+    """The fingerprint is what processes of one scan (and a resumed run) compare: it must not depend on
+    memory addresses (the repr of a code object or function has one)."""
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    from jaxhoist.numerics.observables import resolve
+    from jaxhoist.numerics.scan import _fingerprint, _Spec
+
+    spec = _Spec(paths=(MU,), observables=tuple(resolve(KW["observables"])), histories=(),
+                 options=jh.SolverOptions(), lanes=2, devices=(), derivatives=False)
+    here = _fingerprint(oblique_box(), spec, MUS[:, None], np.linspace(0.0, T1, 3), True)
+    out = subprocess.run([sys.executable, "-c", _FP_WORKER, str(Path(__file__).parent)], capture_output=True,
+                         text=True, timeout=300)
+    assert out.returncode == 0, out.stderr[-2000:]
+    assert out.stdout.strip().splitlines()[-1] == here

@@ -42,8 +42,10 @@ import hashlib
 import json
 import math
 import os
+import re
 import sys
 import time
+import types
 import warnings
 import zipfile
 import zlib
@@ -527,6 +529,48 @@ def print_progress(p: Progress, stream=None) -> None:
 # ------------------------------------------------------------------------------------------ the scan
 
 
+_ADDRESS = re.compile(r" at 0x[0-9a-fA-F]+")
+
+
+def _hash_value(h, v, depth: int = 0) -> None:
+    """Feed a constant or closed-over value into `h` the same way in every process: arrays by their bytes,
+    functions by their code (recursively), anything else by its repr without memory addresses."""
+    if depth > 8:
+        return
+    if isinstance(v, np.ndarray | jax.Array):
+        h.update(np.ascontiguousarray(np.asarray(v)).tobytes())
+    elif isinstance(v, types.CodeType):
+        _hash_code(h, v, depth + 1)
+    elif callable(v) and hasattr(v, "__code__"):
+        _hash_function(h, v, depth + 1)
+    elif isinstance(v, tuple | list):
+        for x in v:
+            _hash_value(h, x, depth + 1)
+    else:
+        h.update(_ADDRESS.sub("", repr(v)).encode())
+
+
+def _hash_code(h, code, depth: int = 0) -> None:
+    h.update(code.co_code)
+    for c in code.co_consts:  # constants: `+ 1.0` -> `+ 2.0` keeps the bytecode (issue 14)
+        _hash_value(h, c, depth)
+
+
+def _hash_function(h, fn, depth: int = 0) -> None:
+    """A function's bytecode, constants, defaults and closed-over values (what a changed custom observable
+    changes), independent of the process (no memory addresses)."""
+    code = getattr(fn, "__code__", None)
+    if code is None:
+        return
+    _hash_code(h, code, depth)
+    _hash_value(h, getattr(fn, "__defaults__", None), depth)
+    for cell in getattr(fn, "__closure__", None) or ():
+        try:
+            _hash_value(h, cell.cell_contents, depth)
+        except ValueError:  # an empty cell
+            continue
+
+
 def _fingerprint(scenario, spec: _Spec, members, ts, sort) -> str:
     h = hashlib.sha256()
     leaves, treedef = jax.tree_util.tree_flatten(scenario)
@@ -554,23 +598,10 @@ def _fingerprint(scenario, spec: _Spec, members, ts, sort) -> str:
         ).encode()
     )
     for ob in spec.observables:
-        code = getattr(ob.fn, "__code__", None)
         h.update(
             f"{ob.name}|{getattr(ob.fn, '__module__', '')}.{getattr(ob.fn, '__qualname__', '')}".encode()
         )
-        if code is not None:
-            h.update(code.co_code)
-            # constants, defaults and closed-over values too: `+ 1.0` -> `+ 2.0` in a custom observable
-            # keeps the bytecode and used to reuse the stale chunks (issue 14)
-            h.update(repr(code.co_consts).encode())
-            h.update(repr(getattr(ob.fn, "__defaults__", None)).encode())
-            for cell in getattr(ob.fn, "__closure__", None) or ():
-                try:
-                    v = cell.cell_contents
-                except ValueError:  # an empty cell
-                    continue
-                array = isinstance(v, np.ndarray | jax.Array)
-                h.update(np.asarray(v).tobytes() if array else repr(v).encode())
+        _hash_function(h, ob.fn)
     return h.hexdigest()[:32]
 
 
