@@ -172,7 +172,13 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
     - `tableau`: the method; default ROS34PW2 (order 3, embedded order 2, L-stable, stiffly accurate).
 
     f at each step's end is kept for the next step's first stage, so a step costs four evaluations of the
-    vector field, one linearisation and one 6x6 factorisation. Dense output between steps is linear;
+    vector field, one linearisation and one 6x6 factorisation.
+
+    Derivatives (`jax.jacfwd`, `jax.grad`) go through the steps with W held fixed. They agree with
+    differences of the solution over short spans (tests/test_rosenbrock.py), but over the full 25 s of
+    paper-4.2 at μ >= 0.5 forward-mode sensitivities grew without bound (docs/performance.md): for
+    sensitivities over long spans use `diffrax.Tsit5()`, which `scan(derivatives=True)` and
+    `locate_bifurcation` do by default. Dense output between steps is linear;
     `numerics.solve` makes the steps land on the saved times, so saved values are the method's own.
     """
 

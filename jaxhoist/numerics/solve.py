@@ -223,7 +223,8 @@ def simulate(
 
     Works under `jax.jit`, `jax.vmap` over any scenario leaf, `jax.grad` (the default adjoint) and
     `jax.jacfwd` (`SolverOptions(adjoint=diffrax.ForwardMode())`, or `adjoint="forward"`), for the elastic
-    model.
+    model. For derivatives over long spans pass `solver=diffrax.Tsit5()`: through the default Rosenbrock-W
+    solver they are not reliable yet at high friction (see `RosenbrockW`).
 
     **Arguments**
     - `scenario`: a `Scenario` (see `load_scenario`).
