@@ -586,3 +586,20 @@ def test_fingerprint_is_the_same_in_every_process():
                          text=True, timeout=300)
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().splitlines()[-1] == here
+
+
+def test_every_chunk_records_the_devices_it_ran_on(box, tmp_path):
+    """Issue 14: scan.json (attrs) and the manifest say which devices computed each chunk, also for chunks
+    read back from an earlier run on other devices."""
+    out = tmp_path / "devs"
+    one = jax.devices()[:1]
+    first = scan(box, {MU: MUS}, T1, chunk_size=4, out_dir=out, devices=one, **KW)
+    assert first.attrs["chunk_devices"] == {"0": [str(one[0])], "1": [str(one[0])]}
+    (out / "chunk_00001.npz").unlink()  # resumed on two devices: chunk 1 is computed again there
+    again = scan(box, {MU: MUS}, T1, chunk_size=4, out_dir=out, **KW)
+    both = [str(d) for d in jax.devices()[:2]]
+    assert again.attrs["chunk_devices"] == {"0": [str(one[0])], "1": both}
+    manifest = json.loads((out / "manifest.json").read_text())
+    assert manifest["chunks"]["0"]["devices"] == [str(one[0])] and manifest["chunks"]["1"]["devices"] == both
+    recorded = json.loads((out / "scan.json").read_text())["attrs"]["chunk_devices"]
+    assert recorded == {"0": [str(one[0])], "1": both}

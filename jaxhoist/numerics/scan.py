@@ -888,6 +888,10 @@ def scan(
             _write_manifest(out, manifest)
 
     n_chunks = math.ceil(n / chunk)
+    # which devices computed each chunk (issue 14): this run's, or as recorded by the run that wrote it
+    here = [str(d) for d in devs] if n_proc == 1 else [f"process {proc}: {d}" for d in devs]
+    chunk_devices: dict[int, list[str]] = {}
+    resumed = set(done_chunks)
     # Groups per compiled call: the chunk's, rounded up to a multiple of the device count (a chunk laid out
     # by a resumed run with fewer devices); the extra groups are inactive and cost nothing.
     groups_per_chunk = math.ceil(chunk // lanes / n_dev) * n_dev
@@ -936,11 +940,19 @@ def scan(
                     "file": path_k.name,
                     "sha256": _file_sha256(path_k),
                     "members": [lo, hi],
+                    "devices": here,
                     "wall_s": round(time.perf_counter() - t_start, 4),
                 }
                 if n_proc == 1:  # with several processes the chunk files themselves are the record
                     _write_manifest(out, manifest)
         results[k] = res
+        if not loaded:
+            chunk_devices[k] = here
+        elif k % n_proc != proc and k not in resumed:
+            chunk_devices[k] = [f"process {k % n_proc}"]
+        else:
+            recorded = manifest.get("chunks", {}).get(str(k)) or {}
+            chunk_devices[k] = recorded.get("devices", ["not recorded (an earlier run)"])
         failed += int(np.sum(res["status"] != 0))
         if report is not None:
             done = min(n, (k + 1) * chunk)
@@ -1015,6 +1027,7 @@ def scan(
         "lanes": lanes,
         "chunk_size": chunk,
         "devices": [str(d) for d in devs],
+        "chunk_devices": {str(k): chunk_devices[k] for k in sorted(chunk_devices)},
         "sorted": bool(sort),
         "timings_s": {
             "compile": round(compile_time, 4),
@@ -1043,7 +1056,9 @@ def scan(
     )
     if out is not None and proc == 0:
         if n_proc > 1:  # record every chunk, now that all are on disk
-            manifest["chunks"] = {str(k): {"file": f"chunk_{k:05d}.npz"} for k in range(n_chunks)}
+            manifest["chunks"] = {
+                str(k): {"file": f"chunk_{k:05d}.npz", "devices": chunk_devices[k]} for k in range(n_chunks)
+            }
             _write_manifest(out, manifest)
         result.save(out / "scan")
         result.to_netcdf(out / "scan.nc")
