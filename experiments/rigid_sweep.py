@@ -355,6 +355,9 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="4 short runs (a minute or two)")
     p.add_argument("--plot-only", action="store_true", help="figures and summary from runs.jsonl")
     p.add_argument("--elastic", action="store_true", help="rigid vs elastic at k = 1.5e9 N/m (see above)")
+    p.add_argument("--shard", default="0/1", help="i/n: run every n-th of the runs still to do, from the i-th "
+                   "(parallel processes, each with its own --out; concatenate their runs.jsonl)")
+    p.add_argument("--only-preset", default=None, help="run only this preset")
     args = p.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -365,7 +368,10 @@ def main(argv=None) -> int:
     done = load_done(path)
     if not args.plot_only:
         runs = run_list(args.quick)
-        todo = [r for r in runs if r["key"] not in done]
+        todo = [r for r in runs if r["key"] not in done
+                and (args.only_preset is None or r["preset"] == args.only_preset)]
+        i_shard, n_shard = (int(x) for x in args.shard.split("/"))
+        todo = todo[i_shard::n_shard]
         print(f"{len(runs)} runs, {len(runs) - len(todo)} already done", flush=True)
         for n, r in enumerate(todo):
             rec = one_run(r)

@@ -51,6 +51,7 @@ from ..physics.elastic import Constants, State
 from ..physics.energy import Energy
 from ..physics.params import Scenario
 from ..physics.rigid import FREE, SLIDE, STICK, Phase
+from .rigid_compliant import ChatterRule, compliant_scenario, elastic_outputs, run_episode
 
 
 class RigidContactError(RuntimeError):
@@ -356,10 +357,10 @@ class _Driver:
         return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
                            (jnp.asarray(u1[:3]), jnp.asarray(u1[3:]))), float(loss)
 
-    def _project_taut(self, t, y, full: np.ndarray, normal: np.ndarray):
+    def _project_taut(self, t, y, full: np.ndarray, normal: np.ndarray, rate_error: float = 0.0):
         """`_project` with the taut inextensible rope: the boom tip's velocity joins the coordinates and
-        the rope's rate d|AB|/dt is kept (a rope impulse P does the hoist work P ds/dt, booked as in the
-        rope jerk). Returns (y, loss [J])."""
+        the rope's rate d|AB|/dt is kept, less `rate_error` [m/s] (a rope impulse P does the hoist work
+        P ds/dt, booked as in the rope jerk). Returns (y, loss [J])."""
         mats = self.matrices(t, y, rigid.ROPE_TAUT)
         rows = [mats.jacobians[i] for i in range(4) if full[i]]
         rows += [mats.jacobians[i, 2:3] for i in range(4) if normal[i] and not full[i]]
@@ -368,7 +369,7 @@ class _Driver:
         u = np.concatenate([_np(y.velocity), _np(y.angular_velocity), _np(y.tip_velocity)])
         J = np.concatenate(rows + [mats.rope_row[None, :]], axis=0)
         b = np.zeros(J.shape[0])
-        b[-1] = mats.rope_row @ u  # the rope keeps its rate
+        b[-1] = mats.rope_row @ u - rate_error  # the rope keeps its rate (less rate_error)
         Minv = np.linalg.inv(mats.mass)
         lam = np.linalg.pinv(J @ Minv @ J.T, rcond=1e-10) @ (J @ u - b)
         u1 = u - Minv @ J.T @ lam
@@ -999,6 +1000,9 @@ def _fmt(combo) -> str:
     return " ".join(f"{c}:{rigid.MODE_NAMES[int(m)]}" for c, m in zip(rigid.CORNERS, combo, strict=True))
 
 
+#: The persistent-contact rule after impacts (docs/rigid-model.md); False only to compare without it.
+PERSISTENT_CONTACT = True
+
 #: The rope models of `simulate_rigid(..., rope=...)`.
 ROPE_MODELS = ("elastic", "inextensible")
 
@@ -1022,7 +1026,8 @@ _DEFAULT_TOL = dict(
 def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_save: int = 501,
                    restitution: float = 0.0, rtol: float = 1e-8, atol: float = 1e-9, max_steps: int = 200_000,
                    max_phases: int = 2000, settings: rigid.Settings | None = None,
-                   verbose: bool = False, rope: str = "elastic") -> RigidTrajectory:
+                   verbose: bool = False, rope: str = "elastic",
+                   chatter: ChatterRule | None = ChatterRule()) -> RigidTrajectory:
     """Simulate a lift with the rigid-body-on-rigid-ground model (paper §2) from rest at t = 0 to `t1`.
 
     Not differentiable and not vmappable (the phase sequence is decided on the host).
@@ -1043,6 +1048,9 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
       at t = 0 (`ConstantSpeedHoist`, `RampedHoist` with ramp_time 0) jerks the taut rope at the start:
       the jerk's loss is booked in `impact_loss` (see docs/rigid-model.md, "Inextensible rope (2.15)");
       `RampedHoist(v, ramp_time > 0)` starts without one.
+    - `chatter`: a `ChatterRule`: when a sustained cycle of impacts (or a phase that stalls twice) is passed
+      by a compliant phase (`numerics.rigid_compliant`; recorded in the phase log); None: never (such a
+      run ends at `max_phases`, or raises at the second stall).
 
     **Returns** a `RigidTrajectory` (with the phase log in `.phases`).
 
@@ -1093,6 +1101,37 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         record_of.append(len(records) - 1)
 
     impact_total = 0.0
+    impact_events: list[tuple[float, float]] = []  # (time [s], loss [J]) of impacts and jerks (`chatter`)
+    compliant_mask = np.zeros(n_t, dtype=bool)  # saved samples inside compliant phases
+
+    def compliant(t0: float, y0: State, phase0: Phase, why: str):
+        """A compliant phase from (t0, y0) (`numerics.rigid_compliant`): fill its saved samples, log it,
+        book its hand-back loss. Returns the state handed back and its time."""
+        nonlocal impact_total
+        ep = run_episode(drv, t0, y0, t1, ts, filled, chatter)
+        drv.accepted += ep.accepted
+        drv.rejected += ep.rejected
+        idx = len(phases)
+        phases.append(phase0)  # a placeholder: these samples' outputs are the compliant model's
+        ks = ep.user_index
+        if ks.size:
+            jax.tree_util.tree_map(lambda dst, src: dst.__setitem__(ks, src), saved_states, ep.user_states)
+            saved_phase[ks] = idx
+            saved_impact[ks] = impact_total
+            filled[ks] = True
+            compliant_mask[ks] = True
+        impact_total += ep.handback_loss
+        loaded = "".join(c for c, on in zip(rigid.CORNERS, ep.loaded, strict=True) if on) or "none"
+        end = "t1" if ep.t_end >= t1 else (f"compliant phase ended: loaded {loaded} steady for "
+                                            f"{ep.steady * 1e3:.3g} ms; hand-back {ep.handback_loss:.4g} J")
+        how = (f"compliant phase: {why}; foundation k = {chatter.stiffness:g} N/m, critically damped, "
+               f"ε = {chatter.regularisation_velocity:g} m/s"
+               + (f", rope {chatter.rope_stiffness:g} N/m" if drv.inextensible else ""))
+        modes = tuple("spring" if on else "free" for on in ep.loaded)
+        log(PhaseRecord(t0, ep.t_end, modes, False, end, ep.y_before_handback,
+                        "compliant" if drv.inextensible else "elastic", how))
+        impact_events.clear()
+        return ep.t_end, ep.y_end
 
     t, y = 0.0, y0
     if drv.inextensible:
@@ -1143,8 +1182,20 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
                 choice = f"{stalled} stalled at max_steps, chosen again without it"
                 choice += f"; {how}" if how else ""
                 continue
-            raise RigidContactError(f"the phase starting at t = {t:.9g} s failed: {result} "
-                                    f"(raise max_steps = {max_steps} or loosen rtol/atol)")
+            if chatter is None or bool(phase.rest):
+                raise RigidContactError(f"the phase starting at t = {t:.9g} s failed: {result} "
+                                        f"(raise max_steps = {max_steps} or loosen rtol/atol)")
+            # Stalled again: pass the episode with a compliant phase.
+            if saved_states is None:
+                saved_states = jax.tree_util.tree_map(lambda x: np.zeros((n_t,) + np.shape(x), np.asarray(x).dtype),
+                                                      y)
+            t, y = compliant(t, y, phase, f"{_fmt(_np(phase.contact))} stalled at max_steps twice")
+            if t >= t1:
+                break
+            phase, y, loss = drv.select_or_jam(t, y, "after a compliant phase")
+            impact_total += loss
+            choice = drv.take_notes()
+            continue
         idx = len(phases)
         phases.append(phase)
         # Saved times of this phase: t <= ts <= t_end not yet filled.
@@ -1186,6 +1237,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
                 except _RopeWouldPush as err:
                     raise RigidContactError(str(err)) from None
                 impact_total += loss
+                impact_events.append((t_end, loss))
                 how = drv.take_notes()
                 end += f" rope-jerk ({loss:.4g} J{', ' + how if how else ''})"
             log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name, choice))
@@ -1195,6 +1247,7 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
             y_before = y_end
             y_end, loss = drv.impact(t_end, y_end, hard, taut=int(phase.rope) == rigid.ROPE_TAUT)
             impact_total += loss
+            impact_events.append((t_end, loss))
             how = drv.take_notes()
             how = f", {how}" if how else ""
             end += f" impact:{''.join(rigid.CORNERS[i] for i in hard)} ({loss:.4g} J{how})"
@@ -1212,6 +1265,19 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
                     y_end, loss = drv._project(t_end, y_end, np.zeros(4, dtype=bool), near)
                     impact_total += loss
                 end += " settled"
+            elif PERSISTENT_CONTACT and np.max(np.abs(cv1[near, 2])) < float(settings.rest_velocity):
+                # Persistent contact: every corner on the ground leaves the impact with a normal velocity
+                # below rest_velocity (a corner the impulse lifts, or one still approaching): their normal
+                # velocities are removed (plastic for all of them) and the next configuration is chosen
+                # with all of them on the ground (docs/rigid-model.md, "Persistent contact").
+                lifted = [rigid.CORNERS[i] for i in range(4) if near[i] and cv1[i, 2] > drv.tol["v"] * drv.V]
+                if lifted:
+                    taut_now = drv.inextensible and drv.rope_taut
+                    project = drv._project_taut if taut_now else drv._project
+                    y_end, loss = project(t_end, y_end, np.zeros(4, dtype=bool), near)
+                    impact_total += loss
+                    end += (f" persistent contact ({','.join(lifted)} held, "
+                            f"|v_n| <= {np.max(np.abs(cv1[near, 2])):.2g} m/s)")
             log(PhaseRecord(t, t_end, modes, bool(phase.rest), end, y_before, rope_name, choice))
             new, y_end, loss = drv.select_or_jam(t_end, y_end, "after impact")
             impact_total += loss
@@ -1222,11 +1288,24 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         if verbose:
             print(records[-1], f"[{drv.accepted} steps so far]", flush=True)
         t, y, phase, choice = t_end, y_end, new, drv.take_notes()
+        why = chatter.detect(impact_events, t) if chatter is not None else ""
+        if why:
+            # A sustained cycle of impacts: pass it with a compliant phase, then choose again.
+            t, y = compliant(t, y, phase, why)
+            if verbose:
+                print(records[-1], f"[{drv.accepted} steps so far]", flush=True)
+            if t >= t1:
+                break
+            phase, y, loss = drv.select_or_jam(t, y, "after a compliant phase")
+            impact_total += loss
+            choice = drv.take_notes()
 
     for k in np.nonzero(~filled)[0]:  # cannot happen unless ts extends past the last phase
         raise RigidContactError(f"saved time {ts[k]} s was not reached")
     states = jax.tree_util.tree_map(jnp.asarray, saved_states)
     out = _chunked_outputs(ts, saved_states, saved_phase, phases, scenario, c, settings, drv.inextensible)
+    if np.any(compliant_mask):
+        out = _with_compliant_outputs(out, ts, saved_states, compliant_mask, drv, chatter)
     euler = out.euler.at[:, :2].set(jnp.unwrap(out.euler[:, :2], axis=0))
     return RigidTrajectory(
         ts=jnp.asarray(ts), position=states.position, velocity=states.velocity, euler=euler,
@@ -1237,6 +1316,25 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
         impact_loss=jnp.asarray(saved_impact), states=states, status=jnp.asarray(SolveStatus.OK, jnp.int32),
         num_accepted_steps=jnp.asarray(drv.accepted), num_rejected_steps=jnp.asarray(drv.rejected),
         phase_index=jnp.asarray(np.asarray(record_of, dtype=np.int64)[saved_phase]), phases=tuple(records))
+
+
+def _with_compliant_outputs(out, ts, states, mask, drv, rule):
+    """`out` (a `rigid.Output` with a leading n_t axis) with the samples `mask` replaced by the outputs of
+    the compliant model (`numerics.rigid_compliant`): its corner spring forces, friction, rope and energies
+    (ground spring and stiff rope included)."""
+    k = np.nonzero(mask)[0]
+    sel = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x)[k]), states)
+    el = elastic_outputs(jnp.asarray(ts[k]), sel, compliant_scenario(drv.sc, rule, drv.inextensible), drv.c)
+
+    def put(a, b):
+        a = np.array(a)
+        a[k] = np.asarray(b)
+        return jnp.asarray(a)
+
+    return eqx.tree_at(lambda o: (o.corners, o.normal, o.friction, o.rope_tension, o.energy, o.euler), out,
+                       (put(out.corners, el["corners"]), put(out.normal, el["normal"]),
+                        put(out.friction, el["friction"]), put(out.rope_tension, el["rope_tension"]),
+                        jax.tree_util.tree_map(put, out.energy, el["energy"]), put(out.euler, el["euler"])))
 
 
 def _merge(previous: PhaseRecord, short: PhaseRecord) -> PhaseRecord:
