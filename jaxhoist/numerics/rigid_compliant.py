@@ -35,6 +35,8 @@ import numpy as np
 from ..physics import elastic, forces, kinematics, rigid
 from ..physics import energy as energy_mod
 from ..physics.params import RegularisedCoulomb, Scenario
+from .rigid_compiled import _rope_state
+from .rigid_records import RigidContactError
 
 
 @dataclasses.dataclass(frozen=True)
@@ -191,8 +193,6 @@ def run_episode(drv, t0: float, y0: elastic.State, t1: float, ts: np.ndarray, fi
         accepted += int(acc)
         rejected += int(rej)
         if result != diffrax.RESULTS.successful:
-            from .rigid_solve import RigidContactError
-
             raise RigidContactError(f"the compliant phase from t = {t:.9g} s failed at {t_next:.9g} s: "
                                     f"{result} (raise max_steps = {opt.max_steps} or loosen rtol/atol)")
         ks = np.nonzero((ts >= t) & (ts <= t_next) & ~filled)[0]
@@ -263,8 +263,6 @@ def handback(drv, sc_c: Scenario, t: float, y: elastic.State, loaded: np.ndarray
         drv.rope_taut = bool(taut)
     if drv.inextensible and drv.rope_taut:
         # The taut rope at its rate as well: d|AB|/dt = dl/dt.
-        from .rigid_solve import _rope_state
-
         _, rate_error, _ = map(float, _rope_state(jnp.asarray(t), y, drv.sc, drv.c))
         y, _ = drv._project_taut(t, y, np.zeros(4, dtype=bool), loaded, rate_error=rate_error)
     elif np.any(loaded):
