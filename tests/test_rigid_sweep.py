@@ -91,6 +91,9 @@ def test_chatter_rule_detects_dense_non_decaying_impacts_only():
     assert rule.detect(settling, settling[-1][0]) == ""
     dense = [(10.0 + 5e-4 * k, 0.5 * 0.95**k) for k in range(60)]  # 60 in 30 ms: passed even though decaying
     assert rule.detect(dense, dense[-1][0]) != ""
+    # Bad settings: one clear line naming the field.
+    with pytest.raises(jh.ScenarioError, match="ChatterRule.stiffness"):
+        simulate_rigid(jh.load_scenario("paper-2.3"), 0.1, chatter=ChatterRule(stiffness=-1.0))
 
 
 def test_compliant_phase_passes_a_rocking_train_and_hands_back_at_rest():

@@ -32,6 +32,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 
+from .._errors import ScenarioError
 from ..physics import elastic, forces, kinematics, rigid
 from ..physics import energy as energy_mod
 from ..physics.params import RegularisedCoulomb, Scenario
@@ -70,6 +71,21 @@ class ChatterRule:
     max_duration: float = 1.0
     load_fraction: float = 1e-3
     samples: int = 65
+
+    def check(self) -> None:
+        """Raise `ScenarioError` naming the first field that is not a positive finite number (`decay` may
+        be 0, `min_impacts` and `samples` are integers >= 1 and >= 2)."""
+        for name in ("window", "stiffness", "regularisation_velocity", "rope_stiffness", "chunk", "steady",
+                     "max_duration", "load_fraction"):
+            v = getattr(self, name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ScenarioError(f"ChatterRule.{name} must be a positive finite number, got {v!r}")
+        if not (isinstance(self.decay, (int, float)) and 0.0 <= self.decay < math.inf):
+            raise ScenarioError(f"ChatterRule.decay must be >= 0, got {self.decay!r}")
+        if not (isinstance(self.min_impacts, int) and self.min_impacts >= 1):
+            raise ScenarioError(f"ChatterRule.min_impacts must be an integer >= 1, got {self.min_impacts!r}")
+        if not (isinstance(self.samples, int) and self.samples >= 2):
+            raise ScenarioError(f"ChatterRule.samples must be an integer >= 2, got {self.samples!r}")
 
     def detect(self, events: list[tuple[float, float]], t: float) -> str:
         """`events`: (time [s], loss [J]) of the impacts so far. Returns a description of the sustained

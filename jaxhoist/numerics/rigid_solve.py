@@ -121,6 +121,10 @@ def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_sa
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()
+    if chatter is not None and not isinstance(chatter, ChatterRule):
+        raise ScenarioError(f"chatter must be a ChatterRule or None, got {type(chatter).__name__}")
+    if chatter is not None:
+        chatter.check()
     if not (0.0 <= restitution <= 1.0):
         raise ScenarioError(f"restitution (e) must be in [0, 1], got {restitution}")
     if t1 is None:
