@@ -84,7 +84,7 @@ SCHEMA: dict[str, dict[str, tuple[str, bool, str]]] = {
 }
 FRICTION_LAWS = ("bristle", "regularised-coulomb")
 HOIST_LAWS = ("constant-speed", "ramped")
-PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2")
+PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2", "paper-4.3")
 
 
 def preset_names() -> tuple[str, ...]:
