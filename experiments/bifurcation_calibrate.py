@@ -1,23 +1,24 @@
 """Calibrate paper-4.3 to the paper's §4.3 μ* = 0.3635 and measure how μ* depends on what the paper omits.
 
 The paper gives no mass centre for its "eccentrically loaded" container, no rope fixture and no boom. The
-maps behind this script (docs/bifurcation.md, "Calibrating to the paper's μ*": 300 mass-centre/fixture
-combinations × 61 μ, then three 151 × 21 grids) found no final-state jump of the 25 s history near
-μ = 0.3635 for any plausible choice; the one sharp change that a mass-centre coordinate moves through it is
-a **jump of the last contact time** (the real lift-off moves 1.1 s earlier: 20.2 s -> 19.0 s) with a
-continuous final state. With ξ_C = 1.25 m, ζ_C = 1.0 m and the preset's corner fixture, it crosses
-μ = 0.3635 at η_C ≈ 2.82 m. This script
+maps behind this script (docs/bifurcation.md, "Calibrating to the paper's μ*") found, near μ = 0.3635, one
+kind of change that moves the whole final attitude at once: a resolved ramp (width ~4e-3 in μ) in which the
+final pitch ϑ(t1) falls from ~19.5° to ~10.5° while ψ(t1), φ(t1) and y(t1) move with it, next to a jump of the
+lift-off time. Its location is taken as the crossing of ϑ(t1) = 15° (mid-way down the ramp), a continuous
+indicator. With η_C = 3.18 m, ζ_C = 0.83 m and the corner fixture of paper-4.2 it crosses μ = 0.3635 at
+ξ_C ≈ 1.159 m. This script
 
-1. locates η_C* at μ = 0.3635 (bisection on `last_contact_time`, |Δη| <= 1e-6 m);
-2. locates μ* at the preset (paper-4.3) and traces μ*(η_C) by continuation (`trace_boundary`) over
-   η_C = 2.78 ... 2.84 m: the path from an uncalibrated value to the fitted one, and the slope dμ*/dη_C;
-3. dμ*/dq for q = ξ_C, ζ_C and the fixture's position along the top edge (rope.attachment[0]) by a
-   two-point continuation (q0, q0 + h): the jump has no implicit-function derivative (g is discontinuous in
-   μ, so dg/dμ does not exist), so the slopes are secants of located points;
-4. μ* at ε = 1e-2, 1e-4 m/s and with the bristle law (δ = 1 mm) from brackets found on 5e-4 grids;
-5. classifies the located change (`classify_change`).
+1. locates ξ_C* at μ = 0.3635 (bisection, |Δξ| <= 1e-6 m) and μ* at the preset (paper-4.3);
+2. traces μ*(ξ_C) by continuation (`trace_boundary`) over ξ_C = 1.14 ... 1.17 m, the path from
+   uncalibrated values to the fitted one;
+3. dμ*/dq from the implicit-function theorem, dμ*/dq = -(∂ϑ/∂q)/(∂ϑ/∂μ), for q = ξ_C, η_C, ζ_C and the
+   fixture's position along the top edges (rope.attachment[0], [1]); the partials are central differences
+   (forward-mode sensitivities of ϑ(t1) over these 25 s come out ~1e45, see docs), checked against the
+   continuation's secant in ξ_C;
+4. μ* at ε = 1e-2, 1e-4 m/s and with the bristle law (δ = 1 mm), from brackets found on 5e-4 grids;
+5. classifies the located change (`classify_change`): a steep ramp, and its 10-90 % width.
 
-    python experiments/bifurcation_calibrate.py --out out/bif-calibrate      # ~10-15 min on 2 cores
+    python experiments/bifurcation_calibrate.py --out out/bif-calibrate      # ~15 min on 2 shared cores
 
 Writes `calibration.json`; prints every located value.
 """
@@ -38,13 +39,14 @@ import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist.apps.classify import json_safe  # noqa: E402
-from jaxhoist.numerics.paths import set_param  # noqa: E402
+from jaxhoist.numerics.paths import get_param, set_param  # noqa: E402
 
 MU = "foundation.friction_coefficient"
-ETA = "load.mass_centre[1]"
+XI = "load.mass_centre[0]"
 EPS = "foundation.friction.regularisation_velocity"
-OBS = "last_contact_time"
-KW = dict(t1=25.0, n_save=2501, method="bisection")
+OBS = "final_theta"
+LEVEL = float(np.radians(15.0))
+KW = dict(t1=25.0, n_save=2501, method="bisection", level=LEVEL)
 MU_PAPER = 0.3635
 
 
@@ -55,7 +57,7 @@ def _row(b):
 
 def _trace(sc, along, values, bracket, tol):
     t = time.perf_counter()
-    bd = jh.trace_boundary(sc, MU, bracket, along, values, OBS, tol=tol, initial_half_width=2e-3, **KW)
+    bd = jh.trace_boundary(sc, MU, bracket, along, values, OBS, tol=tol, initial_half_width=1e-3, **KW)
     rows = [dict(q=float(q), mu_star=float(v), width=float(w)) for q, v, w in
             zip(bd.along_values, bd.values, bd.widths, strict=True)]
     for r in rows:
@@ -67,6 +69,29 @@ def _trace(sc, along, values, bracket, tol):
         slope = (p1 - p0) / (q1 - q0)
     return dict(along=along, rows=rows, n_solves=bd.n_solves, wall_time=time.perf_counter() - t,
                 secant_slope=slope)
+
+
+IFT_STEPS = {MU: 1e-5, XI: 1e-4, "load.mass_centre[1]": 1e-4, "load.mass_centre[2]": 1e-4,
+             "rope.attachment[0]": 1e-4, "rope.attachment[1]": 1e-4}
+
+
+def _ift(sc, mu_star):
+    """dμ*/dq = -(∂ϑ/∂q)/(∂ϑ/∂μ) at (μ*, preset), partials by central differences (one scan of 12 points)."""
+    sc = set_param(sc, MU, mu_star)
+    base = {p: float(np.asarray(get_param(sc, p))) for p in IFT_STEPS}
+    pts = {p: [] for p in IFT_STEPS}
+    for q, h in IFT_STEPS.items():
+        for sgn in (-1, 1):
+            for p in IFT_STEPS:
+                pts[p].append(base[p] + (sgn * h if p == q else 0.0))
+    r = jh.scan(sc, {p: np.array(v) for p, v in pts.items()}, 25.0, mode="points", n_save=2501,
+                observables=[OBS], sort=False)
+    th = np.asarray(r[OBS])
+    d = {q: float((th[2 * k + 1] - th[2 * k]) / (2 * h)) for k, (q, h) in enumerate(IFT_STEPS.items())}
+    out = {"partials_rad_per_unit": d, "dmu_star_dq": {q: -d[q] / d[MU] for q in IFT_STEPS if q != MU}}
+    for q, v in out["dmu_star_dq"].items():
+        print(f"  dmu*/d{q} = {v:.5g} per m (IFT, differenced partials)", flush=True)
+    return out
 
 
 def main(argv=None) -> int:
@@ -84,35 +109,28 @@ def main(argv=None) -> int:
     def save():
         (out / "calibration.json").write_text(json.dumps(json_safe(rec), indent=1))
 
-    if "fit" not in skip:  # 1. η_C* at μ = 0.3635
-        b = jh.locate_bifurcation(set_param(sc, MU, MU_PAPER), ETA, OBS, (2.80, 2.86), tol=args.tol, **KW)
-        print("eta_C* at mu = 0.3635:", b.summary(), flush=True)
-        rec["eta_fit"] = _row(b)
-        b = jh.locate_bifurcation(sc, MU, OBS, (0.3625, 0.3645), tol=args.tol, **KW)
+    if "fit" not in skip:  # 1. ξ_C* at μ = 0.3635, then μ* at the preset
+        b = jh.locate_bifurcation(set_param(sc, MU, MU_PAPER), XI, OBS, (1.15, 1.17), tol=args.tol, **KW)
+        print("xi_C* at mu = 0.3635:", b.summary(), flush=True)
+        rec["xi_fit"] = _row(b)
+        b = jh.locate_bifurcation(sc, MU, OBS, (0.362, 0.365), tol=args.tol, **KW)
         print("mu* at paper-4.3:", b.summary(), flush=True)
         rec["mu_star"] = _row(b)
         save()
-    if "trace" not in skip:  # 2. the continuation path in η_C
-        print("trace mu*(eta_C):", flush=True)
-        rec["trace_eta"] = _trace(set_param(sc, ETA, 2.78), ETA, np.round(np.arange(2.78, 2.8401, 0.01), 4),
-                                  (0.366, 0.372), args.tol)
-        save()
     mu_star = rec.get("mu_star", {}).get("value", MU_PAPER)
-    br = (mu_star - 1e-3, mu_star + 1e-3)
-    if "slopes" not in skip:  # 3. dμ*/dq by two-point continuation
-        rec["slopes"] = {}
-        for path, h in [("load.mass_centre[0]", 0.01), ("load.mass_centre[2]", 0.01), ("rope.attachment[0]", 0.01),
-                        (ETA, 0.005)]:
-            q0 = {"load.mass_centre[0]": 1.25, "load.mass_centre[2]": 1.0, "rope.attachment[0]": 0.0,
-                  ETA: float(sc.load.mass_centre[1])}[path]
-            print(f"slope along {path}:", flush=True)
-            rec["slopes"][path] = _trace(sc, path, [q0, q0 + h], br, args.tol)
-            save()
+    if "slopes" not in skip:  # 3. implicit-function derivatives with differenced partials
+        rec["ift"] = _ift(sc, mu_star)
+        save()
+    if "trace" not in skip:  # 2. the continuation path in ξ_C
+        print("trace mu*(xi_C):", flush=True)
+        rec["trace_xi"] = _trace(set_param(sc, XI, 1.14), XI, [1.14, 1.15, 1.1587788, 1.17], (0.368, 0.374),
+                                 args.tol)
+        save()
     if "eps" not in skip:  # 4. the friction closure
-        laws = [("eps=1e-2", set_param(sc, EPS, 1e-2), (0.370, 0.3715)),
+        laws = [("eps=1e-2", set_param(sc, EPS, 1e-2), (0.3685, 0.370)),
                 ("eps=1e-4", set_param(sc, EPS, 1e-4), (0.3625, 0.364)),
                 ("bristle delta=1e-3", eqx.tree_at(lambda s: s.foundation.friction, sc, jh.BristleFriction(
-                    deflection=1e-3, breakaway_ratio=0.5, relaxation_time=0.01)), (0.364, 0.3655))]
+                    deflection=1e-3, breakaway_ratio=0.5, relaxation_time=0.01)), (0.3645, 0.366))]
         rec["eps"] = {"eps=1e-3": rec.get("mu_star")}
         for name, s, b0 in laws:
             b = jh.locate_bifurcation(s, MU, OBS, b0, tol=args.tol, max_steps=2_000_000, **KW)
@@ -121,8 +139,8 @@ def main(argv=None) -> int:
             save()
     if "classify" not in skip:  # 5. what the change is
         lo, hi = rec.get("mu_star", {}).get("bracket", (MU_PAPER - 5e-7, MU_PAPER + 5e-7))
-        c = jh.classify_change(sc, param=MU, bracket=(lo, hi), observable=OBS, half_window=2.5e-3, n_window=21,
-                               t1=25.0, n_save=2501)
+        c = jh.classify_change(sc, param=MU, bracket=(lo, hi), observable=OBS, half_window=6e-3,
+                               n_window=49, t1=25.0, n_save=2501)
         print("classified:", c.summary(), flush=True)
         rec["classified"] = c.to_dict()
         save()
