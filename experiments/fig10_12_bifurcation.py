@@ -3,13 +3,14 @@ its located change at μ* = 0.3635.
 
 - `fig10_x_y.png`: mass-centre x and y against t for μ = 0.30, 0.33, 0.36, 0.39, 0.42 (a wide sweep, Fig. 10a)
   and for μ = 0.363, 0.3635, 0.364, 0.365 (Fig. 10b);
-- `fig11_y_phi.png`: y and φ for μ = 0.363, 0.3635, 0.364, 0.365 (Fig. 11);
+- `fig11_y_phi.png`: y and φ for μ = 0.363, 0.3635, 0.364, 0.365 (Fig. 11), with μ = 0.360 and 0.367 (the
+  ends of the ramp) thin and grey;
 - `fig12_theta_psi.png`: ϑ and ψ for the same μ (Fig. 12).
 
 Each panel marks every history's last contact (the real lift-off) with a dot. In paper-4.3 the change at
-μ* = 0.3635 is a jump of the last contact time (20.2 s -> 19.0 s: below μ* a corner keeps touching the
-ground for a further ~1.1 s) with a continuous final state; so the histories separate after ~19 s and
-draw together again by 25 s (docs/bifurcation.md, "Calibrating to the paper's μ*").
+μ* = 0.3635 is a resolved ramp of the final attitude (ϑ(t1) from ~19.5° to ~10.5°, ψ(t1), φ(t1), y(t1) with
+it, over ~4e-3 in μ) next to a jump of the lift-off time: the histories agree until the load leaves the
+ground (~19-20 s) and separate after it (docs/bifurcation.md, "Calibrating to the paper's μ*").
 
     python experiments/fig10_12_bifurcation.py --out docs/img       # ~1 min
 
@@ -35,6 +36,7 @@ import jaxhoist as jh  # noqa: E402
 
 MU = "foundation.friction_coefficient"
 NEAR = (0.363, 0.3635, 0.364, 0.365)
+ENDS = (0.360, 0.367)  # the ends of the ramp, drawn thin and grey
 WIDE = (0.30, 0.33, 0.36, 0.39, 0.42)
 
 
@@ -51,6 +53,8 @@ def histories(sc, mus, t1, n_save):
 def _panel(ax, ts, res, key, comp, mus, scale, ylabel, styles):
     lc = np.asarray(res["last_contact_time"])
     h = np.asarray(res.histories[key])[..., comp] * scale
+    for i, m in enumerate(ENDS if len(h) > len(mus) else ()):
+        ax.plot(ts, h[len(mus) + i], "-", color="0.6", lw=0.6, label=f"μ = {m:g} (ramp's ends)")
     for i, m in enumerate(mus):
         (line,) = ax.plot(ts, h[i], styles[i % len(styles)], lw=1.0, label=f"μ = {m:g}")
         if np.isfinite(lc[i]):
@@ -69,16 +73,18 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sc = jh.load_scenario("paper-4.3")
-    near = histories(sc, NEAR, args.t1, args.n_save)
+    near = histories(sc, NEAR + ENDS, args.t1, args.n_save)
     wide = histories(sc, WIDE, args.t1, args.n_save)
     ts = np.asarray(near.ts)
-    for res, mus in ((wide, WIDE), (near, NEAR)):
+    for res, mus in ((wide, WIDE), (near, NEAR + ENDS)):
         for i, m in enumerate(mus):
             pos = np.asarray(res["final_position"])[i]
             eul = np.degrees(np.asarray(res["final_euler"])[i])
-            print(f"mu = {m:<7g} first all-off {float(np.asarray(res['liftoff_time'])[i]):7.3f} s, last contact "
-                  f"{float(np.asarray(res['last_contact_time'])[i]):7.3f} s; at t1 x, y = {pos[0]:.3f}, "
-                  f"{pos[1]:.3f} m, phi, psi, theta = {eul[0]:.1f}, {eul[1]:.1f}, {eul[2]:.1f} deg")
+            t_off = float(np.asarray(res["liftoff_time"])[i])
+            t_last = float(np.asarray(res["last_contact_time"])[i])
+            print(f"mu = {m:<7g} first all-off {t_off:7.3f} s, last contact {t_last:7.3f} s; at t1 "
+                  f"x, y = {pos[0]:.3f}, {pos[1]:.3f} m, phi, psi, theta = {eul[0]:.1f}, {eul[1]:.1f}, "
+                  f"{eul[2]:.1f} deg")
     styles = ["-", "--", "-.", ":", "-"]
     deg = np.degrees(1.0)
     # Fig. 10: x and y, a wide sweep (left) and across μ* (right)
@@ -113,7 +119,8 @@ def main(argv=None) -> int:
         fig.tight_layout()
         fig.savefig(out / name, dpi=args.dpi)
     plt.close("all")
-    print("wrote", ", ".join(str(out / n) for n in ("fig10_x_y.png", "fig11_y_phi.png", "fig12_theta_psi.png")))
+    names = ("fig10_x_y.png", "fig11_y_phi.png", "fig12_theta_psi.png")
+    print("wrote", ", ".join(str(out / n) for n in names))
     return 0
 
 
