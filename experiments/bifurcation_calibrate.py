@@ -20,7 +20,8 @@ indicator. With η_C = 3.18 m, ζ_C = 0.83 m and the corner fixture of paper-4.2
 
     python experiments/bifurcation_calibrate.py --out out/bif-calibrate      # ~15 min on 2 shared cores
 
-Writes `calibration.json`; prints every located value.
+Writes `calibration.json` and resumes from it (steps already there are not redone); prints every located
+value.
 """
 
 from __future__ import annotations
@@ -76,22 +77,35 @@ IFT_STEPS = {MU: 1e-5, XI: 1e-4, "load.mass_centre[1]": 1e-4, "load.mass_centre[
 
 
 def _ift(sc, mu_star):
-    """dμ*/dq = -(∂ϑ/∂q)/(∂ϑ/∂μ) at (μ*, preset), partials by central differences (one scan of 12 points)."""
+    """dμ*/dq = -(∂ϑ/∂q)/(∂ϑ/∂μ) at (μ*, preset), partials by central differences (one-sided for the
+    fixture, which sits on the box's edges); one scan of 12 points."""
     sc = set_param(sc, MU, mu_star)
     base = {p: float(np.asarray(get_param(sc, p))) for p in IFT_STEPS}
     pts = {p: [] for p in IFT_STEPS}
     for q, h in IFT_STEPS.items():
-        for sgn in (-1, 1):
+        # the fixture sits on the box's edge (0 along both top edges): a one-sided difference into the box
+        offsets = (0.0, h) if q.startswith("rope.attachment") else (-h, h)
+        for off in offsets:
             for p in IFT_STEPS:
-                pts[p].append(base[p] + (sgn * h if p == q else 0.0))
+                pts[p].append(base[p] + (off if p == q else 0.0))
     r = jh.scan(sc, {p: np.array(v) for p, v in pts.items()}, 25.0, mode="points", n_save=2501,
                 observables=[OBS], sort=False)
+    if not np.all(r.ok):
+        raise SystemExit(f"IFT solves failed: {r.failures()[:2]}")
     th = np.asarray(r[OBS])
-    d = {q: float((th[2 * k + 1] - th[2 * k]) / (2 * h)) for k, (q, h) in enumerate(IFT_STEPS.items())}
+    d = {}
+    for k, (q, h) in enumerate(IFT_STEPS.items()):
+        span = h if q.startswith("rope.attachment") else 2 * h
+        d[q] = float((th[2 * k + 1] - th[2 * k]) / span)
     out = {"partials_rad_per_unit": d, "dmu_star_dq": {q: -d[q] / d[MU] for q in IFT_STEPS if q != MU}}
     for q, v in out["dmu_star_dq"].items():
         print(f"  dmu*/d{q} = {v:.5g} per m (IFT, differenced partials)", flush=True)
     return out
+
+
+def _done(ift) -> bool:
+    """An implicit-function record with every slope finite."""
+    return bool(ift) and all(isinstance(v, float) for v in ift["dmu_star_dq"].values())
 
 
 def main(argv=None) -> int:
@@ -104,12 +118,14 @@ def main(argv=None) -> int:
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rec: dict = {"mu_paper": MU_PAPER, "observable": OBS}
+    if (out / "calibration.json").exists():  # resume: keep what an earlier run located
+        rec.update(json.loads((out / "calibration.json").read_text()))
     sc = jh.load_scenario("paper-4.3")
 
     def save():
         (out / "calibration.json").write_text(json.dumps(json_safe(rec), indent=1))
 
-    if "fit" not in skip:  # 1. ξ_C* at μ = 0.3635, then μ* at the preset
+    if "fit" not in skip and "mu_star" not in rec:  # 1. ξ_C* at μ = 0.3635, then μ* at the preset
         b = jh.locate_bifurcation(set_param(sc, MU, MU_PAPER), XI, OBS, (1.15, 1.17), tol=args.tol, **KW)
         print("xi_C* at mu = 0.3635:", b.summary(), flush=True)
         rec["xi_fit"] = _row(b)
@@ -118,10 +134,10 @@ def main(argv=None) -> int:
         rec["mu_star"] = _row(b)
         save()
     mu_star = rec.get("mu_star", {}).get("value", MU_PAPER)
-    if "slopes" not in skip:  # 3. implicit-function derivatives with differenced partials
+    if "slopes" not in skip and not _done(rec.get("ift")):  # 3. implicit-function derivatives
         rec["ift"] = _ift(sc, mu_star)
         save()
-    if "trace" not in skip:  # 2. the continuation path in ξ_C
+    if "trace" not in skip and "trace_xi" not in rec:  # 2. the continuation path in ξ_C
         print("trace mu*(xi_C):", flush=True)
         rec["trace_xi"] = _trace(set_param(sc, XI, 1.14), XI, [1.14, 1.15, 1.1587788, 1.17], (0.368, 0.374),
                                  args.tol)
@@ -130,9 +146,11 @@ def main(argv=None) -> int:
         laws = [("eps=1e-2", set_param(sc, EPS, 1e-2), (0.3685, 0.370)),
                 ("eps=1e-4", set_param(sc, EPS, 1e-4), (0.3625, 0.364)),
                 ("bristle delta=1e-3", eqx.tree_at(lambda s: s.foundation.friction, sc, jh.BristleFriction(
-                    deflection=1e-3, breakaway_ratio=0.5, relaxation_time=0.01)), (0.3645, 0.366))]
-        rec["eps"] = {"eps=1e-3": rec.get("mu_star")}
+                    deflection=1e-3, breakaway_ratio=0.5, relaxation_time=0.01)), (0.362, 0.368))]
+        rec.setdefault("eps", {})["eps=1e-3"] = rec.get("mu_star")
         for name, s, b0 in laws:
+            if rec["eps"].get(name):
+                continue
             b = jh.locate_bifurcation(s, MU, OBS, b0, tol=args.tol, max_steps=2_000_000, **KW)
             print(f"{name}:", b.summary(), flush=True)
             rec["eps"][name] = _row(b)

@@ -160,3 +160,25 @@ def test_classify_change_real_case():
     # odd, materially changing ones say anything; none changes by 1 cm / 1° inside the bracket
     assert not any("jumping" in n for n in c.notes)
     assert c.jump_fractions["final_x"] < 0.01
+
+
+def test_paper_43_preset_is_paper_42_with_the_fitted_mass_centre():
+    """paper-4.3 changes only what the calibration fitted or chose (mass centre, μ) and keeps its mass
+    centre inside the plausibility bounds of docs/bifurcation.md."""
+    import tomllib
+    from importlib import resources
+
+    pkg = resources.files("jaxhoist.io.presets")
+    d42 = tomllib.loads(pkg.joinpath("paper-4.2.toml").read_text())
+    d43 = tomllib.loads(pkg.joinpath("paper-4.3.toml").read_text())
+    assert d43["foundation"]["friction_coefficient"] == 0.3635  # paper §4.3
+    xi, eta, zeta = d43["load"]["mass_centre"]
+    assert 0.75 <= xi <= 1.75 and 1.5 <= eta <= 4.5 and 0.6 <= zeta <= 1.25
+    for d in (d42, d43):
+        for k in ("name", "description"):
+            d.pop(k)
+        d["load"].pop("mass_centre")
+        d["foundation"].pop("friction_coefficient")
+    assert d42 == d43
+    sc = jh.load_scenario("paper-4.3")
+    assert float(sc.foundation.friction_coefficient) == 0.3635
