@@ -182,3 +182,22 @@ def test_paper_43_preset_is_paper_42_with_the_fitted_mass_centre():
     assert d42 == d43
     sc = jh.load_scenario("paper-4.3")
     assert float(sc.foundation.friction_coefficient) == 0.3635
+
+
+def test_cli_bifurcation_classify(tmp_path, capsys):
+    """`jaxhoist bifurcation ... --classify` names the located change and records it in bifurcation.json:
+    the level crossing of the mass centre's x after 0.3 s of paper-4.2 is a continuous crossing."""
+    import json
+
+    from jaxhoist.apps import cli
+
+    out = tmp_path / "bif"
+    code = cli.main(["bifurcation", "paper-4.2", "--param", "foundation.friction_coefficient", "--bracket",
+                     "0.2", "0.4", "--observable", "final_x", "--t1", "0.3", "--n-save", "31", "--method",
+                     "bisection", "--tol", "1e-3", "--classify", "--quiet", "--no-plots", "--out", str(out)])
+    assert code == 0
+    assert "continuous crossing" in capsys.readouterr().out
+    rec = json.loads((out / "bifurcation.json").read_text())
+    c = rec["bifurcations"][0]["classification"]
+    assert c["kind"] == "continuous crossing" and c["param"] == "foundation.friction_coefficient"
+    assert c["bracket"] == rec["bifurcations"][0]["bracket"]

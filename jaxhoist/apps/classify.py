@@ -85,7 +85,7 @@ class ChangeClass:
             s += f" of width {self.width:.2g} (10-90 % of {self.ramp_observable})"
         if self.count_change is not None and self.count_change[0] != self.count_change[1]:
             s += f"; impacts {self.count_change[0]:g} -> {self.count_change[1]:g}"
-        ev = ", ".join(f"{k} {v:+.3g} s" for k, v in self.event_jumps.items() if np.isfinite(v))
+        ev = ", ".join(f"{k} {v:+.3g} s" for k, v in self.event_jumps.items() if np.isfinite(v) and v != 0.0)
         if ev:
             s += f"; across the bracket {ev}"
         others = [f for f in self.facets[1:]]
