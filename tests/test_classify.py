@@ -201,3 +201,26 @@ def test_cli_bifurcation_classify(tmp_path, capsys):
     c = rec["bifurcations"][0]["classification"]
     assert c["kind"] == "continuous crossing" and c["param"] == "foundation.friction_coefficient"
     assert c["bracket"] == rec["bifurcations"][0]["bracket"]
+
+
+def test_a_jump_just_outside_the_bracket_is_found_and_noted():
+    """Re-solved in another vmapped group, a 25 s event jump can land a few cells from the located bracket:
+    the jump cell is classified instead, with a note; a ramp is never moved."""
+    x = window()
+    cut = x[25]  # a few cells above the bracket
+    lift = 19.6 - 0.5 * (x >= cut)
+    c = classify_samples(x, smooth(x, liftoff_time=lift), BR, observable="liftoff_time")
+    assert c.kind == "event-definition change"
+    assert c.bracket == (x[24], x[25]) and "does not jump across the given bracket" in c.notes[0]
+    psi = 1.5 * np.tanh((x - 0.5) / 2e-3)
+    c2 = classify_samples(x, smooth(x, final_psi=psi), BR, observable="final_psi")
+    assert c2.bracket == BR and not c2.notes
+
+
+def test_a_gradual_change_across_the_window_is_not_a_ramp():
+    """ψ(t1) changing by 30° linearly over the window: material, but spread out (10-90 % over 80 % of the
+    window): a continuous crossing, with a note."""
+    x = window()
+    c = classify_samples(x, smooth(x, final_psi=1.0 + 26.0 * (x - 0.5)), BR, observable="final_psi")
+    assert c.kind == "continuous crossing" and c.width is None
+    assert any("gradually" in n for n in c.notes)

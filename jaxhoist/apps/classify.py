@@ -134,6 +134,26 @@ def ramp_width(x, y, lo: float = 0.1, hi: float = 0.9) -> float:
     return float(max(cross(j, hi) - cross(i, lo), 0.0))
 
 
+def _relocate(x, y, i_lo, i_hi):
+    """Indices of the window cell to classify instead of the given bracket, or None: when the located
+    observable `y` has one step between neighbouring samples that holds more than half its range over the
+    window (a jump) and changes by less than a tenth of that across the given bracket."""
+    if y is None:
+        return None
+    y = np.where(np.isfinite(y), y, np.nan)
+    if np.all(np.isnan(y)):
+        return None
+    steps = np.abs(np.diff(y))
+    if not np.any(np.isfinite(steps)):
+        return None
+    k = int(np.nanargmax(steps))
+    span = float(np.nanmax(y) - np.nanmin(y))
+    inner = abs(y[i_hi] - y[i_lo])
+    if not (span > 0 and steps[k] > 0.5 * span and not inner >= 0.1 * steps[k]):
+        return None
+    return k, k + 1
+
+
 def classify_samples(
     x,
     samples: Mapping[str, Any],
@@ -166,6 +186,16 @@ def classify_samples(
         i_hi = int(np.nonzero(x == hi)[0][0])
     except IndexError:
         raise ScenarioError("classify_samples: the samples must include both ends of the bracket") from None
+    notes: list[str] = []
+    moved = _relocate(x, ys.get(observable), i_lo, i_hi)
+    if moved is not None:
+        i_lo, i_hi = moved
+        notes.append(
+            f"{observable} does not jump across the given bracket [{lo:.10g}, {hi:.10g}] in these solves, "
+            f"but in [{x[i_lo]:.10g}, {x[i_hi]:.10g}]: classified there (rounding in another vmapped group "
+            f"can move a jump of a long history by more than a narrow bracket)"
+        )
+        lo, hi = float(x[i_lo]), float(x[i_hi])
     facets: list[str] = []
     fractions: dict[str, float] = {}
     window_change: dict[str, float] = {}
@@ -186,7 +216,11 @@ def classify_samples(
         ramp_obs = max(window_change, key=lambda n: window_change[n] / _MATERIAL[n])
         if window_change[ramp_obs] > 10 * _MATERIAL[ramp_obs]:
             width = ramp_width(x, ys[ramp_obs])
-        else:
+            if not width < 0.5 * (x[-1] - x[0]):  # spread over the window: a gradual change, not a ramp
+                notes.append(f"{ramp_obs} changes across the window but gradually (10-90 % over {width:.2g}, "
+                             f"more than half the window): no steep ramp")
+                width = None
+        if width is None:
             ramp_obs = None
     counts = None
     if COUNT in ys:
@@ -221,7 +255,6 @@ def classify_samples(
             facets.append("steep ramp")
     if not facets:
         facets.append("continuous crossing")
-    notes = []
     if jumped:
         notes.append(f"jumping: {', '.join(jumped)}")
         width = None
