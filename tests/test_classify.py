@@ -155,7 +155,8 @@ def test_classify_change_real_case():
         n_save=201,
     )
     assert c.kind == "continuous crossing", c.summary()
-    assert c.n_samples == 11 and c.window == pytest.approx((0.48, 0.52))
+    # 9 window points less the midpoint (inside the bracket), plus the bracket's two ends
+    assert c.n_samples == 10 and c.window == pytest.approx((0.48, 0.52))
     # fractions of coordinates that are even in ξ_C - 0.5 (y, φ) are ratios of two tiny numbers: only the
     # odd, materially changing ones say anything; none changes by 1 cm / 1° inside the bracket
     assert not any("jumping" in n for n in c.notes)

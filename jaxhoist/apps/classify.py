@@ -300,7 +300,8 @@ def classify_change(
     - `change`: a `Bifurcation` (from `locate_bifurcation`) or a `Jump` (from `find_jumps`); or give
       `param`, `bracket` (and `observable`, default "final_psi") instead.
     - `half_window`: the window p* ± `half_window` sampled with `n_window` uniform points besides the two
-      bracket ends (default: 100 bracket widths, at least 1 % of |p*|).
+      bracket ends (points inside the bracket are dropped; default: 100 bracket widths, at least 1 % of
+      |p*|).
     - `t1`, `n_save` and further keyword arguments (`solver`, `rtol`, ...) go to `scan`; save every ~10 ms
       (the default 2501 over 25 s) so event times and counts are read reliably.
 
@@ -320,7 +321,8 @@ def classify_change(
     mid = 0.5 * (lo + hi)
     if half_window is None:
         half_window = max(100 * (hi - lo), 0.01 * abs(mid), 1e-6)
-    xs = np.unique(np.concatenate([np.linspace(mid - half_window, mid + half_window, n_window), [lo, hi]]))
+    xs = np.linspace(mid - half_window, mid + half_window, n_window)
+    xs = np.unique(np.concatenate([xs[(xs < lo) | (xs > hi)], [lo, hi]]))  # the bracket's ends are neighbours
     res = scan(scenario, {param: xs}, t1, n_save=n_save, observables=list(OBSERVABLES), sort=False, **scan_kw)
     if not np.all(res.ok):
         raise ScenarioError(f"classify_change: solves failed: {res.failures()[:2]}")
