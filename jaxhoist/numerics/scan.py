@@ -14,10 +14,11 @@ How the work is laid out (and why results do not depend on the chunk size or the
   last member). A group is solved by one `jax.vmap` of the traceable core `numerics.solve.solve`, in lock
   step: it costs what its slowest member costs, which sorting keeps close to the others;
 - a *chunk* is a whole number of groups per device; on each device the chunk's groups run one after the
-  other (`lax.map`), and the devices (a 1-D mesh over `jax.devices()`, via `shard_map`) run in parallel,
-  each with its own loop, so a slow group on one device does not hold up the other;
-- each group is the same compiled computation on the same inputs whatever the chunk size and the number
-  of devices, so the results are bit-for-bit identical.
+  other (`lax.map`), and the devices' shares run in parallel, one host thread each, so a slow group on one
+  device does not hold up the other (`numerics.batch.CompiledChunk`);
+- each group is the same single-device compiled computation on the same inputs whatever the chunk size
+  and the number of devices (never a partitioned SPMD program, which rounds differently), so the results
+  are bit-for-bit identical; a healthy member is also bit-for-bit what it is without a failing group mate.
 - several processes (hosts) under `jax.distributed`: every process runs the chunks k with
   k mod process_count = process_index on its own local devices and writes them to `out_dir`, which must
   be a folder all processes share; then each reads the others' chunks and assembles the same result
@@ -66,6 +67,7 @@ from .batch import HISTORY_UNITS as _HISTORY_UNITS
 from .batch import BatchSpec as _Spec
 from .batch import ScanStatus as ScanStatus
 from .batch import chunk_fn as _chunk_fn
+from .batch import describe_devices as _describe_devices
 from .batch import flatten_out as _flatten_out
 from .batch import hist_shape as _hist_shape
 from .options import SolverOptions
@@ -889,7 +891,8 @@ def scan(
 
     n_chunks = math.ceil(n / chunk)
     # which devices computed each chunk (issue 14): this run's, or as recorded by the run that wrote it
-    here = [str(d) for d in devs] if n_proc == 1 else [f"process {proc}: {d}" for d in devs]
+    here = _describe_devices(devs)
+    here = here if n_proc == 1 else [f"process {proc}: {d}" for d in here]
     chunk_devices: dict[int, list[str]] = {}
     resumed = set(done_chunks)
     # Groups per compiled call: the chunk's, rounded up to a multiple of the device count (a chunk laid out
