@@ -272,13 +272,13 @@ class _scan_bars:
         self.saved = getattr(self.mod, "print_progress", None)
         if self.saved is not None:
             self.bars = ScanProgressBar()
-            self.mod.print_progress = self.bars
+            self.mod.print_progress = self.bars  # pyright: ignore[reportAttributeAccessIssue, reportOptionalMemberAccess]  # self.mod is set and holds print_progress when saved is not None
         return self
 
     def __exit__(self, *exc):
         if self.saved is not None:
             self.bars.close()
-            self.mod.print_progress = self.saved
+            self.mod.print_progress = self.saved  # pyright: ignore[reportAttributeAccessIssue, reportOptionalMemberAccess]  # self.mod is set and holds print_progress when saved is not None
         return False
 
 
@@ -417,8 +417,8 @@ def run_simulate(args: argparse.Namespace) -> int:
                     scenario,
                     t1,
                     ts=np.asarray(ts),
-                    rtol=options.rtol,
-                    atol=options.atol,
+                    rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
+                    atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
                     max_steps=args.max_steps,
                     rope=args.rope,
                     verbose=not args.quiet,  # the phase log, one line per phase: drives the bar

@@ -443,7 +443,7 @@ def _sensitivity_solve(cfg: _Config, z, args):
         adjoint=diffrax.ForwardMode(),
         throw=False,
     )
-    ys, Ys = sol.ys
+    ys, Ys = sol.ys  # pyright: ignore[reportGeneralTypeIssues]  # sol.ys is the saved (state, tangent) pair with SaveAt(ts=...)
     y1 = jax.tree_util.tree_map(lambda x: x[-1], ys)
     finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves((y1, Ys))]))
     status = jnp.where(

@@ -148,7 +148,7 @@ def parse_list(text: str, where: str) -> list:
 
     if not isinstance(value, list):
         raise ScenarioError(f"{where}: expected a list like [1, 2.5, 1], got {brief(text)}")
-    return conv(value, 0)
+    return conv(value, 0)  # pyright: ignore[reportReturnType]  # conv of a list is a list
 
 
 def parse_values(spec, flag: str = "--values") -> np.ndarray:
@@ -309,7 +309,7 @@ def clean_outputs(folder: str | Path, names: Iterable[str]) -> list[Path]:
 def _concrete(x):
     import jax
 
-    return None if isinstance(x, jax.core.Tracer) else x
+    return None if isinstance(x, jax.core.Tracer) else x  # pyright: ignore[reportAttributeAccessIssue]  # jax.core is a lazily loaded submodule
 
 
 _PATH = re.compile(r"([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)(?:\[([0-9]{1,6})\])?")

@@ -59,7 +59,7 @@ def set_param(scenario: Scenario, path: str, value) -> Scenario:
     where = _getter(dotted)
     value = jnp.asarray(value, dtype=jnp.float64)
     if index is not None:
-        value = where(scenario).at[index].set(value)
+        value = where(scenario).at[index].set(value)  # pyright: ignore[reportAttributeAccessIssue]  # the leaf at a vector path is an array
     return eqx.tree_at(where, scenario, value)
 
 

@@ -427,7 +427,7 @@ class ScanResult:
     def to_xarray(self):
         """An `xarray.Dataset` (only if xarray is installed; it is not a dependency of jaxhoist)."""
         try:
-            import xarray as xr
+            import xarray as xr  # pyright: ignore[reportMissingImports]  # xarray is optional
         except ImportError:
             raise ImportError(
                 "to_xarray() needs xarray, which jaxhoist does not depend on: "
@@ -607,7 +607,7 @@ def _fingerprint(scenario, spec: _Spec, members, ts, sort) -> str:
 
 def _write_atomic_npz(path: Path, arrays: Mapping[str, np.ndarray]) -> None:
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **arrays)
+    np.savez(tmp, **arrays)  # pyright: ignore[reportArgumentType]  # numpy's stubs read **arrays as the allow_pickle keyword
     os.replace(tmp, path)
 
 
@@ -769,7 +769,7 @@ def scan(
     )
     t1, ts = saved_times(scenario, t1, ts, n_save)
     if fixed_step and fixed_mod.supports(options.solver):
-        need = fixed_mod.steps_needed(ts, dt0)
+        need = fixed_mod.steps_needed(ts, dt0)  # pyright: ignore[reportArgumentType]  # fixed_step checks dt0 before
         if need > int(max_steps):
             raise ScenarioError(
                 f"fixed steps of dt0 = {dt0} s to t1 = {float(np.asarray(ts)[-1])} s need {need} steps, more "
@@ -908,7 +908,7 @@ def scan(
         t_start = time.perf_counter()
         loaded = k in done_chunks
         if not loaded and k % n_proc != proc:  # another process's chunk: wait for its file
-            path_k = out / f"chunk_{k:05d}.npz"
+            path_k = out / f"chunk_{k:05d}.npz"  # pyright: ignore[reportOptionalOperand]  # out is set when several processes share out_dir
             done_chunks[k] = _wait_for(
                 lambda: _read_chunk(path_k, fp, idx)[0], wait_timeout, f"{path_k} from process {k % n_proc}"
             )

@@ -32,7 +32,7 @@ def _f64(x) -> Array:
 
 def _concrete(x) -> np.ndarray | None:
     """The value of a leaf as numpy, or None if it is a tracer (inside jit/vmap/grad)."""
-    if isinstance(x, jax.core.Tracer):
+    if isinstance(x, jax.core.Tracer):  # pyright: ignore[reportAttributeAccessIssue]  # jax.core is a lazily loaded submodule
         return None
     return np.asarray(x)
 
@@ -609,7 +609,7 @@ class Scenario(eqx.Module):
 
 def _leaf_value(path: str, value, shape: tuple) -> Array:
     """`value` as a float64 array of `shape` (broadcast), or a `ScenarioError` naming `path`."""
-    if not isinstance(value, jax.core.Tracer):
+    if not isinstance(value, jax.core.Tracer):  # pyright: ignore[reportAttributeAccessIssue]  # jax.core is a lazily loaded submodule
         try:
             a = np.asarray(value)
         except (ValueError, TypeError, OverflowError):
@@ -683,4 +683,4 @@ def get_leaf(scenario: Scenario, path: str) -> Array:
         obj = getattr(obj, p)
     if not isinstance(obj, jax.Array | np.ndarray):
         raise ScenarioError(f"{path!r} is not a float leaf (got {type(obj).__name__})")
-    return obj
+    return obj  # pyright: ignore[reportReturnType]  # np.ndarray leaves (host arrays) are accepted too
