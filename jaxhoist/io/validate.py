@@ -312,9 +312,6 @@ def _concrete(x):
     return None if isinstance(x, jax.core.Tracer) else x  # pyright: ignore[reportAttributeAccessIssue]  # jax.core is a lazily loaded submodule
 
 
-_PATH = re.compile(r"([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)(?:\[([0-9]{1,6})\])?")
-
-
 def check_param_path(scenario: P.Scenario, path: str, flag: str = "--param") -> tuple[str, int | None]:
     """Check that `path` names a float scalar leaf of `scenario`, or one component of a float vector leaf
     (`load.mass_centre[0]`): what a scan or a bifurcation may vary.
@@ -329,15 +326,15 @@ def check_param_path(scenario: P.Scenario, path: str, flag: str = "--param") -> 
     **Raises** `ScenarioError` naming `flag` and the path (static settings such as `t1` and `name` are no
     parameters; a misspelt field gets a "did you mean").
     """
-    m = _PATH.fullmatch(str(path).strip())
-    if not m:
+    from ..physics.paths import get_leaf, parse_path
+
+    try:
+        dotted, index = parse_path(str(path))
+    except ScenarioError:
         raise ScenarioError(
             f"{flag} {brief(path)}: not a parameter path; use dotted field names with an optional component "
             f"index, e.g. foundation.friction_coefficient or load.mass_centre[0]"
-        )
-    from ..physics.params import get_leaf
-
-    dotted, index = m.group(1), None if m.group(2) is None else int(m.group(2))
+        ) from None
     try:
         leaf = np.asarray(get_leaf(scenario, dotted))
     except ScenarioError as e:
