@@ -19,10 +19,11 @@ How the work is laid out (and why results do not depend on the chunk size or the
   last member). A group is solved by one `jax.vmap` of the traceable core `numerics.solve.solve`, in lock
   step: it costs what its slowest member costs, which sorting keeps close to the others;
 - a *chunk* is a whole number of groups per device; on each device the chunk's groups run one after the
-  other, and the devices run in parallel, each with its own loop, so a slow group on one device does not
-  hold up the other;
-- each group is the same compiled computation on the same inputs whatever the chunk size and the number
-  of devices, so the results are bit-for-bit identical.
+  other (`lax.map`), and the devices' shares run in parallel, one host thread each, so a slow group on one
+  device does not hold up the other (`numerics.batch.CompiledChunk`);
+- each group is the same single-device compiled computation on the same inputs whatever the chunk size
+  and the number of devices (never a partitioned SPMD program, which rounds differently), so the results
+  are bit-for-bit identical; a healthy member is also bit-for-bit what it is without a failing group mate.
 - several processes (hosts) under `jax.distributed`: every process runs the chunks k with
   k mod process_count = process_index on its own local devices and writes them to `out_dir`, which must
   be a folder all processes share; then each reads the others' chunks and assembles the same result
@@ -59,7 +60,15 @@ from ..io.scan_store import ScanStore, fingerprint
 from ..numerics import compile_cache
 from ..numerics import fixed_step as fixed_mod
 from ..numerics import observables as obs_mod
-from ..numerics.batch import HISTORY_UNITS, BatchSpec, ScanStatus, chunk_fn, flatten_out, hist_shape
+from ..numerics.batch import (
+    HISTORY_UNITS,
+    BatchSpec,
+    ScanStatus,
+    chunk_fn,
+    describe_devices,
+    flatten_out,
+    hist_shape,
+)
 from ..numerics.options import SolverOptions
 from ..numerics.solve import saved_times
 from ..physics.params import Scenario
@@ -326,10 +335,10 @@ class _Run:
 
     def _here(self) -> list[str]:
         """Which devices computed a chunk (issue 14): this run's, named by process with several."""
-        devs = self.spec.devices
+        here = describe_devices(self.spec.devices)
         if jax.process_count() == 1:
-            return [str(d) for d in devs]
-        return [f"process {jax.process_index()}: {d}" for d in devs]
+            return here
+        return [f"process {jax.process_index()}: {d}" for d in here]
 
     def _compute(self, k: int, idx: np.ndarray) -> dict[str, np.ndarray]:
         """Solve chunk k (members `idx`), in groups of `lanes`, padded to whole groups on every device."""
