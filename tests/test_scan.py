@@ -1,4 +1,4 @@
-"""`jaxhoist.numerics.scan`: chunked, vmapped, sharded parameter scans.
+"""`jaxhoist.apps.scan` (with `io.scan_store`, `apps.scan_result`): chunked, vmapped, sharded parameter scans.
 
 The scans here share one compiled core (same scenario structure, observables, options, saved times and
 chunk shape) wherever a test does not need another shape. The box is a 1 m cube of 1000 kg pulled
@@ -16,17 +16,11 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
+from jaxhoist.apps.scan import ScanResult, ScanStatus, scan  # noqa: E402
+from jaxhoist.apps.sweep import members as _members  # noqa: E402
+from jaxhoist.apps.sweep import parse_values  # noqa: E402
 from jaxhoist.numerics import observables as O  # noqa: E402
-from jaxhoist.numerics.scan import (  # noqa: E402
-    ScanResult,
-    ScanStatus,
-    _members,
-    get_param,
-    parse_path,
-    parse_values,
-    scan,
-    set_param,
-)
+from jaxhoist.numerics.paths import get_param, parse_path, set_param  # noqa: E402
 
 MU = "foundation.friction_coefficient"
 MUS = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
@@ -387,7 +381,7 @@ jax.distributed.initialize(coordinator_address=f"127.0.0.1:{port}", num_processe
 import numpy as np
 sys.path.insert(0, sys.argv[4])
 from test_scan import KW, MU, MUS, T1, oblique_box
-from jaxhoist.numerics.scan import scan
+from jaxhoist.apps.scan import scan
 assert jax.process_count() == 2 and len(jax.local_devices()) == 1
 res = scan(oblique_box(), {MU: MUS}, T1, chunk_size=4, out_dir=out, wait_timeout=300, **KW)
 np.savez(f"{out}/process{pid}.npz", **{k: res[k] for k in res.data}, status=res.status)
@@ -446,7 +440,7 @@ sys.path.insert(0, here)
 from jaxtyping import install_import_hook
 install_import_hook("jaxhoist", "beartype.beartype")
 from test_scan import KW, MU, MUS, T1, oblique_box
-from jaxhoist.numerics.scan import scan
+from jaxhoist.apps.scan import scan
 assert len(jax.devices()) == 4
 save = lambda name, r: np.savez(f"{tmp}/{name}.npz", **{k: r[k] for k in r.data}, status=r.status)
 res = scan(oblique_box(), {MU: MUS}, T1, chunk_size=4, **KW)
@@ -516,8 +510,9 @@ def test_four_devices_and_resumes_across_device_counts(clean, tmp_path):
 def test_fingerprint_sees_constants_and_closures_of_custom_observables():
     """Issue 14: a custom observable whose constant or closed-over value changed must not reuse the chunks
     of the old one (the fingerprint hashed only the bytecode)."""
+    from jaxhoist.apps.scan import _fingerprint
+    from jaxhoist.numerics.batch import BatchSpec as _Spec
     from jaxhoist.numerics.observables import resolve
-    from jaxhoist.numerics.scan import _fingerprint, _Spec
 
     sc = oblique_box()
     ts = np.linspace(0.0, T1, 3)
@@ -542,7 +537,7 @@ def test_a_damaged_or_foreign_store_is_recomputed_with_a_warning(box, clean, tmp
     fingerprint and the member indices inside the file); a truncated or emptied chunk, a chunk copied over
     another, a chunk whose values were changed (NaNs marked ok) and a truncated manifest are each recomputed
     with a `ScanStoreWarning` naming the file, and the result equals the clean scan."""
-    from jaxhoist.numerics.scan import ScanStoreWarning
+    from jaxhoist.io.scan_store import ScanStoreWarning
 
     out = tmp_path / "store"
     first = scan(box, {MU: MUS}, T1, chunk_size=4, out_dir=out, **KW)  # 2 chunks (4 and 2 members)
@@ -587,7 +582,8 @@ from jaxtyping import install_import_hook
 install_import_hook("jaxhoist", "beartype.beartype")
 from test_scan import KW, MU, MUS, T1, oblique_box
 from jaxhoist.numerics.observables import resolve
-from jaxhoist.numerics.scan import _fingerprint, _Spec
+from jaxhoist.apps.scan import _fingerprint
+from jaxhoist.numerics.batch import BatchSpec as _Spec
 import jaxhoist as jh
 spec = _Spec(paths=(MU,), observables=tuple(resolve(KW["observables"])), histories=(),
              options=jh.SolverOptions(), lanes=2, devices=(), derivatives=False)
@@ -602,8 +598,9 @@ def test_fingerprint_is_the_same_in_every_process():
     import sys
     from pathlib import Path
 
+    from jaxhoist.apps.scan import _fingerprint
+    from jaxhoist.numerics.batch import BatchSpec as _Spec
     from jaxhoist.numerics.observables import resolve
-    from jaxhoist.numerics.scan import _fingerprint, _Spec
 
     spec = _Spec(paths=(MU,), observables=tuple(resolve(KW["observables"])), histories=(),
                  options=jh.SolverOptions(), lanes=2, devices=(), derivatives=False)

@@ -48,9 +48,10 @@ import numpy as np
 from .._errors import ScenarioError, SolveStatus, require_x64
 from ..numerics import observables as obs_mod
 from ..numerics.options import SolverOptions
-from ..numerics.scan import ScanResult, check_path, param_unit, scan, set_param
 from ..numerics.solve import saved_times, solve
 from ..physics.params import Scenario
+from ..physics.paths import check_path, param_unit, set_param
+from .scan import ScanResult, scan
 
 
 class BifurcationError(RuntimeError):
@@ -992,7 +993,7 @@ def run_cli(args) -> int:
     bar = None
     quiet = getattr(args, "quiet", False)
     if not quiet:
-        from .cli import LocatorProgressBar
+        from .progress_bars import LocatorProgressBar
 
         bar = LocatorProgressBar()
     try:

@@ -27,6 +27,7 @@ from typing import Any
 
 from .._errors import ScenarioError, require_x64
 from ..physics import params as P
+from ..physics.paths import get_leaf
 from .validate import brief, parse_list, parse_number, read_text
 
 # field -> (unit, required, kind) where kind is "float", "vec3", "mat33", "str" or "float|vec3".
@@ -295,7 +296,7 @@ def apply_overrides(scenario: P.Scenario, items) -> tuple[P.Scenario, dict]:
     overrides = parse_overrides(items or [])
     try:
         for path in overrides:
-            P.get_leaf(scenario, path)  # raises ScenarioError naming a bad path
+            get_leaf(scenario, path)  # raises ScenarioError naming a bad path
         if overrides:
             scenario = scenario.replace(**overrides)
             scenario.check()
