@@ -95,7 +95,7 @@ class ChangeClass:
 
     def to_dict(self) -> dict[str, Any]:
         d = dataclasses.asdict(self)
-        return json_safe(d)
+        return json_safe(d)  # pyright: ignore[reportReturnType]  # json_safe keeps a dict a dict
 
 
 def json_safe(x):
