@@ -5,6 +5,7 @@
     python experiments/rigid_sweep.py --out out/rigid_sweep             # the full sweep (hours on 2 cores)
     python experiments/rigid_sweep.py --out out/rigid_sweep --plot-only # figures from what is done so far
     python experiments/rigid_sweep.py --out out/rigid_elastic --elastic # rigid vs elastic, k = 1.5e9
+    python experiments/rigid_sweep.py --out out/rigid_chatter --elastic-chatter  # ... where cycles were
 
 Full sweep: μ = 0.10, 0.105, ..., 0.50 (81 values) on `paper-2.3` and `paper-4.1`, each with the elastic rope
 (2.14) and the inextensible rope (2.15), to the preset's t1 (20 s and 70 s); plus, at the preset's μ, the
@@ -25,6 +26,10 @@ p_0 = 1e-6 m (the stiffest row of the convergence table in docs/rigid-model.md) 
 paper-2.3 at μ = 0.252, 0.255, 0.27 (the landings that raised "non-uniqueness") and 0.26 (the grazing
 impact), each to just past that moment (`ELASTIC_CASES`), saved every 2 ms: max |Δr_C| and, after every
 resolved contact choice, which corners carry load in each model. Writes `rigid_elastic.json`.
+`--elastic-chatter`: the same at `CHATTER_CASES` (paper-2.3 μ = 0.30 to 17 s, 0.32 to 12.4 s, paper-4.1
+μ = 0.38 to 20 s), where the rigid model used to stop in a sustained cycle and now passes it by the
+persistent-contact rule or a compliant phase; also records those episodes. Writes
+`rigid_elastic_chatter.json`.
 """
 
 from __future__ import annotations
@@ -280,11 +285,18 @@ def resolved_phases(tr) -> list[int]:
     return out
 
 
-def elastic_check(out: Path, cases=ELASTIC_CASES, k=1.5e9, eps=1e-4, dt=0.002):
+#: (preset, μ, t1 [s]) of the sustained cycles of issue 15 that the persistent-contact rule and the compliant
+#: phase pass (docs/rigid-model.md, "Sustained cycles"): stalls at 16.13 s, F-H chatter from 10.8 s, chatter
+#: at 15.7 s (each used to end the run).
+CHATTER_CASES = (("paper-2.3", 0.30, 17.0), ("paper-2.3", 0.32, 12.4), ("paper-4.1", 0.38, 20.0))
+
+
+def elastic_check(out: Path, cases=ELASTIC_CASES, k=1.5e9, eps=1e-4, dt=0.002, preset_name="paper-2.3",
+                  name="rigid_elastic.json"):
     """Rigid vs elastic (k, critically damped, ε, p_0 = 1e-4 m x 1.5e7/k) on paper-2.3 at the `cases`:
     the mass-centre distance, and in a window of 50 ms to 0.2 s after each resolved choice (from 10 ms
     after its start) the corners that carry load (mean N > 1e-3 G) in both models."""
-    preset = jaxhoist.load_scenario("paper-2.3")
+    preset = jaxhoist.load_scenario(preset_name)
     rows = []
     for mu, t1 in cases:
         ts = np.linspace(0.0, t1, int(round(t1 / dt)) + 1)
@@ -304,8 +316,13 @@ def elastic_check(out: Path, cases=ELASTIC_CASES, k=1.5e9, eps=1e-4, dt=0.002):
         wall = time.perf_counter() - t0
         d = np.linalg.norm(np.asarray(el.position) - np.asarray(rig.position), axis=-1)
         row = dict(
+            preset=preset_name,
             mu=mu,
             t1=t1,
+            phases=len(rig.phases),
+            residual_J=float(np.max(np.abs(np.asarray(rig.energy_residual())))),
+            compliant=[str(p) for p in rig.phases if p.choice.startswith("compliant phase")],
+            persistent=sum("persistent contact" in p.end for p in rig.phases),
             dr_mm_every_s={f"{t:g}": float(np.interp(t, ts, d) * 1e3) for t in np.arange(1.0, t1, 1.0)},
             k=k,
             eps=eps,
@@ -345,7 +362,17 @@ def elastic_check(out: Path, cases=ELASTIC_CASES, k=1.5e9, eps=1e-4, dt=0.002):
             )
         rows.append(row)
         print(json.dumps(row), flush=True)
-    (out / "rigid_elastic.json").write_text(json.dumps(rows, indent=1))
+    (out / name).write_text(json.dumps(rows, indent=1))
+    return rows
+
+
+def chatter_check(out: Path):
+    """`elastic_check` at the `CHATTER_CASES`: rigid (with the persistent-contact rule and the compliant
+    phase) vs the elastic model at k = 1.5e9; writes `rigid_elastic_chatter.json`."""
+    rows = []
+    for preset, mu, t1 in CHATTER_CASES:
+        rows += elastic_check(out, cases=((mu, t1),), preset_name=preset, name=f"chatter_{preset}_{mu}.json")
+    (out / "rigid_elastic_chatter.json").write_text(json.dumps(rows, indent=1))
     return rows
 
 
@@ -355,17 +382,32 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="4 short runs (a minute or two)")
     p.add_argument("--plot-only", action="store_true", help="figures and summary from runs.jsonl")
     p.add_argument("--elastic", action="store_true", help="rigid vs elastic at k = 1.5e9 N/m (see above)")
+    p.add_argument("--elastic-chatter", action="store_true",
+                   help="rigid vs elastic at k = 1.5e9 N/m where sustained cycles were (CHATTER_CASES)")
+    p.add_argument("--shard", default="0/1", help="i/n: run every n-th of the runs still to do, from the "
+                   "i-th (parallel processes, each with its own --out; concatenate their runs.jsonl)")
+    p.add_argument("--only-preset", default=None, help="run only this preset")
+    p.add_argument("--mus", default=None, help="comma-separated μ values: run only these (first)")
     args = p.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     if args.elastic:
         elastic_check(out)
         return 0
+    if args.elastic_chatter:
+        chatter_check(out)
+        return 0
     path = out / "runs.jsonl"
     done = load_done(path)
     if not args.plot_only:
         runs = run_list(args.quick)
-        todo = [r for r in runs if r["key"] not in done]
+        todo = [r for r in runs if r["key"] not in done
+                and (args.only_preset is None or r["preset"] == args.only_preset)]
+        if args.mus:
+            wanted = {round(float(m), 3) for m in args.mus.split(",")}
+            todo = [r for r in todo if round(r["mu"], 3) in wanted and not r["variant"]]
+        i_shard, n_shard = (int(x) for x in args.shard.split("/"))
+        todo = todo[i_shard::n_shard]
         print(f"{len(runs)} runs, {len(runs) - len(todo)} already done", flush=True)
         for n, r in enumerate(todo):
             rec = one_run(r)

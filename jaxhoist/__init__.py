@@ -10,6 +10,9 @@ from .apps.bifurcation import find_crossings as find_crossings
 from .apps.bifurcation import find_jumps as find_jumps
 from .apps.bifurcation import locate_bifurcation as locate_bifurcation
 from .apps.bifurcation import trace_boundary as trace_boundary
+from .apps.classify import ChangeClass as ChangeClass
+from .apps.classify import classify_change as classify_change
+from .apps.classify import classify_samples as classify_samples
 from .apps.identify import identify as identify
 from .apps.scan import ScanResult as ScanResult
 from .apps.scan import ScanStatus as ScanStatus
