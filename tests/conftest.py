@@ -20,10 +20,11 @@ except AttributeError:  # older JAX: the XLA flag, read when the backend initial
 jax.config.update("jax_enable_x64", True)
 # Strict dtype promotion (issue 11): mixing dtypes (bool or int with float arrays, float32 with float64) is
 # an error rather than a silent promotion; Python scalars stay weakly typed. Opt-in for now
-# (JAXHOIST_STRICT_PROMOTION=1): the code of this branch passes under it (tests/test_reference_results.py,
-# the elastic presets and a scan with sensitivities), but two products in files that other branches are
-# rewriting mix dtypes: numerics/observables.py `_configuration_time` (bool * int, issue 13) and
-# physics/rigid.py `solve_contact_system` (float * bool, issue 15). Make it the default once both are cast.
+# (JAXHOIST_STRICT_PROMOTION=1): the issue-11 code passes under it (tests/test_reference_results.py, the
+# elastic presets and a scan with sensitivities), but three products mix dtypes in code of issues 13 and
+# 15: numerics/observables.py `_configuration_time` (bool * int) and physics/rigid.py
+# `solve_contact_system`, `solve_rope_contact_system` (float * bool, `... * four`). Make it the default once
+# they are cast (`four.astype(w_row.dtype)` etc.: the same numbers).
 STRICT_PROMOTION = os.environ.get("JAXHOIST_STRICT_PROMOTION", "0") == "1"
 if STRICT_PROMOTION:
     jax.config.update("jax_numpy_dtype_promotion", "strict")
@@ -43,10 +44,8 @@ import jaxhoist.numerics.solve  # noqa: E402
 
 
 def _standard_promotion(fn):
-    """`fn` run under JAX's standard dtype promotion. Temporary: the rigid model multiplies a float row by a
-    bool (`physics/rigid.py`, `solve_contact_system`: `... * four`), which strict promotion refuses; that
-    file is being split (issue 15), so the one-token fix (`four.astype(w_row.dtype)`, the same numbers) is
-    left to that branch. Remove this wrapper once it is in."""
+    """`fn` run under JAX's standard dtype promotion: the rigid model's float * bool products (above) are
+    refused by strict promotion; with this, JAXHOIST_STRICT_PROMOTION=1 still checks everything else."""
 
     @functools.wraps(fn)
     def wrapped(*args, **kwargs):

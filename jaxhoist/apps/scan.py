@@ -166,27 +166,9 @@ def scan(
     for p in paths:
         check_path(scenario, p)
     obs, histories = _observables(observables, histories)
-    if derivatives and solver is None:
-        # Tsit5: forward-mode sensitivities through the default Rosenbrock-W solver are not reliable yet at
-        # high friction (they grow without bound over 25 s of paper-4.2 at mu >= 0.5; docs/performance.md)
-        solver = diffrax.Tsit5()
-    options = SolverOptions(
-        solver=solver,
-        rtol=rtol,
-        atol=atol,
-        dt0=dt0,
-        max_steps=max_steps,
-        adjoint="forward" if derivatives else "reverse",
-        fixed_step=bool(fixed_step),
-    )
+    options = _solver_options(solver, rtol, atol, dt0, max_steps, fixed_step, derivatives)
     t1, ts = saved_times(scenario, t1, ts, n_save)
-    if fixed_step and fixed_mod.supports(options.solver):
-        need = fixed_mod.steps_needed(ts, dt0)  # pyright: ignore[reportArgumentType]  # fixed_step checks dt0
-        if need > int(max_steps):
-            raise ScenarioError(
-                f"fixed steps of dt0 = {dt0} s to t1 = {float(np.asarray(ts)[-1])} s need {need} steps, more "
-                f"than max_steps = {max_steps}: raise max_steps or dt0"
-            )
+    _check_fixed_steps(options, ts)
     ts = jnp.asarray(ts, dtype=jnp.float64)
     if lanes is None:
         lanes = 256 if fixed_step else 16
@@ -241,6 +223,35 @@ def scan(
         result.save(store.out / "scan")
         result.to_netcdf(store.out / "scan.nc")
     return result
+
+
+def _solver_options(solver, rtol, atol, dt0, max_steps, fixed_step, derivatives) -> SolverOptions:
+    """The scan's `SolverOptions`: forward-mode derivatives if asked, with Tsit5 unless a solver is given."""
+    if derivatives and solver is None:
+        # Tsit5: forward-mode sensitivities through the default Rosenbrock-W solver are not reliable yet at
+        # high friction (they grow without bound over 25 s of paper-4.2 at mu >= 0.5; docs/performance.md)
+        solver = diffrax.Tsit5()
+    return SolverOptions(
+        solver=solver,
+        rtol=rtol,
+        atol=atol,
+        dt0=dt0,
+        max_steps=max_steps,
+        adjoint="forward" if derivatives else "reverse",
+        fixed_step=bool(fixed_step),
+    )
+
+
+def _check_fixed_steps(options: SolverOptions, ts) -> None:
+    """Refuse constant steps of `dt0` that need more than `max_steps` steps to reach the last saved time."""
+    if options.fixed_step and fixed_mod.supports(options.solver):
+        dt0, max_steps = options.dt0, options.max_steps
+        need = fixed_mod.steps_needed(ts, dt0)  # pyright: ignore[reportArgumentType]  # fixed_step checks dt0
+        if need > int(max_steps):
+            raise ScenarioError(
+                f"fixed steps of dt0 = {dt0} s to t1 = {float(np.asarray(ts)[-1])} s need {need} steps, more "
+                f"than max_steps = {max_steps}: raise max_steps or dt0"
+            )
 
 
 def _observables(observables, histories) -> tuple[tuple, tuple[str, ...]]:
