@@ -52,11 +52,11 @@ def _trap(*args, **kwargs):
 
 
 def _install_traps():
-    import jaxhoist.numerics.scan as scan_mod
+    import jaxhoist.apps.scan as scan_mod
     import jaxhoist.numerics.solve as solve_mod
-    from jaxhoist.apps import bifurcation, cli
+    from jaxhoist.apps import bifurcation, simulate_cli
 
-    cli._compiled_solve = _trap
+    simulate_cli._compiled_solve = _trap
     solve_mod._solve_jit = _trap
     scan_mod._fingerprint = _trap  # scan(): called after every host-side check, before compiling
     for name in ("scan", "locate_bifurcation", "trace_boundary"):

@@ -60,10 +60,10 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
+from jaxhoist import scan, set_param  # noqa: E402
 from jaxhoist.apps.bifurcation import locate_bifurcation, trace_boundary  # noqa: E402
 from jaxhoist.numerics.observables import Observable, contact_function  # noqa: E402
 from jaxhoist.numerics.observables import get as get_observable  # noqa: E402
-from jaxhoist.numerics.scan import scan, set_param  # noqa: E402
 
 MU = "foundation.friction_coefficient"
 EPS = "foundation.friction.regularisation_velocity"

@@ -40,8 +40,8 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
+from jaxhoist import scan  # noqa: E402
 from jaxhoist.apps.bifurcation import BifurcationError, find_jumps, locate_bifurcation, trace_boundary  # noqa: E402
-from jaxhoist.numerics.scan import scan  # noqa: E402
 
 MU = "foundation.friction_coefficient"
 OBSERVABLES = [
@@ -88,8 +88,8 @@ def _plot_observables(sc, mus, res, jumps, located, ramp, out, t1):
     for ax in axes[-1]:
         ax.set_xlabel("friction coefficient μ [-]")
     fig.suptitle(
-        f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s)\nin each panel the μ* located "
-        f"where it jumps: red = jump, grey = continuous crossing; green dashed: steepest change of ψ"
+        f"{sc.name}: outcome of the lift against μ ({n} values, t1 = {t1:g} s)\nin each panel the value "
+        f"located where it jumps: red = jump, grey = continuous crossing; green dashed: steepest change of ψ"
     )
     fig.tight_layout()
     fig.savefig(out / "observables_vs_mu.png", dpi=110)
@@ -228,7 +228,7 @@ def main(argv=None):
         ramp = types.SimpleNamespace(**previous["steepest_psi"])
         _plot_observables(sc, mus, res, jumps, located, ramp, out, t1)
         path.write_text(json.dumps(previous, indent=1, default=float) + "\n")  # as it was
-        print(f"redrew {out / 'observables_vs_mu.png'} with {len(located)} located μ*")
+        print(f"redrew {out / 'observables_vs_mu.png'} with {len(located)} located values")
         return
 
     # 3. refine every candidate jump of the continuous observables (event counts and the first corner are
@@ -340,7 +340,7 @@ def main(argv=None):
         ax.axvline(b.value, color="C3", lw=0.8)
         ax.set_xlabel("μ [-]")
         ax.set_ylabel(f"{label} [{unit}]")
-        ax.set_title(f"zoom around μ* = {b.value:.7f} ({b.kind}; bracket width {b.width:.1e})")
+        ax.set_title(f"zoom around μ = {b.value:.7f} ({b.kind}; bracket width {b.width:.1e})")
         fig.tight_layout()
         fig.savefig(out / f"zoom_{i}.png", dpi=110)
         plt.close(fig)
@@ -374,13 +374,13 @@ def main(argv=None):
                     val[k] * scale,
                     lw=1.0,
                     ls="-" if side == "below" else "--",
-                    label=f"μ = {mu:.7f} ({side} μ*)",
+                    label=f"μ = {mu:.7f} ({side} it)",
                 )
             ax.set_ylabel(f"{sym} [{unit}]")
         axes[0].legend(fontsize=7)
         axes[-1].set_xlabel("t [s]")
         fig.suptitle(
-            f"{sc.name}: histories across μ* = {b.value:.7f} ({name}, {b.kind}; cf. the paper's Figs 10-12)"
+            f"{sc.name}: histories across μ = {b.value:.7f} ({name}, {b.kind}; cf. the paper's Figs 10-12)"
         )
         fig.tight_layout()
         fig.savefig(out / f"histories_across_mu_star_{i}.png", dpi=110)

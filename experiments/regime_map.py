@@ -46,8 +46,8 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
+from jaxhoist import get_param, set_param  # noqa: E402
 from jaxhoist.apps.bifurcation import BifurcationError, locate_bifurcation, trace_boundary  # noqa: E402
-from jaxhoist.numerics.scan import get_param, set_param  # noqa: E402
 
 MU, VL = "foundation.friction_coefficient", "hoist.speed"
 MARGIN = "contact_margin[E]"

@@ -19,8 +19,8 @@ from jaxhoist.apps.bifurcation import (  # noqa: E402
     locate_bifurcation,
     trace_boundary,
 )
+from jaxhoist.apps.scan_result import ScanResult  # noqa: E402
 from jaxhoist.numerics import observables as O  # noqa: E402
-from jaxhoist.numerics.scan import ScanResult  # noqa: E402
 from jaxhoist.physics import kinematics  # noqa: E402
 
 XI = "load.mass_centre[0]"

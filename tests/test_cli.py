@@ -17,7 +17,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from jaxhoist.apps import cli  # noqa: E402
+from jaxhoist.apps import cli, simulate_cli  # noqa: E402
 from jaxhoist.io import results  # noqa: E402
 from jaxhoist.io.scenario import SCHEMA  # noqa: E402
 
@@ -29,7 +29,7 @@ def _no_compile(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("compiled despite invalid input")
 
-    monkeypatch.setattr(cli, "_compiled_solve", boom)
+    monkeypatch.setattr(simulate_cli, "_compiled_solve", boom)
 
 
 @pytest.fixture(scope="module")
@@ -255,9 +255,9 @@ def test_library_hints_use_the_flag_names(monkeypatch, capsys):
     import inspect
 
     from jaxhoist._errors import ScenarioError
-    from jaxhoist.numerics import scan as scan_mod
+    from jaxhoist.io import scan_store
 
-    src = inspect.getsource(scan_mod)
+    src = inspect.getsource(scan_store)
     assert "use another out_dir, or resume=False to " in src and '"overwrite it"' in src  # the text reworded
 
     def configure_parser(subparsers):
@@ -282,7 +282,7 @@ def test_library_hints_use_the_flag_names(monkeypatch, capsys):
 def test_scan_progress_bar_shows_members_rate_eta_failures(monkeypatch):
     import io
 
-    from jaxhoist.numerics import scan as scan_mod
+    from jaxhoist.apps import progress as scan_mod
 
     stream = io.StringIO()
     bar = cli.ScanProgressBar(stream=stream)
@@ -297,10 +297,10 @@ def test_scan_progress_bar_shows_members_rate_eta_failures(monkeypatch):
     assert bar.bar is None  # closed when every member is done
 
     # while a subcommand runs, the scan's default per-chunk line is this bar; afterwards it is restored
-    saved = scan_mod.print_progress
+    saved = scan_mod.default_reporter()
     with cli._scan_bars():
-        assert isinstance(scan_mod.print_progress, cli.ScanProgressBar)
-    assert scan_mod.print_progress is saved
+        assert isinstance(scan_mod.default_reporter(), cli.ScanProgressBar)
+    assert scan_mod.default_reporter() is saved
 
 
 def test_printed_progress_lines_drive_the_bars():

@@ -17,9 +17,9 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
+from jaxhoist.apps.scan import scan  # noqa: E402
 from jaxhoist.numerics import fixed_step  # noqa: E402
 from jaxhoist.numerics.options import SolverOptions  # noqa: E402
-from jaxhoist.numerics.scan import scan  # noqa: E402
 from jaxhoist.numerics.solve import solve  # noqa: E402
 
 MU = "foundation.friction_coefficient"

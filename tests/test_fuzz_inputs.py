@@ -14,7 +14,7 @@ from hypothesis import strategies as st
 
 import jaxhoist as jh
 from jaxhoist._errors import MAX_MESSAGE_CHARS
-from jaxhoist.apps import cli
+from jaxhoist.apps import cli, simulate_cli
 
 PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2")
 FUZZ = settings(max_examples=60, derandomize=True, deadline=None,
@@ -148,6 +148,6 @@ def test_simulate_set_is_validated_or_refused_in_one_line(fuzz_dir, monkeypatch_
 @pytest.fixture(scope="module")
 def monkeypatch_module():
     mp = pytest.MonkeyPatch()
-    mp.setattr(cli, "_compiled_solve", _trap)
+    mp.setattr(simulate_cli, "_compiled_solve", _trap)
     yield mp
     mp.undo()

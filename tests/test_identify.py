@@ -18,8 +18,10 @@ import scipy.stats  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist.apps import identify as ident  # noqa: E402
+from jaxhoist.apps import identify_core  # noqa: E402
 from jaxhoist.apps.identify import identify, synthetic_measurement  # noqa: E402
 from jaxhoist.io.measurement import Measurement, MeasurementError, read_measurement, write_measurement  # noqa: E402
+from jaxhoist.numerics import compile_cache  # noqa: E402
 
 MU = 0.25  # paper-4.2's friction coefficient
 T = np.linspace(0.0, 0.4, 21)  # 50 Hz
@@ -80,9 +82,9 @@ def test_progress_reports_every_evaluation_and_nothing_without_a_callback(scenar
     assert any(r["step"] > 0 for r in reps[1:])
     assert all(r["elapsed"] >= 0 and r["solver_steps"] > 0 for r in reps)
     capfd.readouterr()
-    compiled = len(ident._COMPILED)
+    compiled = compile_cache.count("identify")
     quiet = identify(scenario, clean, ["mu"], **kw)
-    assert len(ident._COMPILED) == compiled and quiet.cost == pytest.approx(res.cost, rel=1e-12)
+    assert compile_cache.count("identify") == compiled and quiet.cost == pytest.approx(res.cost, rel=1e-12)
     out = capfd.readouterr()
     assert out.out == "" and out.err == ""
 
@@ -91,11 +93,11 @@ def test_covariance_matches_scatter(scenario, clean):
     """The Gauss-Newton standard error of μ̂ against the scatter of μ̂ over independent noise draws."""
     n = 12
     fits = [identify(scenario, _noisy(clean, 0), ["mu"], noise={"position": SIGMA})]
-    compiled = len(ident._COMPILED)
+    compiled = compile_cache.count("identify")
     fits += [
         identify(scenario, _noisy(clean, seed), ["mu"], noise={"position": SIGMA}) for seed in range(1, n)
     ]
-    assert len(ident._COMPILED) == compiled  # new data values reuse the compiled core
+    assert compile_cache.count("identify") == compiled  # new data values reuse the compiled core
     assert all(f.compile_time < 0.5 for f in fits[1:])
     est = np.array([f.values[0] for f in fits])
     se = np.array([f.std_errors[0] for f in fits])
@@ -303,7 +305,7 @@ def no_compile(monkeypatch):
         raise AssertionError("identify compiled before rejecting invalid input")
 
     monkeypatch.setattr(ident, "_compiled_core", boom)
-    monkeypatch.setattr(ident, "_fit_core", boom)
+    monkeypatch.setattr(identify_core, "_fit_core", boom)
 
 
 def test_times_outside_span_rejected_before_compiling(scenario, tmp_path, no_compile):

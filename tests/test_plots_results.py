@@ -130,7 +130,7 @@ def test_plots_from_loaded_file_and_save_all(traj42, tmp_path):
 
 
 def _fake_sweep(mu, data, units, components):
-    from jaxhoist.numerics.scan import ScanResult
+    from jaxhoist.apps.scan_result import ScanResult
 
     n = mu.size
     return ScanResult(params=["foundation.friction_coefficient"], mode="sweep",

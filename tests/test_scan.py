@@ -1,4 +1,4 @@
-"""`jaxhoist.numerics.scan`: chunked, vmapped, sharded parameter scans.
+"""`jaxhoist.apps.scan` (with `io.scan_store`, `apps.scan_result`): chunked, vmapped, sharded parameter scans.
 
 The scans here share one compiled core (same scenario structure, observables, options, saved times and
 chunk shape) wherever a test does not need another shape. The box is a 1 m cube of 1000 kg pulled
@@ -16,17 +16,11 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
+from jaxhoist.apps.scan import ScanResult, ScanStatus, scan  # noqa: E402
+from jaxhoist.apps.sweep import members as _members  # noqa: E402
+from jaxhoist.apps.sweep import parse_values  # noqa: E402
 from jaxhoist.numerics import observables as O  # noqa: E402
-from jaxhoist.numerics.scan import (  # noqa: E402
-    ScanResult,
-    ScanStatus,
-    _members,
-    get_param,
-    parse_path,
-    parse_values,
-    scan,
-    set_param,
-)
+from jaxhoist.numerics.paths import get_param, parse_path, set_param  # noqa: E402
 
 MU = "foundation.friction_coefficient"
 MUS = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
@@ -45,11 +39,9 @@ KW = dict(
     n_save=31,
     lanes=2,
     max_steps=3000,
-    # Tsit5: these tests are about the scan machinery (layout, failures, store, sensitivities). With the
-    # default Rosenbrock-W solver a scan on 1 device differs from one on 2 by 1e-7 m here: its step rounds
-    # differently in the two compilations (7e-14 m at fixed steps, tests/test_rosenbrock.py) and the loose
-    # default tolerance turns that into other accept/reject decisions. Its poison member below (μ = 1e4)
-    # also solves with Rosenbrock-W, whose friction is implicit.
+    # Tsit5: these tests are about the scan machinery (layout, failures, store, sensitivities), and its poison
+    # member below (μ = 1e4) must exhaust its steps (the default Rosenbrock-W solver, whose friction is
+    # implicit, solves it). The default solver's layout independence is tested on its own below.
     solver=diffrax.Tsit5(),
 )
 
@@ -130,6 +122,34 @@ def test_identical_for_any_chunk_size_and_device_count(box, clean):
         for k in clean.data:
             np.testing.assert_array_equal(other[k], clean[k], err_msg=k)
         np.testing.assert_array_equal(other.num_accepted_steps, clean.num_accepted_steps)
+
+
+@pytest.mark.parametrize("solver", [None, diffrax.Tsit5()], ids=["default", "tsit5"])
+def test_layout_independent_and_failing_group_mate_isolated(paper42, solver):
+    """Issue 14, on paper-4.2 over 0.5 s in groups of 4, with the default solver (Rosenbrock-W) and Tsit5:
+    a scan on two devices in chunks of 8 equals, bit for bit, one on one device in chunks of 4 (the
+    partitioned program used before differed by 4.7e-6 m with Rosenbrock-W); and a member whose rope of
+    1e16 N/m on a tip of 1e-12 kg exhausts its steps (marked `max_steps`) leaves its three group mates
+    bit-for-bit what they are beside a healthy member (its group is solved again without it,
+    `numerics.batch.CompiledChunk`; without that, a Tsit5 group mate moved by 3e-11 m)."""
+    n = 8
+    rope_k, tip_m = float(paper42.rope.stiffness), float(paper42.boom.tip_mass)
+    base = {MU: np.linspace(0.1, 0.6, n), "rope.stiffness": np.full(n, rope_k)}
+    base["boom.tip_mass"] = np.full(n, tip_m)
+    bad = {k: v.copy() for k, v in base.items()}
+    bad["rope.stiffness"][1], bad["boom.tip_mass"][1] = 1e16, 1e-12
+    kw = dict(mode="points", observables=["final_position"], n_save=11, lanes=4, sort=False, max_steps=2000,
+              solver=solver)
+    two = scan(paper42, bad, 0.5, chunk_size=8, **kw)
+    one = scan(paper42, bad, 0.5, chunk_size=4, devices=jax.devices()[:1], **kw)
+    clean = scan(paper42, base, 0.5, chunk_size=8, **kw)
+    assert two.status[1] == ScanStatus.MAX_STEPS and np.all(np.delete(two.status, 1) == ScanStatus.OK)
+    np.testing.assert_array_equal(two.num_accepted_steps, one.num_accepted_steps)
+    keep = [0, 2, 3, 4, 5, 6, 7]
+    for k in two.data:
+        np.testing.assert_array_equal(two[k], one[k], err_msg=k)
+        np.testing.assert_array_equal(two[k][keep], clean[k][keep], err_msg=k)
+    np.testing.assert_array_equal(two.num_accepted_steps[keep], clean.num_accepted_steps[keep])
 
 
 def test_poisoned_members_are_marked_and_the_rest_unchanged(box, clean):
@@ -361,7 +381,7 @@ jax.distributed.initialize(coordinator_address=f"127.0.0.1:{port}", num_processe
 import numpy as np
 sys.path.insert(0, sys.argv[4])
 from test_scan import KW, MU, MUS, T1, oblique_box
-from jaxhoist.numerics.scan import scan
+from jaxhoist.apps.scan import scan
 assert jax.process_count() == 2 and len(jax.local_devices()) == 1
 res = scan(oblique_box(), {MU: MUS}, T1, chunk_size=4, out_dir=out, wait_timeout=300, **KW)
 np.savez(f"{out}/process{pid}.npz", **{k: res[k] for k in res.data}, status=res.status)
@@ -420,7 +440,7 @@ sys.path.insert(0, here)
 from jaxtyping import install_import_hook
 install_import_hook("jaxhoist", "beartype.beartype")
 from test_scan import KW, MU, MUS, T1, oblique_box
-from jaxhoist.numerics.scan import scan
+from jaxhoist.apps.scan import scan
 assert len(jax.devices()) == 4
 save = lambda name, r: np.savez(f"{tmp}/{name}.npz", **{k: r[k] for k in r.data}, status=r.status)
 res = scan(oblique_box(), {MU: MUS}, T1, chunk_size=4, **KW)
@@ -490,8 +510,9 @@ def test_four_devices_and_resumes_across_device_counts(clean, tmp_path):
 def test_fingerprint_sees_constants_and_closures_of_custom_observables():
     """Issue 14: a custom observable whose constant or closed-over value changed must not reuse the chunks
     of the old one (the fingerprint hashed only the bytecode)."""
+    from jaxhoist.apps.scan import _fingerprint
+    from jaxhoist.numerics.batch import BatchSpec as _Spec
     from jaxhoist.numerics.observables import resolve
-    from jaxhoist.numerics.scan import _fingerprint, _Spec
 
     sc = oblique_box()
     ts = np.linspace(0.0, T1, 3)
@@ -516,7 +537,7 @@ def test_a_damaged_or_foreign_store_is_recomputed_with_a_warning(box, clean, tmp
     fingerprint and the member indices inside the file); a truncated or emptied chunk, a chunk copied over
     another, a chunk whose values were changed (NaNs marked ok) and a truncated manifest are each recomputed
     with a `ScanStoreWarning` naming the file, and the result equals the clean scan."""
-    from jaxhoist.numerics.scan import ScanStoreWarning
+    from jaxhoist.io.scan_store import ScanStoreWarning
 
     out = tmp_path / "store"
     first = scan(box, {MU: MUS}, T1, chunk_size=4, out_dir=out, **KW)  # 2 chunks (4 and 2 members)
@@ -561,7 +582,8 @@ from jaxtyping import install_import_hook
 install_import_hook("jaxhoist", "beartype.beartype")
 from test_scan import KW, MU, MUS, T1, oblique_box
 from jaxhoist.numerics.observables import resolve
-from jaxhoist.numerics.scan import _fingerprint, _Spec
+from jaxhoist.apps.scan import _fingerprint
+from jaxhoist.numerics.batch import BatchSpec as _Spec
 import jaxhoist as jh
 spec = _Spec(paths=(MU,), observables=tuple(resolve(KW["observables"])), histories=(),
              options=jh.SolverOptions(), lanes=2, devices=(), derivatives=False)
@@ -576,8 +598,9 @@ def test_fingerprint_is_the_same_in_every_process():
     import sys
     from pathlib import Path
 
+    from jaxhoist.apps.scan import _fingerprint
+    from jaxhoist.numerics.batch import BatchSpec as _Spec
     from jaxhoist.numerics.observables import resolve
-    from jaxhoist.numerics.scan import _fingerprint, _Spec
 
     spec = _Spec(paths=(MU,), observables=tuple(resolve(KW["observables"])), histories=(),
                  options=jh.SolverOptions(), lanes=2, devices=(), derivatives=False)
@@ -597,7 +620,8 @@ def test_every_chunk_records_the_devices_it_ran_on(box, tmp_path):
     assert first.attrs["chunk_devices"] == {"0": [str(one[0])], "1": [str(one[0])]}
     (out / "chunk_00001.npz").unlink()  # resumed on two devices: chunk 1 is computed again there
     again = scan(box, {MU: MUS}, T1, chunk_size=4, out_dir=out, **KW)
-    both = [str(d) for d in jax.devices()[:2]]
+    # two host CPU devices: their shares ran in two threads on the first (numerics.batch.execution_targets)
+    both = [f"{jax.devices()[0]} (2 threads)"]
     assert again.attrs["chunk_devices"] == {"0": [str(one[0])], "1": both}
     manifest = json.loads((out / "manifest.json").read_text())
     assert manifest["chunks"]["0"]["devices"] == [str(one[0])] and manifest["chunks"]["1"]["devices"] == both

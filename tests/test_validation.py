@@ -530,9 +530,9 @@ def test_strict_numbers():
 
 
 def _cli(monkeypatch, capsys, argv) -> tuple[int, str]:
-    from jaxhoist.apps import bifurcation, cli
+    from jaxhoist.apps import bifurcation, cli, simulate_cli
 
-    monkeypatch.setattr(cli, "_compiled_solve", _core_must_not_run)
+    monkeypatch.setattr(simulate_cli, "_compiled_solve", _core_must_not_run)
     for name in ("scan", "locate_bifurcation", "trace_boundary"):
         monkeypatch.setattr(bifurcation, name, _core_must_not_run)
     capsys.readouterr()

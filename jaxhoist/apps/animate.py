@@ -377,7 +377,7 @@ def save_animation(scene: Scene, path: str | Path, indices: Sequence[int] | np.n
         raise ScenarioError("--format mp4 needs ffmpeg on PATH; install it or use --format gif")
     path = Path(path).with_suffix("." + fmt)
     path.parent.mkdir(parents=True, exist_ok=True)
-    writer = PillowWriter(fps=fps) if fmt == "gif" else FFMpegWriter(fps=fps, codec="libx264",
+    writer = PillowWriter(fps=fps) if fmt == "gif" else FFMpegWriter(fps=fps, codec="libx264",  # pyright: ignore[reportArgumentType]  # matplotlib's stubs say int; a float fps works
                                                                     extra_args=["-pix_fmt", "yuv420p"])
     fig, (ax,) = _figure(1)
     FigureCanvasAgg(fig)

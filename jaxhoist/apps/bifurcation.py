@@ -48,9 +48,10 @@ import numpy as np
 from .._errors import ScenarioError, SolveStatus, require_x64
 from ..numerics import observables as obs_mod
 from ..numerics.options import SolverOptions
-from ..numerics.scan import ScanResult, check_path, param_unit, scan, set_param
 from ..numerics.solve import saved_times, solve
 from ..physics.params import Scenario
+from ..physics.paths import check_path, param_unit, set_param
+from .scan import ScanResult, scan
 
 
 class BifurcationError(RuntimeError):
@@ -936,6 +937,13 @@ def configure_parser(subparsers) -> None:
     )
     p.add_argument("--no-plots", action="store_true", help="write no PNGs")
     p.add_argument(
+        "--classify",
+        action="store_true",
+        help="name every located change (final-state jump, steep ramp, event-count change, event-definition "
+        "change, continuous crossing) by solving a window around it (jaxhoist.classify_change; ~43 solves "
+        "each)",
+    )
+    p.add_argument(
         "--quiet", action="store_true", help="no progress bars on stderr (scan members, locator brackets)"
     )
     p.set_defaults(func=run_cli)
@@ -985,7 +993,7 @@ def run_cli(args) -> int:
     bar = None
     quiet = getattr(args, "quiet", False)
     if not quiet:
-        from .cli import LocatorProgressBar
+        from .progress_bars import LocatorProgressBar
 
         bar = LocatorProgressBar()
     try:
@@ -995,7 +1003,24 @@ def run_cli(args) -> int:
             bar.close()
     for b in found:
         print(b.summary())
-    return _write_cli(args, scenario, overrides, found, boundary, res, out)
+    classes = _classify_cli(args, scenario, found, boundary, kw) if getattr(args, "classify", False) else None
+    return _write_cli(args, scenario, overrides, found, boundary, res, out, classes)
+
+
+def _classify_cli(args, scenario, found, boundary, kw) -> list:
+    """`classify_change` for every located value (at its own --along value when tracing); printed."""
+    from .classify import classify_change
+
+    scenarios = [scenario] * len(found)
+    if boundary is not None:
+        scenarios = [set_param(scenario, boundary.along, q) for q, b in
+                     zip(boundary.along_values, boundary.points, strict=True) if b is not None]
+    classes = []
+    for sc, b in zip(scenarios, found, strict=True):
+        c = classify_change(sc, b, **kw)
+        print("  " + c.summary())
+        classes.append(c)
+    return classes
 
 
 def _run_locator(args, scenario, observable, along_values, lo, hi, out, kw, bar):
@@ -1063,7 +1088,7 @@ def _run_locator(args, scenario, observable, along_values, lo, hi, out, kw, bar)
     return found, boundary, res
 
 
-def _write_cli(args, scenario, overrides, found, boundary, res, out) -> int:
+def _write_cli(args, scenario, overrides, found, boundary, res, out, classes=None) -> int:
     if out is not None:
         out.mkdir(parents=True, exist_ok=True)
         rec = {
@@ -1072,6 +1097,9 @@ def _write_cli(args, scenario, overrides, found, boundary, res, out) -> int:
             "command": getattr(args, "argv", sys.argv),
             "bifurcations": [b.to_dict() for b in found],
         }
+        if classes is not None:
+            for d, c in zip(rec["bifurcations"], classes, strict=True):
+                d["classification"] = c.to_dict()
         if boundary is not None:
             rec["boundary"] = {
                 "param": boundary.param,

@@ -1,4 +1,4 @@
-"""`jaxhoist scan`: the command line of `numerics.scan.scan` (argument parsing, the summary it prints, the
+"""`jaxhoist scan`: the command line of `apps.scan.scan` (argument parsing, the summary it prints, the
 plots it writes)."""
 
 from __future__ import annotations
@@ -12,7 +12,7 @@ import numpy as np
 from .._errors import ScenarioError
 from ..io.validate import check_out_dir, parse_values
 from ..numerics.rosenbrock import RosenbrockW
-from ..numerics.scan import scan
+from .scan import scan
 
 _CLI_SOLVERS = {
     "rosenbrock-w": RosenbrockW,

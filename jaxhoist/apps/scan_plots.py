@@ -25,7 +25,7 @@ from .plots import _figure, save_figure
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
 
-    from ..numerics.scan import ScanResult
+    from .scan_result import ScanResult
 
 _MAX_PANELS = 6
 

@@ -448,7 +448,7 @@ def read_measurement(
                 f"{side_src}: noise given for {n!r}, which is not a signal column of {src}"
                 f"{_hint(n, list(cols))}"
             )
-        noise[n] = _noise_value(raw, n, factors[n], cols[n], side_src)
+        noise[n] = _noise_value(raw, n, factors[n], cols[n], side_src)  # pyright: ignore[reportArgumentType]  # where is None only for noise given on the command line, which _noise_value accepts
         if not (np.isfinite(noise[n]) and noise[n] > 0):
             raise MeasurementError(f"{side_src}: noise of {n!r} must be positive, got {raw!r}")
     m = Measurement(t, cols, noise, src)

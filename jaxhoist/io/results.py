@@ -94,7 +94,7 @@ def trajectory_arrays(traj) -> dict[str, np.ndarray]:
         "hoist_work": traj.hoist_work,
         "damping_loss": traj.damping_loss,
         "friction_work": traj.friction_work,
-        "energy_residual": (mech - mech[..., :1]) - (supplied - supplied[..., :1]),
+        "energy_residual": (mech - mech[..., :1]) - (supplied - supplied[..., :1]),  # pyright: ignore[reportIndexIssue]  # mech is an array here
         "status": traj.status,
         "num_accepted_steps": traj.num_accepted_steps,
         "num_rejected_steps": traj.num_rejected_steps,
@@ -247,7 +247,7 @@ def save_arrays(path: str | Path, arrays: Mapping[str, Any], units: Mapping[str,
     # atomically (temporary file, then rename): a run killed while saving leaves the old file or none,
     # never a truncated one
     tmp = npz_path.with_name(npz_path.name + ".tmp.npz")
-    np.savez_compressed(tmp, **arrs)
+    np.savez_compressed(tmp, **arrs)  # pyright: ignore[reportArgumentType]  # numpy's stubs read **arrs as the allow_pickle keyword
     os.replace(tmp, npz_path)
     sidecar = {
         "format": kind,
@@ -255,7 +255,7 @@ def save_arrays(path: str | Path, arrays: Mapping[str, Any], units: Mapping[str,
         "versions": _versions(),
         "data_file": npz_path.name,
         "arrays": described,
-        **_jsonable(dict(metadata or {})),
+        **_jsonable(dict(metadata or {})),  # pyright: ignore[reportGeneralTypeIssues]  # _jsonable returns the dict it was given
     }
     tmp = json_path.with_name(json_path.name + ".tmp")
     tmp.write_text(json.dumps(sidecar, indent=2, allow_nan=True) + "\n")

@@ -27,6 +27,7 @@ from typing import Any
 
 from .._errors import ScenarioError, require_x64
 from ..physics import params as P
+from ..physics.paths import get_leaf
 from .validate import brief, parse_list, parse_number, read_text
 
 # field -> (unit, required, kind) where kind is "float", "vec3", "mat33", "str" or "float|vec3".
@@ -84,7 +85,7 @@ SCHEMA: dict[str, dict[str, tuple[str, bool, str]]] = {
 }
 FRICTION_LAWS = ("bristle", "regularised-coulomb")
 HOIST_LAWS = ("constant-speed", "ramped")
-PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2")
+PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2", "paper-4.3")
 
 
 def preset_names() -> tuple[str, ...]:
@@ -295,7 +296,7 @@ def apply_overrides(scenario: P.Scenario, items) -> tuple[P.Scenario, dict]:
     overrides = parse_overrides(items or [])
     try:
         for path in overrides:
-            P.get_leaf(scenario, path)  # raises ScenarioError naming a bad path
+            get_leaf(scenario, path)  # raises ScenarioError naming a bad path
         if overrides:
             scenario = scenario.replace(**overrides)
             scenario.check()
@@ -305,7 +306,8 @@ def apply_overrides(scenario: P.Scenario, items) -> tuple[P.Scenario, dict]:
 
 
 def load_scenario(name_or_path: str | Path) -> P.Scenario:
-    """A `Scenario` from a bundled preset name (`paper-2.3`, `paper-4.1`, `paper-4.2`) or a TOML path.
+    """A `Scenario` from a bundled preset name (`paper-2.3`, `paper-4.1`, `paper-4.2`, `paper-4.3`) or a
+    TOML path.
 
     **Raises** `ScenarioError` naming the file and field for any invalid content (a folder, non-UTF-8
     bytes, invalid TOML, nesting too deep, integers too large for a float, unknown or missing fields, bad

@@ -148,7 +148,7 @@ def parse_list(text: str, where: str) -> list:
 
     if not isinstance(value, list):
         raise ScenarioError(f"{where}: expected a list like [1, 2.5, 1], got {brief(text)}")
-    return conv(value, 0)
+    return conv(value, 0)  # pyright: ignore[reportReturnType]  # conv of a list is a list
 
 
 def parse_values(spec, flag: str = "--values") -> np.ndarray:
@@ -309,10 +309,7 @@ def clean_outputs(folder: str | Path, names: Iterable[str]) -> list[Path]:
 def _concrete(x):
     import jax
 
-    return None if isinstance(x, jax.core.Tracer) else x
-
-
-_PATH = re.compile(r"([A-Za-z_]\w*(?:\.[A-Za-z_]\w*)*)(?:\[([0-9]{1,6})\])?")
+    return None if isinstance(x, jax.core.Tracer) else x  # pyright: ignore[reportAttributeAccessIssue]  # jax.core is a lazily loaded submodule
 
 
 def check_param_path(scenario: P.Scenario, path: str, flag: str = "--param") -> tuple[str, int | None]:
@@ -329,15 +326,15 @@ def check_param_path(scenario: P.Scenario, path: str, flag: str = "--param") -> 
     **Raises** `ScenarioError` naming `flag` and the path (static settings such as `t1` and `name` are no
     parameters; a misspelt field gets a "did you mean").
     """
-    m = _PATH.fullmatch(str(path).strip())
-    if not m:
+    from ..physics.paths import get_leaf, parse_path
+
+    try:
+        dotted, index = parse_path(str(path))
+    except ScenarioError:
         raise ScenarioError(
             f"{flag} {brief(path)}: not a parameter path; use dotted field names with an optional component "
             f"index, e.g. foundation.friction_coefficient or load.mass_centre[0]"
-        )
-    from ..physics.params import get_leaf
-
-    dotted, index = m.group(1), None if m.group(2) is None else int(m.group(2))
+        ) from None
     try:
         leaf = np.asarray(get_leaf(scenario, dotted))
     except ScenarioError as e:

@@ -122,6 +122,22 @@ def _first_zero(ts, f, steps):
     return jnp.where(found, t, jnp.inf)
 
 
+def last_down_crossing(ts, f):
+    """Last time [s] at which the continuous signal `f` (n_t,) goes from > 0 to <= 0, interpolated linearly
+    between saved times; `+inf` if f > 0 at the last saved time (still in contact at t1), `ts[0]` if f <= 0
+    at every saved time."""
+    on = f > 0.0
+    down = on[:-1] & ~on[1:]
+    rev = down[::-1]
+    found = jnp.any(down)
+    j = down.size - 1 - jnp.argmax(rev)  # the last step with a down-crossing
+    f0, f1 = f[j], f[j + 1]
+    denom = jnp.where(found, f0 - f1, 1.0)
+    t = ts[j] + (f0 / denom) * (ts[j + 1] - ts[j])
+    t = jnp.where(found, t, ts[0])
+    return jnp.where(on[-1], jnp.inf, t)
+
+
 def _down_crossings(ts, F):
     return jax.vmap(first_down_crossing, in_axes=(None, 1))(ts, F)
 
@@ -174,6 +190,11 @@ def _max_tilt(traj):
 def _liftoff_time(traj, scenario):
     F = contact_function(traj, scenario)
     return first_down_crossing(traj.ts, jnp.max(F, axis=-1))
+
+
+def _last_contact_time(traj, scenario):
+    F = contact_function(traj, scenario)
+    return last_down_crossing(traj.ts, jnp.max(F, axis=-1))
 
 
 def _detachment_times(traj, scenario):
@@ -276,6 +297,16 @@ _register(
 _register(
     Observable(
         "liftoff_time", _liftoff_time, "s", "first time all four N_i are zero (interpolated; inf if never)"
+    )
+)
+_register(
+    Observable(
+        "last_contact_time",
+        _last_contact_time,
+        "s",
+        "last time any corner is in contact (max_i N_i goes to 0 for the last time; interpolated; inf if "
+        "still in contact at t1): unlike liftoff_time it ignores a momentary all-off instant before the last "
+        "contact",
     )
 )
 _register(

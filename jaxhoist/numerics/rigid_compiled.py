@@ -27,7 +27,8 @@ def _phase_solve(scenario, c, phase, settings, y0, t0, t1, ts, options: _Options
     event = diffrax.Event(rigid.event_condition,
                           root_finder=optx.Bisection(rtol=1e-14, atol=options.event_atol), direction=False)
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(rigid.vector_field), diffrax.Tsit5(), t0=t0, t1=t1, dt0=None, y0=y0,
+        diffrax.ODETerm(rigid.vector_field),  # pyright: ignore[reportArgumentType]  # jaxtyping Scalar vs diffrax RealScalarLike
+        diffrax.Tsit5(), t0=t0, t1=t1, dt0=None, y0=y0,
         args=(scenario, c, phase, settings) + ((True,) if inextensible else ()),
         saveat=diffrax.SaveAt(ts=ts, t1=True),
         stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),

@@ -134,11 +134,14 @@ def compliant_scenario(scenario: Scenario, rule: ChatterRule, inextensible: bool
 
 def _chunk_solve(scenario, c, y0, t0, t1, ts_user, ts_dense, rtol, atol, max_steps):
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(elastic.vector_field), diffrax.Tsit5(), t0=t0, t1=t1, dt0=None, y0=y0,
+        diffrax.ODETerm(elastic.vector_field),  # pyright: ignore[reportArgumentType]  # jaxtyping Scalar vs diffrax RealScalarLike
+        diffrax.Tsit5(), t0=t0, t1=t1, dt0=None, y0=y0,
         args=(scenario, c),
         saveat=diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts_user), diffrax.SubSaveAt(ts=ts_dense)]),
         stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol), max_steps=max_steps, throw=False)
-    return sol.ys[0], sol.ys[1], sol.result, sol.stats["num_accepted_steps"], sol.stats["num_rejected_steps"]
+    ys = sol.ys
+    assert ys is not None  # SaveAt(subs=...) saves
+    return ys[0], ys[1], sol.result, sol.stats["num_accepted_steps"], sol.stats["num_rejected_steps"]
 
 
 _chunk_solve_jit = eqx.filter_jit(_chunk_solve)

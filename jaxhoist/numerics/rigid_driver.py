@@ -323,6 +323,7 @@ class _Driver:
                     continue  # held fixed: the rest configuration, which failed above
                 combos.append(modes)
                 hints_list.append(hints)
+        assert reference is not None  # the loop runs at least once (r = 0: the empty subset)
         ref_row = 0 if combos and np.array_equal(combos[0], reference[0]) else len(combos)
         n_max = 16
         contact = np.zeros((n_max, 4), dtype=np.int32)

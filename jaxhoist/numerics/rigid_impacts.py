@@ -103,7 +103,7 @@ def impact(drv, t, y, striking: list[int], taut: bool = False, normal_only: bool
     if tied:
         # Newton's law is not unique for simultaneous multi-corner impacts: maximal dissipation.
         ke = {k: drv.kin(t, after(k))[2] for k in [best, *tied]}
-        new = min(ke, key=ke.get)
+        new = min(ke, key=lambda k: ke[k])
         drv.notes.append(f"{len(tied) + 1} consistent impulses: maximal dissipation, "
                           f"{_fmt(combos[new])}")
         best = new

@@ -68,11 +68,11 @@ def w_tableau(alpha, gamma_lower, gamma: float, b, b_hat, order: int, embedded_o
         return tuple(map(frozen, x)) if x.ndim else float(x)
 
     return WTableau(
-        a=frozen(a),
-        c=frozen(c),
-        alpha=frozen(alpha.sum(axis=1)),
-        m=frozen(m),
-        m_err=frozen(m - m_hat),
+        a=frozen(a),  # pyright: ignore[reportArgumentType]  # frozen() of a matrix is a tuple
+        c=frozen(c),  # pyright: ignore[reportArgumentType]  # frozen() of a matrix is a tuple
+        alpha=frozen(alpha.sum(axis=1)),  # pyright: ignore[reportArgumentType]  # frozen() of a matrix is a tuple
+        m=frozen(m),  # pyright: ignore[reportArgumentType]  # frozen() of a matrix is a tuple
+        m_err=frozen(m - m_hat),  # pyright: ignore[reportArgumentType]  # frozen() of a matrix is a tuple
         gamma=float(gamma),
         order=order,
         embedded_order=embedded_order,

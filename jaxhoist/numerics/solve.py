@@ -128,7 +128,7 @@ def solve(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOptions) 
     """The traceable core: initial state, one diffeqsolve with `throw=False`, outputs. Never raises."""
     y0, c = initial_state(scenario)
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(vector_field),
+        diffrax.ODETerm(vector_field),  # pyright: ignore[reportArgumentType]  # jaxtyping Scalar vs diffrax RealScalarLike
         options.solver,
         t0=ts[0] * 0.0,
         t1=ts[-1],
@@ -143,7 +143,7 @@ def solve(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOptions) 
         throw=False,
     )
     y1 = jax.tree_util.tree_map(lambda x: x[-1], sol.ys)
-    return outputs(ts, sol.ys, scenario, c, _status(sol.result, y1), sol.stats)
+    return outputs(ts, sol.ys, scenario, c, _status(sol.result, y1), sol.stats)  # pyright: ignore[reportArgumentType]  # sol.ys is the saved State with SaveAt(ts=...)
 
 
 _solve_jit = eqx.filter_jit(solve)
@@ -167,7 +167,7 @@ def as_float64_leaves(scenario: Scenario) -> Scenario:
 
 
 def _concrete_float(x):
-    return None if x is None or isinstance(x, jax.core.Tracer) else float(np.asarray(x))
+    return None if x is None or isinstance(x, jax.core.Tracer) else float(np.asarray(x))  # pyright: ignore[reportAttributeAccessIssue]  # jax.core is a lazily loaded submodule
 
 
 def check_times(t1, ts) -> None:
@@ -177,7 +177,7 @@ def check_times(t1, ts) -> None:
     t1c = _concrete_float(t1)
     if t1c is not None and not (np.isfinite(t1c) and t1c > 0):
         raise ScenarioError(f"t1 must be a positive finite time [s], got {t1c}")
-    if ts is not None and not isinstance(ts, jax.core.Tracer):
+    if ts is not None and not isinstance(ts, jax.core.Tracer):  # pyright: ignore[reportAttributeAccessIssue]  # jax.core is a lazily loaded submodule
         a = np.asarray(ts)
         if a.ndim != 1 or a.size < 2:
             raise ScenarioError(f"ts must be a 1-D array of at least 2 times [s], got shape {a.shape}")
@@ -263,7 +263,7 @@ def simulate(
             kw = {k: v for k, v in solver_kw.items() if k in ("rtol", "atol", "max_steps")}
             options = SolverOptions(diffrax.Tsit5(), **kw)  # for its default tolerances 1e-6, 1e-8
         return simulate_rigid(
-            scenario, t1, ts=ts, n_save=n_save, rtol=options.rtol, atol=options.atol,
+            scenario, t1, ts=ts, n_save=n_save, rtol=options.rtol, atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in; ts given
             max_steps=options.max_steps, rope=model.rope.name,
         )
     if not isinstance(scenario, Scenario):

@@ -11,104 +11,24 @@ Host-side checks (`check()`) run on concrete values only, so the modules stay tr
 
 from __future__ import annotations
 
-import abc
-import dataclasses
-from collections.abc import Callable
-from typing import ClassVar
-
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, Float
 
 from .._errors import ScenarioError, require_x64
 from .._typing import Rot33, Scalar, Vec3
-
-
-def _f64(x) -> Array:
-    return jnp.asarray(x, dtype=jnp.float64)
-
-
-def _concrete(x) -> np.ndarray | None:
-    """The value of a leaf as numpy, or None if it is a tracer (inside jit/vmap/grad)."""
-    if isinstance(x, jax.core.Tracer):
-        return None
-    return np.asarray(x)
-
-
-PLAUSIBLE_MAGNITUDE = (1e-100, 1e100)
-"""Plausibility check: every nonzero finite parameter (and the derived mass) must have a magnitude in this
-range, in SI units. Outside it, float64 products in the forces and energies (m g z, k p², ρabc) overflow or
-lose the value entirely, and a solve "succeeds" with absurd states (C_z ≈ -1e295 m)."""
-
-
-def _show(v):
-    """A value for an error message: the list itself if short, else a summary (messages stay short)."""
-    v = np.asarray(v)
-    if v.size <= 6:
-        return v.tolist()
-    return f"<array of shape {v.shape}, from {np.nanmin(v):g} to {np.nanmax(v):g}>"
-
-
-def _check_plausible(label: str, v: np.ndarray, unit_s: str) -> None:
-    lo, hi = PLAUSIBLE_MAGNITUDE
-    with np.errstate(invalid="ignore"):
-        a = np.abs(np.where(np.isfinite(v), v, 0.0))
-    bad = (a > hi) | ((a > 0) & (a < lo))
-    if np.any(bad):
-        raise ScenarioError(
-            f"{label} = {_show(v)}{unit_s} is not plausible: nonzero values must have a magnitude between "
-            f"{lo:g} and {hi:g} in SI units (beyond that, forces and energies overflow float64)"
-        )
-
-
-def _check(
-    name: str,
-    value,
-    *,
-    unit: str,
-    shape: tuple | None = None,
-    low=None,
-    high=None,
-    low_open=False,
-    high_open=False,
-    symbol: str = "",
-    allow_posinf=False,
-    plausible=True,
-) -> None:
-    """Raise `ScenarioError` naming `name` unless every element of `value` is finite and in range (and,
-    with `plausible`, of a magnitude within `PLAUSIBLE_MAGNITUDE` unless zero)."""
-    v = _concrete(value)
-    if v is None:
-        return
-    label = f"{name} ({symbol})" if symbol else name
-    if v.dtype == np.float32:
-        raise ScenarioError(
-            f"{label} is float32. " + "jaxhoist needs float64: call "
-            "`jax.config.update('jax_enable_x64', True)` before building a scenario."
-        )
-    if v.dtype.kind not in "fiu":
-        raise ScenarioError(f"{label} must be a number or an array of numbers, got dtype {v.dtype}")
-    if shape is not None and v.shape[v.ndim - len(shape) :] != shape:
-        raise ScenarioError(f"{label} must have shape {shape}, got {v.shape}")
-    if not np.all(np.isfinite(v)):
-        if not allow_posinf or np.any(np.isnan(v) | np.isneginf(v)):
-            raise ScenarioError(f"{label} must be finite, got {_show(v)}")
-    unit_s = f" {unit}" if unit and unit != "-" else ""
-    if low is not None:
-        bad = v <= low if low_open else v < low
-        if np.any(bad):
-            rel = ">" if low_open else ">="
-            raise ScenarioError(f"{label} must be {rel} {low}{unit_s}, got {_show(v)}")
-    if high is not None:
-        bad = v >= high if high_open else v > high
-        if np.any(bad):
-            rel = "<" if high_open else "<="
-            raise ScenarioError(f"{label} must be {rel} {high}{unit_s}, got {_show(v)}")
-    if plausible:
-        _check_plausible(label, v, unit_s)
-
+from .checks import PLAUSIBLE_MAGNITUDE as PLAUSIBLE_MAGNITUDE
+from .checks import _check, _concrete, _f64, _show
+from .friction import AbstractFrictionLaw as AbstractFrictionLaw
+from .friction import BristleFriction as BristleFriction
+from .friction import RegularisedCoulomb as RegularisedCoulomb
+from .hoist import AbstractHoistLaw as AbstractHoistLaw
+from .hoist import ConstantSpeedHoist as ConstantSpeedHoist
+from .hoist import ProfileHoist as ProfileHoist
+from .hoist import RampedHoist as RampedHoist
+from .paths import get_leaf as get_leaf  # the dotted paths live in physics.paths (issue 11)
+from .paths import leaf_getter as leaf_getter
+from .paths import replace_leaves, unit
 
 # --------------------------------------------------------------------------------------------- load
 
@@ -126,10 +46,10 @@ class Load(eqx.Module):
       carried to C by the parallel-axis theorem (our choice; give J explicitly for a measured load).
     """
 
-    size: Vec3
-    mass: Scalar
-    mass_centre: Vec3
-    inertia: Rot33 | None
+    size: Vec3 = eqx.field(metadata=unit("m"))
+    mass: Scalar = eqx.field(metadata=unit("kg"))
+    mass_centre: Vec3 = eqx.field(metadata=unit("m"))
+    inertia: Rot33 | None = eqx.field(metadata=unit("kg m²"))
 
     def __init__(self, size, mass=None, *, density=None, mass_centre=None, inertia=None):
         size = _f64(size)
@@ -183,136 +103,6 @@ class Load(eqx.Module):
                     )
 
 
-# ----------------------------------------------------------------------------------------- friction
-
-
-class AbstractFrictionLaw(eqx.Module):
-    """How a corner's tangential ground force follows its sliding velocity (paper eq. 3.3).
-
-    A law may carry an internal state per corner, of shape `(4, state_size)`.
-    """
-
-    state_size: eqx.AbstractClassVar[int]
-
-    @abc.abstractmethod
-    def force(
-        self, mu: Scalar, normal: Float[Array, "4"], velocity: Float[Array, "4 2"], state: Float[Array, "4 n"]
-    ) -> Float[Array, "4 2"]:
-        """Horizontal friction force on each corner [N], from μ, N_i [N], corner velocity [m/s]."""
-
-    @abc.abstractmethod
-    def state_rate(
-        self, velocity: Float[Array, "4 2"], state: Float[Array, "4 n"], contact: Float[Array, "4"]
-    ) -> Float[Array, "4 n"]:
-        """Time derivative of the law's internal state. `contact` in [0, 1] is 0 off the ground and 1 once a
-        corner is deeper than the foundation's `damping_onset` (continuous in between)."""
-
-    def check(self) -> None:
-        pass
-
-
-class RegularisedCoulomb(AbstractFrictionLaw):
-    """The paper's Coulomb law (2.18)/(3.3), T_i = -μ N_i v_i / sqrt(|v_i|² + ε²).
-
-    - `regularisation_velocity`: ε [m/s]. Below ~ε the law acts as a steep viscous damper, so it creeps
-      rather than sticks; small ε makes the ODE stiff (steps grow like 1/ε). The square root keeps the
-      force and its gradient finite at v = 0.
-    """
-
-    regularisation_velocity: Scalar
-    state_size: ClassVar[int] = 0
-
-    def __init__(self, regularisation_velocity=1e-3):
-        self.regularisation_velocity = _f64(regularisation_velocity)
-
-    def force(self, mu, normal, velocity, state):
-        eps = self.regularisation_velocity
-        speed = jnp.sqrt(jnp.sum(velocity**2, axis=-1) + eps**2)
-        return -(mu * normal / speed)[:, None] * velocity
-
-    def state_rate(self, velocity, state, contact):
-        return state
-
-    def check(self):
-        _check(
-            "foundation.friction.regularisation_velocity",
-            self.regularisation_velocity,
-            unit="m/s",
-            low=0.0,
-            low_open=True,
-            symbol="ε",
-        )
-
-
-class BristleFriction(AbstractFrictionLaw):
-    """Elastic-plastic bristle friction that truly sticks (a 2-D Dahl / elasto-plastic law, our choice).
-
-    Each corner carries a bristle deflection z_i [m] (2 horizontal components). The force is
-    T_i = -μ N_i z_i / δ, i.e. a tangential stiffness μN_i/δ that scales with the load, so it never
-    stiffens as N_i -> 0 at touch-down and lift-off. The deflection follows the corner velocity v_i,
-
-        dz/dt = v - α(|z|/δ) (v·z)⁺ z / |z|²,   α(r) = ((r - r_b)⁺ / (1 - r_b))²,
-
-    so below the break-away deflection r_b δ the contact is purely elastic (sticks, no drift); at
-    |z| = δ the outward growth stops and the corner slides with |T_i| = μN_i opposite to its motion.
-
-    - `deflection`: δ, the bristle deflection at full sliding [m].
-    - `breakaway_ratio`: r_b in [0, 1), the fraction of δ below which there is no slip [-].
-    - `relaxation_time`: τ, time constant with which an unloaded bristle (corner off the ground)
-      relaxes to zero [s].
-    """
-
-    deflection: Scalar
-    breakaway_ratio: Scalar
-    relaxation_time: Scalar
-    state_size: ClassVar[int] = 2
-
-    def __init__(self, deflection=1e-3, breakaway_ratio=0.5, relaxation_time=0.01):
-        self.deflection = _f64(deflection)
-        self.breakaway_ratio = _f64(breakaway_ratio)
-        self.relaxation_time = _f64(relaxation_time)
-
-    def force(self, mu, normal, velocity, state):
-        return -(mu * normal / self.deflection)[:, None] * state
-
-    def state_rate(self, velocity, state, contact):
-        delta, rb = self.deflection, self.breakaway_ratio
-        z2 = jnp.sum(state**2, axis=-1)
-        # |z| with a finite derivative at z = 0 (every bristle starts there): the two-`where` guard.
-        r = jnp.where(z2 > 0.0, jnp.sqrt(jnp.where(z2 > 0.0, z2, 1.0)), 0.0) / delta
-        alpha = (jnp.maximum(r - rb, 0.0) / (1.0 - rb)) ** 2
-        # alpha is zero wherever |z| < r_b δ, so the division is guarded by a positive floor.
-        beta = alpha / jnp.maximum(z2, (rb * delta) ** 2 + 1e-300)
-        vz = jnp.maximum(jnp.sum(velocity * state, axis=-1), 0.0)
-        rate = velocity - (beta * vz)[:, None] * state
-        # Off the ground the bristles carry no load and relax: a corner lands with an unloaded bristle,
-        # and a fast-moving free corner does not make the ODE stiff.
-        w = contact[:, None]
-        return w * rate - (1.0 - w) * state / self.relaxation_time
-
-    def check(self):
-        _check(
-            "foundation.friction.deflection", self.deflection, unit="m", low=0.0, low_open=True, symbol="δ"
-        )
-        _check(
-            "foundation.friction.breakaway_ratio",
-            self.breakaway_ratio,
-            unit="-",
-            low=0.0,
-            high=1.0,
-            high_open=True,
-            symbol="r_b",
-        )
-        _check(
-            "foundation.friction.relaxation_time",
-            self.relaxation_time,
-            unit="s",
-            low=0.0,
-            low_open=True,
-            symbol="τ",
-        )
-
-
 # ------------------------------------------------------------------------------- foundation, rope, boom
 
 
@@ -330,11 +120,11 @@ class Foundation(eqx.Module):
     ground pushes, never pulls, and the force is continuous at touch-down.
     """
 
-    stiffness: Scalar
-    damping: Scalar
-    friction_coefficient: Scalar
+    stiffness: Scalar = eqx.field(metadata=unit("N/m"))
+    damping: Scalar = eqx.field(metadata=unit("N s/m"))
+    friction_coefficient: Scalar = eqx.field(metadata=unit("-"))
     friction: AbstractFrictionLaw
-    damping_onset: Scalar
+    damping_onset: Scalar = eqx.field(metadata=unit("m"))
 
     def __init__(self, stiffness, damping, friction_coefficient, friction=None, damping_onset=1e-4):
         self.stiffness = _f64(stiffness)
@@ -364,11 +154,11 @@ class Rope(eqx.Module):
     S = max(0, c_l δ + b_l min(δ/δ_0, 1) dδ/dt) for stretch δ = |AB| - l(t) > 0, else 0.
     """
 
-    stiffness: Scalar
-    damping: Scalar
-    attachment: Vec3
-    slack: Scalar
-    damping_onset: Scalar
+    stiffness: Scalar = eqx.field(metadata=unit("N/m"))
+    damping: Scalar = eqx.field(metadata=unit("N s/m"))
+    attachment: Vec3 = eqx.field(metadata=unit("m"))
+    slack: Scalar = eqx.field(metadata=unit("m"))
+    damping_onset: Scalar = eqx.field(metadata=unit("m"))
 
     def __init__(self, stiffness, damping, attachment, slack=0.0, damping_onset=1e-4):
         self.stiffness = _f64(stiffness)
@@ -385,97 +175,6 @@ class Rope(eqx.Module):
         _check("rope.damping_onset", self.damping_onset, unit="m", low=0.0, symbol="δ_0")
 
 
-class AbstractHoistLaw(eqx.Module):
-    """How much rope the hoist has taken in: l(t) = l0 - s(t), with s(0) = 0."""
-
-    @abc.abstractmethod
-    def shortening(self, t: Scalar) -> Scalar:
-        """s(t) [m]."""
-
-    def rate(self, t: Scalar) -> Scalar:
-        """ds/dt [m/s] (by forward-mode differentiation unless a law overrides it)."""
-        return jax.jvp(self.shortening, (t,), (jnp.ones_like(t),))[1]
-
-    def check(self) -> None:
-        pass
-
-
-class ConstantSpeedHoist(AbstractHoistLaw):
-    """l(t) = l0 - v_l t, the paper's law (§2.3).
-
-    - `speed`: v_l [m/s].
-    """
-
-    speed: Scalar
-
-    def __init__(self, speed):
-        self.speed = _f64(speed)
-
-    def shortening(self, t):
-        return self.speed * t
-
-    def rate(self, t):
-        return self.speed * jnp.ones_like(t)
-
-    def check(self):
-        _check("hoist.speed", self.speed, unit="m/s", low=0.0, symbol="v_l")
-
-
-class RampedHoist(AbstractHoistLaw):
-    """Hoist speed rising smoothly (C¹, smoothstep) from 0 to v_l over `ramp_time`, then falling to 0
-    so that the hoist stops after taking in `travel` metres of rope.
-
-    - `speed`: v_l, the cruising speed [m/s].
-    - `ramp_time`: duration of the speed-up and of the slow-down [s] (0 gives a step in speed).
-    - `travel`: total rope taken in [m] (`inf`: never stops); needs travel >= v_l ramp_time.
-    """
-
-    speed: Scalar
-    ramp_time: Scalar
-    travel: Scalar
-
-    def __init__(self, speed, ramp_time=0.0, travel=float("inf")):
-        self.speed = _f64(speed)
-        self.ramp_time = _f64(ramp_time)
-        self.travel = _f64(travel)
-
-    def _g(self, t):
-        # ∫_0^t smoothstep(τ/T) dτ, which is T (x³ - x⁴/2) on the ramp and T/2 + (t - T) after it.
-        T = jnp.maximum(self.ramp_time, 1e-12)
-        x = jnp.clip(t / T, 0.0, 1.0)
-        return T * (x**3 - 0.5 * x**4) + jnp.maximum(t - T, 0.0)
-
-    def _stop_time(self):
-        return jnp.where(jnp.isinf(self.travel), jnp.inf, self.travel / jnp.maximum(self.speed, 1e-300))
-
-    def shortening(self, t):
-        t_stop = self._stop_time()
-        late = jnp.where(jnp.isinf(t_stop), 0.0, self._g(t - jnp.where(jnp.isinf(t_stop), 0.0, t_stop)))
-        return self.speed * (self._g(t) - late)
-
-    def check(self):
-        _check("hoist.speed", self.speed, unit="m/s", low=0.0, symbol="v_l")
-        _check("hoist.ramp_time", self.ramp_time, unit="s", low=0.0)
-        _check("hoist.travel", self.travel, unit="m", low=0.0, allow_posinf=True)
-        v, T, L = (_concrete(x) for x in (self.speed, self.ramp_time, self.travel))
-        if v is not None and T is not None and L is not None and np.any(L < v * T):
-            raise ScenarioError(
-                f"hoist.travel must be >= speed * ramp_time = {_show(v * T)} m, got {_show(L)} m"
-            )
-
-
-class ProfileHoist(AbstractHoistLaw):
-    """A user-supplied smooth shortening profile s(t) [m] (a JAX-traceable function with s(0) = 0).
-
-    - `profile`: callable t [s] -> s(t) [m]; its rate comes from forward-mode differentiation.
-    """
-
-    profile: Callable = eqx.field(static=True)
-
-    def shortening(self, t):
-        return self.profile(t)
-
-
 class Boom(eqx.Module):
     """The boom tip as a particle on three axis-aligned springs (paper eqs. 2.12-2.13).
 
@@ -485,10 +184,10 @@ class Boom(eqx.Module):
     - `damping`: (c_X, c_Y, c_Z), equivalent boom damping [N s/m] (our addition; 0 is the paper's model).
     """
 
-    tip_position: Vec3
-    tip_mass: Scalar
-    stiffness: Vec3
-    damping: Vec3
+    tip_position: Vec3 = eqx.field(metadata=unit("m"))
+    tip_mass: Scalar = eqx.field(metadata=unit("kg"))
+    stiffness: Vec3 = eqx.field(metadata=unit("N/m"))
+    damping: Vec3 = eqx.field(metadata=unit("N s/m"))
 
     def __init__(self, tip_position, tip_mass, stiffness, damping=(0.0, 0.0, 0.0)):
         self.tip_position = _f64(tip_position)
@@ -529,7 +228,7 @@ class Scenario(eqx.Module):
     rope: Rope
     hoist: AbstractHoistLaw
     boom: Boom
-    gravity: Scalar
+    gravity: Scalar = eqx.field(metadata=unit("m/s²"))
     name: str = eqx.field(static=True)
     t1: float = eqx.field(static=True)
     description: str = eqx.field(static=True)
@@ -600,87 +299,4 @@ class Scenario(eqx.Module):
         field's name), a static setting (`t1`, `name`), a value that is not numeric or whose shape does
         not fit the leaf.
         """
-        out = self
-        for path, value in leaves.items():
-            old = get_leaf(out, path)
-            out = eqx.tree_at(leaf_getter(path), out, _leaf_value(path, value, np.shape(old)))
-        return out
-
-
-def _leaf_value(path: str, value, shape: tuple) -> Array:
-    """`value` as a float64 array of `shape` (broadcast), or a `ScenarioError` naming `path`."""
-    if not isinstance(value, jax.core.Tracer):
-        try:
-            a = np.asarray(value)
-        except (ValueError, TypeError, OverflowError):
-            a = np.asarray(None)
-        if a.dtype.kind not in "fiu":
-            raise ScenarioError(f"{path} must be a number or an array of numbers, got {value!r:.60}")
-        try:
-            a = a.astype(np.float64)
-        except OverflowError:
-            raise ScenarioError(f"{path}: the integer {value!r:.40} is too large for a float") from None
-    vshape = np.shape(value)
-    try:
-        ok = np.broadcast_shapes(vshape, shape) == tuple(shape)
-    except ValueError:
-        ok = False
-    if not ok:
-        want = "a number" if shape == () else f"shape {tuple(shape)}"
-        raise ScenarioError(f"{path} must be {want}, got a value of shape {vshape}")
-    return jnp.broadcast_to(_f64(value), shape)
-
-
-def leaf_getter(path: str) -> Callable[[Scenario], Array]:
-    """`"rope.stiffness"` -> `lambda s: s.rope.stiffness`, checking that the path names a float leaf."""
-    parts = path.split(".")
-
-    def get(s):
-        for p in parts:
-            s = getattr(s, p)
-        return s
-
-    return get
-
-
-_STATIC_HINTS = {
-    "t1": "the scenario's end time, a static setting: give it with --t1 T on the command line or "
-    "simulate(scenario, t1=T), or as t1 in the scenario file",
-    "name": "a static label (the scenario file's name)",
-    "description": "static free text (the scenario file's description)",
-}
-
-
-def get_leaf(scenario: Scenario, path: str) -> Array:
-    """The float leaf at a dotted path such as `"rope.stiffness"`.
-
-    **Arguments**
-    - `scenario`: the scenario (or any of its parts).
-    - `path`: dotted field names, e.g. `foundation.friction.regularisation_velocity`.
-
-    **Returns** the leaf (an array).
-
-    **Raises** `ScenarioError` naming the path if a part is no field of its parent (with the closest
-    field's name), is a static setting (`t1`, `name`, `description`) or reaches past a leaf
-    (`load.mass.real`), or if the path ends at a table rather than a float leaf.
-    """
-    import difflib
-
-    obj = scenario
-    parts = str(path).split(".")
-    for i, p in enumerate(parts):
-        where = ".".join(parts[:i]) or "scenario"
-        if not isinstance(obj, eqx.Module):
-            raise ScenarioError(f"{path!r}: {where} is a value, not a table; it has no field {p!r}")
-        fields = {f.name: f for f in dataclasses.fields(obj)}
-        if p not in fields:
-            close = difflib.get_close_matches(p, list(fields), n=1, cutoff=0.6)
-            hint = f" (did you mean {close[0]!r}?)" if close else ""
-            raise ScenarioError(f"{path!r}: {where} has no field {p!r}{hint}; fields are {list(fields)}")
-        if fields[p].metadata.get("static", False):
-            what = _STATIC_HINTS.get(p, "a static setting")
-            raise ScenarioError(f"{path!r} is not a float leaf: it is {what}")
-        obj = getattr(obj, p)
-    if not isinstance(obj, jax.Array | np.ndarray):
-        raise ScenarioError(f"{path!r} is not a float leaf (got {type(obj).__name__})")
-    return obj
+        return replace_leaves(self, leaves)

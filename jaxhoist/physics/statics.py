@@ -350,7 +350,7 @@ def _first_root(fn, s_max: float, n_grid: int = 400) -> float:
     for s in grid[1:]:
         v = fn(s)
         if v <= 0:
-            return float(brentq(fn, prev_s, s, xtol=1e-15 * s, rtol=1e-15, maxiter=200))
+            return float(brentq(fn, prev_s, s, xtol=1e-15 * s, rtol=1e-15, maxiter=200))  # pyright: ignore[reportArgumentType]  # brentq returns a float without full_output
         prev_s, prev_v = s, v
     return math.inf
 
@@ -410,7 +410,7 @@ def thresholds(scenario: Scenario, direction, *, attachment=None, mass_centre=No
     how R leaves the rectangle.
     """
     kw = dict(attachment=attachment, mass_centre=mass_centre)
-    s_tip, kind, edges = tip_threshold(scenario, direction, **kw)
+    s_tip, kind, edges = tip_threshold(scenario, direction, **kw)  # pyright: ignore[reportArgumentType]  # corner_tol has a default
     out = {
         "lift": lift_threshold(scenario, direction, **kw),
         "slide": slide_threshold(scenario, direction, **kw),
@@ -438,4 +438,4 @@ def first_failure(scenario: Scenario, rope_force, *, attachment=None, mass_centr
     best = min(names, key=lambda n: th[n])
     if not math.isfinite(th[best]):
         return None, math.inf
-    return (th["tip_kind"] if best == "tip" else best), th[best]
+    return (th["tip_kind"] if best == "tip" else best), th[best]  # pyright: ignore[reportReturnType]  # a tip_kind is a str

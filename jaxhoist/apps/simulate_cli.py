@@ -1,0 +1,313 @@
+"""`jaxhoist simulate`: one solve of a scenario from the command line, its summary, result files and
+plots."""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import sys
+import time
+from pathlib import Path
+
+from .animate_cli import _animate
+from .cli_common import _ATOL_HELP, _RTOL_HELP, PROG, _enable_x64
+from .progress_bars import StepTimer, _bar, _LineSink, _percent_to_bar, _phase_to_bar
+
+# ---------------------------------------------------------------------------------------- simulate
+
+def _cache_key(scenario, ts, options):
+    from ..numerics.compile_cache import structure_key
+
+    return (*structure_key(scenario, ts), options)
+
+
+def _compiled_solve(scenario, ts, options):
+    """The solve core `numerics.solve.solve`, compiled ahead of time (so compile and solve are timed apart)
+    and cached per structure/shape/options, so repeated `main()` calls in one process compile once."""
+    import equinox as eqx
+
+    from ..numerics.compile_cache import compiled
+    from ..numerics.solve import solve
+
+    fn, _ = compiled(
+        "cli-simulate", _cache_key(scenario, ts, options),
+        lambda: eqx.filter_jit(solve).lower(scenario, ts, options),
+    )
+    return fn
+
+
+def _fmt_vec(v) -> str:
+    return "(" + ", ".join(f"{x:.4g}" for x in v) + ")"
+
+
+# Files `simulate` writes into --out besides the plots' PNGs (removed first with --overwrite).
+SIMULATE_OUTPUTS = ("trajectory.npz", "trajectory.json", "trajectory.csv", "trajectory.nc")
+
+
+def summary_status(arrays: dict):
+    """The run's `SolveStatus` for the summary and the exit code: the solver's, except that a run marked ok
+    whose state or energy residual is not finite everywhere counts as `NONFINITE` (a failed run)."""
+    import numpy as np
+
+    from .._errors import SolveStatus
+
+    status = SolveStatus(int(arrays["status"]))
+    if status == SolveStatus.OK:
+        keys = ("position", "euler", "normal_forces", "rope_tension", "energy_residual")
+        if not all(np.all(np.isfinite(arrays[k])) for k in keys if k in arrays):
+            return SolveStatus.NONFINITE
+    return status
+
+
+def event_lines(status, ts, normal_forces) -> list[str]:
+    """The summary's lift-off and first-detachment lines; a failed run has no event times to report (its
+    arrays past the failure are inf or NaN), so it says so instead of reading times from them."""
+    from .._errors import SolveStatus
+    from ..io.results import corner_detach_times, liftoff_time
+
+    if status != SolveStatus.OK:
+        return ["lift-off      not available (the solve failed)", "first N_i = 0 not available"]
+    lift = liftoff_time(ts, normal_forces)
+    detach = corner_detach_times(ts, normal_forces)
+    return [
+        "lift-off      "
+        + (
+            f"{lift:g} s (first saved time with every N_i = 0)"
+            if lift is not None
+            else "none within the horizon"
+        ),
+        "first N_i = 0 "
+        + ", ".join(f"{c}: {'-' if t is None else f'{t:g} s'}" for c, t in zip("DEFH", detach, strict=True)),
+    ]
+
+
+def run_simulate(args: argparse.Namespace) -> int:
+    """`jaxhoist simulate`: load, validate, compile, solve, save npz+json (+ PNGs), print a summary."""
+    _enable_x64()
+    import jax
+    import jax.numpy as jnp
+    import numpy as np
+
+    from .._errors import ScenarioError, SolveStatus, require_x64
+    from ..io.scenario import apply_overrides, load_scenario
+    from ..io.validate import check_out_dir
+    from ..numerics.compile_cache import is_cached
+    from ..numerics.options import SolverOptions
+    from ..numerics.solve import check_times
+
+    require_x64()
+    progress = StepTimer(quiet=args.quiet)
+    wall0 = time.perf_counter()
+
+    # ---- host side: everything is checked before anything is compiled
+    with progress(f"loading scenario {args.scenario}"):
+        scenario = load_scenario(args.scenario)
+        scenario, overrides = apply_overrides(scenario, args.set)
+        t1 = scenario.t1 if args.t1 is None else args.t1
+        check_times(t1, None)
+        if args.n_save < 2:
+            raise ScenarioError(f"--n-save must be >= 2, got {args.n_save}")
+        if args.rope != "elastic" and args.model != "rigid":
+            raise ScenarioError(
+                f"--rope {args.rope} needs --model rigid (the elastic-foundation model has the elastic rope)"
+            )
+        if args.model == "rigid":
+            import diffrax
+
+            options = SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+        else:
+            # diffrax's progress meter (TextProgressMeter) unless --quiet; its lines become a bar on stderr
+            options = SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps,
+                                    progress=not args.quiet)
+        ts = jnp.linspace(0.0, 1.0, args.n_save) * jnp.asarray(t1, dtype=jnp.float64)
+    out_dir = Path(args.out) if args.out else Path("out") / scenario.name
+    check_out_dir(out_dir, "--out", refuse_existing=True, overwrite=args.overwrite)
+    progress.note(
+        f"scenario {scenario.name}: t1 = {t1:g} s, {args.n_save} saved times, "
+        f"{type(options.solver).__name__}, rtol = {options.rtol:g}, atol = {options.atol:g}"
+    )
+
+    if args.model == "rigid":
+        from ..numerics.rigid_solve import simulate_rigid
+
+        label = "solving with the rigid-ground model (each phase compiles on first use)"
+        with progress(label, bar=True), _bar(float(t1), "rigid model", "s", quiet=args.quiet, bar_format=(
+            "{desc}: {percentage:3.0f}%|{bar}| t = {n:.3f}/{total:.3g} s [{elapsed}<{remaining}{postfix}]"
+        )) as bar:
+            with contextlib.redirect_stdout(_LineSink(_phase_to_bar(bar))):
+                traj = simulate_rigid(
+                    scenario,
+                    t1,
+                    ts=np.asarray(ts),
+                    rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
+                    atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
+                    max_steps=args.max_steps,
+                    rope=args.rope,
+                    verbose=not args.quiet,  # the phase log, one line per phase: drives the bar
+                )
+            bar.n = bar.total  # the phase ending at t1 is not logged
+            bar.refresh()
+        wall_solve = progress.times[label]
+    else:
+        cached = is_cached("cli-simulate", _cache_key(scenario, ts, options))
+        with progress("compiling (cached in this process)" if cached else "compiling"):
+            solve_fn = _compiled_solve(scenario, ts, options)
+        with progress("solving", bar=True), _bar(100.0, "solving", "%", quiet=args.quiet, bar_format=(
+            "{desc}: {percentage:3.0f}%|{bar}| t = {n:.0f}% of t1 [{elapsed}<{remaining}]"
+        )) as bar:
+            with contextlib.redirect_stdout(_LineSink(_percent_to_bar(bar))):
+                traj = jax.block_until_ready(solve_fn(scenario, ts, options))
+        wall_solve = progress.times["solving"]
+
+    arrays, written = _write_results(args, out_dir, traj, scenario, options, t1, overrides, progress)
+    pngs = []
+    if not args.no_plots:
+        from . import plots
+
+        with progress("plotting"):
+            pngs = plots.save_all(arrays, out_dir, title_prefix=scenario.name)
+    animation = []
+    if args.animate:
+        animation = _animate(out_dir, quiet=args.quiet)
+
+    # ---- summary (stdout)
+    status = summary_status(arrays)
+    ts_np = arrays["ts"]
+    resid = float(np.max(np.abs(arrays["energy_residual"])))
+    lines = [
+        f"scenario      {scenario.name} (t = 0 .. {ts_np[-1]:g} s, {len(ts_np)} saved times)",
+        f"status        {status.name.lower()}" + ("" if status == SolveStatus.OK else f": {status.message}"),
+        f"final C       {_fmt_vec(arrays['position'][-1])} m",
+        f"final angles  (φ, ψ, ϑ) = {_fmt_vec(np.degrees(arrays['euler'][-1]))} deg",
+        *event_lines(status, ts_np, arrays["normal_forces"]),
+        f"max S         {arrays['rope_tension'].max() / 1e3:.4g} kN",
+        f"energy check  max |residual| = {resid:.3g} J (hoist work {arrays['hoist_work'][-1]:.4g} J)",
+        f"steps         {int(arrays['num_accepted_steps'])} accepted, "
+        f"{int(arrays['num_rejected_steps'])} rejected",
+        f"wall time     solve {wall_solve:.3g} s, total {time.perf_counter() - wall0:.3g} s",
+        f"wrote         {', '.join(map(str, written))}"
+        + (f", {len(pngs)} PNGs" if pngs else "")
+        + "".join(f", {p.name}" for p in animation),
+    ]
+    print("\n".join(lines), flush=True)
+    return 0 if status == SolveStatus.OK else 1
+
+
+def configure_simulate(subparsers) -> None:
+    from ..io.validate import count_arg, number_arg
+
+    p = subparsers.add_parser(
+        "simulate",
+        help="simulate one lift and write npz/json/csv/nc results and PNG plots",
+        description="Simulate one lift with the elastic-foundation model (paper §3, or --model rigid) and "
+        "write trajectory.npz + trajectory.json (arrays and what they are), trajectory.csv (every signal, "
+        "SI units in the header; `jaxhoist identify` reads it), trajectory.nc (netCDF) and PNG plots to "
+        "--out.",
+    )
+    p.add_argument(
+        "scenario",
+        metavar="SCENARIO",
+        help="a preset name (paper-2.3, paper-4.1, paper-4.2) or a path to a TOML scenario file",
+    )
+    p.add_argument(
+        "--t1", type=number_arg, default=None, metavar="T", help="end time [s] (default: the scenario's t1)"
+    )
+    p.add_argument(
+        "--n-save",
+        type=count_arg,
+        default=501,
+        metavar="N",
+        help="number of equally spaced saved times from 0 to t1 (default 501)",
+    )
+    p.add_argument("--rtol", type=number_arg, default=None, metavar="R",
+                   help=_RTOL_HELP + " (default 1e-3 with the default Rosenbrock-W solver; 1e-6 with --model "
+                   "rigid)")
+    p.add_argument("--atol", type=number_arg, default=None, metavar="A",
+                   help=_ATOL_HELP + " (default 1e-5 with the default solver; 1e-8 with --model rigid)")
+    p.add_argument(
+        "--max-steps",
+        type=count_arg,
+        default=200_000,
+        metavar="M",
+        help="solver step budget (default 200000)",
+    )
+    p.add_argument(
+        "--set",
+        action="append",
+        metavar="PATH=VALUE",
+        help="replace a scenario value by dotted path, e.g. foundation.friction_coefficient=0.3 "
+        "or "
+        "'load.mass_centre=[1, 2.5, 1]' (repeatable); checked before compiling",
+    )
+    p.add_argument("--out", default=None, metavar="DIR", help="output folder (default out/<scenario name>)")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="replace the results of a previous run in --out (its trajectory files and PNGs are removed "
+        "first); without it, an existing non-empty --out is refused",
+    )
+    p.add_argument(
+        "--model",
+        choices=("elastic", "rigid"),
+        default="elastic",
+        help="elastic foundation (paper §3, default) or the rigid-ground reference (paper §2)",
+    )
+    p.add_argument(
+        "--rope",
+        choices=("elastic", "inextensible"),
+        default="elastic",
+        help="elastic rope (2.14, default) or inextensible rope (2.15, with --model rigid only)",
+    )
+    p.add_argument("--no-plots", action="store_true", help="write no PNG plots")
+    p.add_argument(
+        "--animate",
+        action="store_true",
+        help="also write the 3-D animation and keyframes.png (as `jaxhoist animate DIR` with its defaults)",
+    )
+    p.add_argument("--quiet", action="store_true", help="no progress bars or lines on stderr")
+    p.set_defaults(func=run_simulate)
+
+
+def _write_results(args, out_dir: Path, traj, scenario, options, t1, overrides, progress):
+    """The result files of `jaxhoist simulate`. **Returns** `(arrays, [npz, json, csv name, nc name])`."""
+    from ..io.results import (
+        load_metadata,
+        save_trajectory,
+        save_trajectory_csv,
+        save_trajectory_netcdf,
+        trajectory_arrays,
+    )
+    from ..io.validate import clean_outputs
+
+    with progress(f"writing results to {out_dir}"):
+        if args.overwrite:
+            from .plots import PLOTS
+
+            clean_outputs(out_dir, [*SIMULATE_OUTPUTS, *(f"{n}.png" for n in PLOTS)])
+        arrays = trajectory_arrays(traj)
+        npz, meta = save_trajectory(
+            out_dir / "trajectory",
+            traj,
+            scenario,
+            command=[PROG, *args.argv] if args.argv is not None else sys.argv,
+            options={
+                "model": args.model,
+                "rope": args.rope,
+                "solver": type(options.solver).__name__,
+                "rtol": options.rtol,
+                "atol": options.atol,
+                "max_steps": args.max_steps,
+                "t1": t1,
+                "n_save": args.n_save,
+            },
+            extra={
+                "source": str(args.scenario),
+                "overrides": overrides,
+                "timings_s": {k: round(v, 4) for k, v in progress.times.items()},
+            },
+        )
+        csv_path = save_trajectory_csv(out_dir / "trajectory.csv", arrays)
+        md = load_metadata(npz)
+        nc_path = save_trajectory_netcdf(out_dir / "trajectory.nc", arrays,
+                                         {k: md[k] for k in ("command", "scenario", "solver", "status")})
+    return arrays, [npz, meta, csv_path.name, nc_path.name]

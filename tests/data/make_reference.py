@@ -1,0 +1,103 @@
+"""Record the reference results that `tests/test_reference_results.py` compares against (issue 11).
+
+The restructuring of numerics/apps (issue 11) must not change any result: this script, run once on the
+code before the restructuring, stores short-horizon results of the three presets with both models and of a
+64-member scan with forward-mode sensitivities in `tests/data/reference_results.npz` (a few hundred kB).
+Re-run it only when a result is meant to change, and say why in the commit message.
+
+    PYTHONPATH=$PWD python tests/data/make_reference.py
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import jax
+import numpy as np
+
+import jaxhoist as jh
+
+PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2")
+T1 = 2.0  # [s]: the elastic model's horizon, short so that the comparison stays cheap
+# The rigid model's horizon [s] and rope per preset: paper-4.2 with the elastic rope takes 124 000 steps in
+# its first 0.1 s, and with either rope it enters a Zeno sequence of impacts at 0.44-0.48 s (more than
+# max_phases = 2000 phases), so it runs 0.2 s with the inextensible rope (748 accepted steps since the
+# issue-15 merge, 928 before).
+RIGID = {
+    "paper-2.3": (0.45, jh.ElasticRope()),
+    "paper-4.1": (0.45, jh.ElasticRope()),
+    "paper-4.2": (0.2, jh.InextensibleRope()),
+}
+N_SAVE = 21
+TRAJECTORY_FIELDS = (
+    "position",
+    "velocity",
+    "euler",
+    "angular_velocity",
+    "normal_forces",
+    "rope_tension",
+    "hoist_work",
+    "friction_work",
+    "num_accepted_steps",
+)
+SCAN_PATH = "foundation.friction_coefficient"
+SCAN_VALUES = np.linspace(0.2, 0.4, 64)
+SCAN_T1 = 2.0  # [s]
+SCAN_OBSERVABLES = ("final_psi", "final_position", "max_tilt")
+OUT = Path(__file__).with_name("reference_results.npz")
+
+
+def trajectories() -> dict[str, np.ndarray]:
+    """`{preset}/{model}/{field}` -> the field at the N_SAVE saved times of a short simulate per model."""
+    out = {}
+    for name in PRESETS:
+        sc = jh.load_scenario(name)
+        t1_rigid, rope = RIGID[name]
+        runs = {
+            "elastic": jh.simulate(sc, T1, n_save=N_SAVE, model=jh.ElasticFoundation()),
+            "rigid": jh.simulate(sc, t1_rigid, n_save=N_SAVE, model=jh.RigidGround(rope=rope)),
+        }
+        for model, traj in runs.items():
+            for f in TRAJECTORY_FIELDS:
+                out[f"{name}/{model}/{f}"] = np.asarray(getattr(traj, f))
+    return out
+
+
+def scan() -> dict[str, np.ndarray]:
+    """`scan/{name}` -> every observable, its sensitivity and the status of the 64-member μ scan."""
+    res = jh.scan(
+        jh.load_scenario("paper-4.2"),
+        {SCAN_PATH: SCAN_VALUES},
+        SCAN_T1,
+        observables=list(SCAN_OBSERVABLES),
+        n_save=N_SAVE,
+        derivatives=True,
+        devices=jax.devices()[:1],  # one device: valid while the multi-device path changes
+    )
+    out = {f"scan/{k}": np.asarray(v) for k, v in res.data.items()}
+    out["scan/status"] = np.asarray(res.status)
+    out["scan/num_accepted_steps"] = np.asarray(res.num_accepted_steps)
+    return out
+
+
+def compute() -> dict[str, np.ndarray]:
+    return {**trajectories(), **scan()}
+
+
+def _setup() -> None:
+    """The tests' device set-up (tests/conftest.py): two CPU devices, float64 (before the backend starts;
+    under pytest, conftest.py has done it)."""
+    try:
+        jax.config.update("jax_num_cpu_devices", 2)
+    except AttributeError:
+        flags = os.environ.get("XLA_FLAGS", "")
+        os.environ["XLA_FLAGS"] = (flags + " --xla_force_host_platform_device_count=2").strip()
+    jax.config.update("jax_enable_x64", True)
+
+
+if __name__ == "__main__":
+    _setup()
+    arrays = compute()
+    np.savez_compressed(OUT, **arrays)
+    print(f"{OUT}: {len(arrays)} arrays, {OUT.stat().st_size} bytes")
