@@ -91,6 +91,11 @@ def test_chatter_rule_detects_dense_non_decaying_impacts_only():
     assert rule.detect(settling, settling[-1][0]) == ""
     dense = [(10.0 + 5e-4 * k, 0.5 * 0.95**k) for k in range(60)]  # 60 in 30 ms: passed even though decaying
     assert rule.detect(dense, dense[-1][0]) != ""
+    # Contact changes without impacts (a see-saw between two configurations every few µs): 48 in 50 ms.
+    seesaw = [2.0927 + 2e-6 * k for k in range(48)]
+    assert "48 contact changes" in rule.detect_switching(seesaw, seesaw[-1])
+    assert rule.detect_switching(seesaw[:47], seesaw[46]) == ""
+    assert rule.detect_switching([0.1 * k for k in range(60)], 5.9) == ""  # spread over 6 s
     # Bad settings: one clear line naming the field.
     with pytest.raises(jh.ScenarioError, match="ChatterRule.stiffness"):
         simulate_rigid(jh.load_scenario("paper-2.3"), 0.1, chatter=ChatterRule(stiffness=-1.0))

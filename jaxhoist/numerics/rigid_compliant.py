@@ -58,6 +58,8 @@ class ChatterRule:
       loaded corners (N > `load_fraction` G) have not changed for this long; `max_duration` [s]: at the
       latest after this long.
     - `samples`: contact samples per chunk (the steadiness test).
+    - `min_switches`: ... or at least this many contact changes without impact within `window` (a load
+      see-sawing between two configurations every few µs, e.g. about the diagonal EF).
     """
 
     window: float = 0.05
@@ -71,6 +73,7 @@ class ChatterRule:
     max_duration: float = 1.0
     load_fraction: float = 1e-3
     samples: int = 65
+    min_switches: int = 48
 
     def check(self) -> None:
         """Raise `ScenarioError` naming the first field that is not a positive finite number (`decay` may
@@ -84,8 +87,19 @@ class ChatterRule:
             raise ScenarioError(f"ChatterRule.decay must be >= 0, got {self.decay!r}")
         if not (isinstance(self.min_impacts, int) and self.min_impacts >= 1):
             raise ScenarioError(f"ChatterRule.min_impacts must be an integer >= 1, got {self.min_impacts!r}")
+        if not (isinstance(self.min_switches, int) and self.min_switches >= 1):
+            raise ScenarioError(f"ChatterRule.min_switches must be an integer >= 1, "
+                                f"got {self.min_switches!r}")
         if not (isinstance(self.samples, int) and self.samples >= 2):
             raise ScenarioError(f"ChatterRule.samples must be an integer >= 2, got {self.samples!r}")
+
+    def detect_switching(self, times: list[float], t: float) -> str:
+        """`times`: when contact changes without an impact happened. Returns a description if at least
+        `min_switches` of them fall within the last `window` seconds before `t`, else ""."""
+        n = sum(1 for te in times if te >= t - self.window)
+        if n < self.min_switches:
+            return ""
+        return f"{n} contact changes without impact in {self.window * 1e3:g} ms"
 
     def detect(self, events: list[tuple[float, float]], t: float) -> str:
         """`events`: (time [s], loss [J]) of the impacts so far. Returns a description of the sustained

@@ -31,14 +31,10 @@ Each such step is recorded in the phase log (`PhaseRecord.choice`, or the impact
 for inputs that cannot be continued: too many phases, a failed phase solve, an impact that would gain
 energy with the given restitution, an inextensible rope that cannot start.
 
-A sustained cycle of impacts that does not decay, or a phase that stalls twice, is passed by a compliant
-phase (`numerics.rigid_compliant`), recorded in the phase log.
-
-Modules: this one (`simulate_rigid` and the phase loop, `_Run`); `rigid_records` (`PhaseRecord`,
-`RigidTrajectory`, `RigidContactError`, importable from here), `rigid_driver` (`_Driver`: phase solves,
-projections, the choice of configurations), `rigid_impacts` (impacts and rope jerks), `rigid_coulomb`
-(Coulomb's law for the choice), `rigid_compiled` (the jitted pieces), `rigid_compliant` (the compliant
-phase).
+A sustained cycle of impacts or contact changes, or a phase that stalls twice, is passed by a compliant
+phase (`rigid_compliant`), recorded in the phase log. Modules: this one (`simulate_rigid`, the loop `_Run`);
+`rigid_records` (`PhaseRecord`, `RigidTrajectory`, `RigidContactError`, importable from here), `rigid_driver`
+(`_Driver`: solves, projections, configuration choice), `rigid_impacts`, `rigid_coulomb`, `rigid_compiled`.
 """
 
 from __future__ import annotations
@@ -169,6 +165,7 @@ class _Run:
         self.record_of: list[int] = []  # per phase solve, its record in `records` (several when merged)
         self.impact_total = 0.0
         self.impact_events: list[tuple[float, float]] = []  # (time [s], loss [J]) of impacts and jerks
+        self.switch_events: list[float] = []  # times [s] of contact changes without an impact
         self.compliant_mask = np.zeros(n_t, dtype=bool)  # saved samples inside compliant phases
         self.retried_at = None  # start time of a stalled phase chosen again (once)
 
@@ -232,7 +229,9 @@ class _Run:
         if self.verbose:
             print(self.records[-1], f"[{drv.accepted} steps so far]", flush=True)
         self.t, self.y, self.phase, self.choice = t_end, y_end, new, drv.take_notes()
-        why = self.chatter.detect(self.impact_events, t_end) if self.chatter is not None else ""
+        rule = self.chatter
+        why = rule and (rule.detect(self.impact_events, t_end)
+                        or rule.detect_switching(self.switch_events, t_end))
         if why:
             # A sustained cycle of impacts: pass it with a compliant phase, then choose again.
             return self.compliant(t_end, y_end, new, why)
@@ -325,6 +324,7 @@ class _Run:
             self.impact_total += loss
         else:
             self.log(PhaseRecord(**record, end=end, state_end=y_end))
+            self.switch_events.append(t_end)
             new, y_end, loss = _transition(drv, t_end, y_end, phase, fired, self.ts)
             self.impact_total += loss
         return new, y_end
@@ -398,6 +398,7 @@ class _Run:
         self.log(PhaseRecord(t0, ep.t_end, modes, False, end, ep.y_before_handback,
                              "compliant" if drv.inextensible else "elastic", how))
         self.impact_events.clear()
+        self.switch_events.clear()
         if self.verbose:
             print(self.records[-1], f"[{drv.accepted} steps so far]", flush=True)
         if ep.t_end >= self.t1:
