@@ -173,9 +173,9 @@ def test_invalid_value_and_bad_override_exit_2(tmp_path, capsys, monkeypatch):
 
 def test_unknown_preset_gives_a_hint(capsys, monkeypatch):
     _no_compile(monkeypatch)
-    assert cli.main(["simulate", "paper-4.3", "--quiet"]) == 2
+    assert cli.main(["simulate", "paper-2.4", "--quiet"]) == 2  # (paper-4.3 exists since issue 13)
     err = capsys.readouterr().err
-    assert "paper-4.3" in err and "did you mean 'paper-4.2'" in err and "Traceback" not in err
+    assert "paper-2.4" in err and "did you mean 'paper-2.3'" in err and "Traceback" not in err
 
 
 def test_no_command_prints_help_and_version(capsys):
