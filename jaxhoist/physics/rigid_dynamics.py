@@ -16,7 +16,7 @@ from . import kinematics, statics
 from .elastic import Constants, State
 from .energy import Energy
 from .params import Scenario
-from .rigid import (
+from .rigid_contact import (
     FREE,
     ROPE_SLACK,
     ROPE_TAUT,
