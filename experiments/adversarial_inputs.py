@@ -142,8 +142,24 @@ def file_cases(tmp: Path, n_mutations: int):
     # mutated presets (a fixed seed): delete / duplicate / retype / swap lines, truncate, splice bytes,
     # re-encode; whether each is bad is not known in advance
     rng = random.Random(14)
-    wrong = ['"12.5"', "true", "[]", "[1.0, 2.0]", "1" + "0" * 400, "-1", "nan", "inf", "{ a = 1 }", "1e999",
-             "0x10", "1_000", "[" * 2000 + "]" * 2000, "1e-300", "1e300", "9" * 5000]
+    wrong = [
+        '"12.5"',
+        "true",
+        "[]",
+        "[1.0, 2.0]",
+        "1" + "0" * 400,
+        "-1",
+        "nan",
+        "inf",
+        "{ a = 1 }",
+        "1e999",
+        "0x10",
+        "1_000",
+        "[" * 2000 + "]" * 2000,
+        "1e-300",
+        "1e300",
+        "9" * 5000,
+    ]
     texts = [preset(n) for n in ("paper-2.3", "paper-4.1", "paper-4.2")]
     for k in range(n_mutations):
         lines = rng.choice(texts).splitlines()
@@ -201,8 +217,19 @@ def cli_cases(tmp: Path):
         ("scenario path is a folder", ["simulate", str(tmp), "--quiet", "--out", o]),
         ("scan --param t1", ["scan", "paper-4.2", "--param", "t1", "--values", "1,2", "--out", o]),
         ("scan --param load.mass.real", ["scan", "paper-4.2", "--param", "load.mass.real", "--values", "1"]),
-        ("scan --values 0_1,0.2", ["scan", "paper-4.2", "--param", "foundation.friction_coefficient",
-                                   "--values", "0_1,0.2", "--out", o]),
+        (
+            "scan --values 0_1,0.2",
+            [
+                "scan",
+                "paper-4.2",
+                "--param",
+                "foundation.friction_coefficient",
+                "--values",
+                "0_1,0.2",
+                "--out",
+                o,
+            ],
+        ),
     ]
     if os.geteuid() != 0:
         cases.append(("--out in a read-only folder", [*sim, "--out", str(ro / "o")]))
@@ -216,8 +243,14 @@ def cli_cases(tmp: Path):
         ("bifurcation --tol 1_0", [*bif, "--tol", "1_0"]),
     ]
     out = [("simulate/scan/bifurcation args", label, argv, True) for label, argv in cases]
-    out.append(("simulate/scan/bifurcation args", "valid --set (control)",
-                [*sim, "--out", o, "--set", "foundation.friction_coefficient=0.3"], False))
+    out.append(
+        (
+            "simulate/scan/bifurcation args",
+            "valid --set (control)",
+            [*sim, "--out", o, "--set", "foundation.friction_coefficient=0.3"],
+            False,
+        )
+    )
     return out
 
 
@@ -250,8 +283,11 @@ def api_cases(paper42):
         ("replace t1", lambda: paper42.replace(**{"t1": 5.0}), True),
         ("simulate, stiffness 1e-300", lambda: sim({"foundation.stiffness": 1e-300}), True),
         ("simulate, mass 1e300", lambda: sim({"load.mass": 1e300}), True),
-        ("simulate(t1=1, ts ending at 0.05)", lambda: jh.simulate(paper42, 1.0, ts=np.array([0, 0.02, 0.05])),
-         True),
+        (
+            "simulate(t1=1, ts ending at 0.05)",
+            lambda: jh.simulate(paper42, 1.0, ts=np.array([0, 0.02, 0.05])),
+            True,
+        ),
         ("jacfwd through the default adjoint", jacfwd, True),
         ("valid replace + simulate (control)", lambda: jh.simulate(paper42.replace(**{mu: 0.3}), 0.1), False),
     ]

@@ -47,8 +47,10 @@ def main(argv=None) -> int:
         times.append(time.perf_counter() - t0)
         if len(times) == 1:
             compile_s = {k.rsplit("/", 1)[-1]: v for k, v in durations.items() if "/compile/" in k}
-    print(f"first call {times[0]:.1f} s, second call {times[1]:.2f} s; {len(tr.phases)} phases, "
-          f"{int(tr.num_accepted_steps)} accepted steps")
+    print(
+        f"first call {times[0]:.1f} s, second call {times[1]:.2f} s; {len(tr.phases)} phases, "
+        f"{int(tr.num_accepted_steps)} accepted steps"
+    )
     print("compilation in the first call: " + ", ".join(f"{k} {v:.1f} s" for k, v in compile_s.items()))
     return 0
 

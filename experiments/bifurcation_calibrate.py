@@ -52,15 +52,24 @@ MU_PAPER = 0.3635
 
 
 def _row(b):
-    return dict(value=b.value, bracket=list(b.bracket), y_lo=b.y_lo, y_hi=b.y_hi, kind=b.kind,
-                n_solves=b.n_solves, wall_time=b.wall_time)
+    return dict(
+        value=b.value,
+        bracket=list(b.bracket),
+        y_lo=b.y_lo,
+        y_hi=b.y_hi,
+        kind=b.kind,
+        n_solves=b.n_solves,
+        wall_time=b.wall_time,
+    )
 
 
 def _trace(sc, along, values, bracket, tol):
     t = time.perf_counter()
     bd = jh.trace_boundary(sc, MU, bracket, along, values, OBS, tol=tol, initial_half_width=1e-3, **KW)
-    rows = [dict(q=float(q), mu_star=float(v), width=float(w)) for q, v, w in
-            zip(bd.along_values, bd.values, bd.widths, strict=True)]
+    rows = [
+        dict(q=float(q), mu_star=float(v), width=float(w))
+        for q, v, w in zip(bd.along_values, bd.values, bd.widths, strict=True)
+    ]
     for r in rows:
         print(f"  {along} = {r['q']:.6g}: mu* = {r['mu_star']:.7f} (width {r['width']:.2g})", flush=True)
     good = [(r["q"], r["mu_star"]) for r in rows if np.isfinite(r["mu_star"])]
@@ -68,12 +77,19 @@ def _trace(sc, along, values, bracket, tol):
     if len(good) >= 2:
         (q0, p0), (q1, p1) = good[-2], good[-1]
         slope = (p1 - p0) / (q1 - q0)
-    return dict(along=along, rows=rows, n_solves=bd.n_solves, wall_time=time.perf_counter() - t,
-                secant_slope=slope)
+    return dict(
+        along=along, rows=rows, n_solves=bd.n_solves, wall_time=time.perf_counter() - t, secant_slope=slope
+    )
 
 
-IFT_STEPS = {MU: 1e-5, XI: 1e-4, "load.mass_centre[1]": 1e-4, "load.mass_centre[2]": 1e-4,
-             "rope.attachment[0]": 1e-4, "rope.attachment[1]": 1e-4}
+IFT_STEPS = {
+    MU: 1e-5,
+    XI: 1e-4,
+    "load.mass_centre[1]": 1e-4,
+    "load.mass_centre[2]": 1e-4,
+    "rope.attachment[0]": 1e-4,
+    "rope.attachment[1]": 1e-4,
+}
 
 
 def _ift(sc, mu_star):
@@ -88,8 +104,15 @@ def _ift(sc, mu_star):
         for off in offsets:
             for p in IFT_STEPS:
                 pts[p].append(base[p] + (off if p == q else 0.0))
-    r = jh.scan(sc, {p: np.array(v) for p, v in pts.items()}, 25.0, mode="points", n_save=2501,
-                observables=[OBS], sort=False)
+    r = jh.scan(
+        sc,
+        {p: np.array(v) for p, v in pts.items()},
+        25.0,
+        mode="points",
+        n_save=2501,
+        observables=[OBS],
+        sort=False,
+    )
     if not np.all(r.ok):
         raise SystemExit(f"IFT solves failed: {r.failures()[:2]}")
     th = np.asarray(r[OBS])
@@ -139,14 +162,24 @@ def main(argv=None) -> int:
         save()
     if "trace" not in skip and "trace_xi" not in rec:  # 2. the continuation path in ξ_C
         print("trace mu*(xi_C):", flush=True)
-        rec["trace_xi"] = _trace(set_param(sc, XI, 1.14), XI, [1.14, 1.15, 1.1587788, 1.17], (0.368, 0.374),
-                                 args.tol)
+        rec["trace_xi"] = _trace(
+            set_param(sc, XI, 1.14), XI, [1.14, 1.15, 1.1587788, 1.17], (0.368, 0.374), args.tol
+        )
         save()
     if "eps" not in skip:  # 4. the friction closure
-        laws = [("eps=1e-2", set_param(sc, EPS, 1e-2), (0.3685, 0.370)),
-                ("eps=1e-4", set_param(sc, EPS, 1e-4), (0.3625, 0.364)),
-                ("bristle delta=1e-3", eqx.tree_at(lambda s: s.foundation.friction, sc, jh.BristleFriction(
-                    deflection=1e-3, breakaway_ratio=0.5, relaxation_time=0.01)), (0.362, 0.368))]
+        laws = [
+            ("eps=1e-2", set_param(sc, EPS, 1e-2), (0.3685, 0.370)),
+            ("eps=1e-4", set_param(sc, EPS, 1e-4), (0.3625, 0.364)),
+            (
+                "bristle delta=1e-3",
+                eqx.tree_at(
+                    lambda s: s.foundation.friction,
+                    sc,
+                    jh.BristleFriction(deflection=1e-3, breakaway_ratio=0.5, relaxation_time=0.01),
+                ),
+                (0.362, 0.368),
+            ),
+        ]
         rec.setdefault("eps", {})["eps=1e-3"] = rec.get("mu_star")
         for name, s, b0 in laws:
             if rec["eps"].get(name):
@@ -157,8 +190,16 @@ def main(argv=None) -> int:
             save()
     if "classify" not in skip:  # 5. what the change is
         lo, hi = rec.get("mu_star", {}).get("bracket", (MU_PAPER - 5e-7, MU_PAPER + 5e-7))
-        c = jh.classify_change(sc, param=MU, bracket=(lo, hi), observable=OBS, half_window=6e-3,
-                               n_window=49, t1=25.0, n_save=2501)
+        c = jh.classify_change(
+            sc,
+            param=MU,
+            bracket=(lo, hi),
+            observable=OBS,
+            half_window=6e-3,
+            n_window=49,
+            t1=25.0,
+            n_save=2501,
+        )
         print("classified:", c.summary(), flush=True)
         rec["classified"] = c.to_dict()
         save()

@@ -48,8 +48,16 @@ from jaxhoist.numerics.scan import ScanResult  # noqa: E402
 MU = "foundation.friction_coefficient"
 C = "load.mass_centre"
 A = "rope.attachment"
-OBS = ["final_x", "final_y", "final_phi", "final_theta", "final_psi", "liftoff_time", "last_contact_time",
-       "impacts"]
+OBS = [
+    "final_x",
+    "final_y",
+    "final_phi",
+    "final_theta",
+    "final_psi",
+    "liftoff_time",
+    "last_contact_time",
+    "impacts",
+]
 FIXTURES = [(0.0, 0.0), (2.5, 0.0), (0.0, 6.0), (2.5, 6.0)]  # top corners above D, E, H, F (body axes)
 KW = dict(n_save=2501, observables=OBS, progress=True)
 
@@ -58,8 +66,13 @@ def step_size(res, n_mu):
     """Largest final-state step between neighbouring μ per combination (members laid out μ fastest)."""
     n = res.ok.size // n_mu
     s = np.zeros((n, n_mu - 1))
-    for k, scale in [("final_x", 10.0), ("final_y", 10.0), ("final_phi", np.degrees(1)),
-                     ("final_theta", np.degrees(1)), ("final_psi", np.degrees(1))]:
+    for k, scale in [
+        ("final_x", 10.0),
+        ("final_y", 10.0),
+        ("final_phi", np.degrees(1)),
+        ("final_theta", np.degrees(1)),
+        ("final_psi", np.degrees(1)),
+    ]:
         y = np.asarray(res[k]).reshape(n, n_mu)
         s = np.maximum(s, np.abs(np.diff(y, axis=1)) * scale)
     return s
@@ -68,22 +81,38 @@ def step_size(res, n_mu):
 def run(which, out, base):
     if which == "corners":
         mus = np.linspace(0.30, 0.45, 61)
-        rows = list(itertools.product(FIXTURES, [0.75, 1.0, 1.25, 1.5, 1.75], [2.0, 2.5, 3.0, 3.5, 4.0],
-                                      [0.75, 1.0, 1.25]))
+        rows = list(
+            itertools.product(
+                FIXTURES, [0.75, 1.0, 1.25, 1.5, 1.75], [2.0, 2.5, 3.0, 3.5, 4.0], [0.75, 1.0, 1.25]
+            )
+        )
         pts = {MU: [], f"{C}[0]": [], f"{C}[1]": [], f"{C}[2]": [], f"{A}[0]": [], f"{A}[1]": []}
         for (fa, fb), x, e, z in rows:
             for m in mus:
                 for k, v in zip(pts, (m, x, e, z, fa, fb), strict=True):
                     pts[k].append(v)
-        return jh.scan(base, {k: np.array(v) for k, v in pts.items()}, 25.0, mode="points",
-                       out_dir=out / which, **KW)
+        return jh.scan(
+            base, {k: np.array(v) for k, v in pts.items()}, 25.0, mode="points", out_dir=out / which, **KW
+        )
     if which == "xi-ramp":
-        return jh.scan(base, {MU: np.linspace(0.30, 0.45, 151), f"{C}[0]": np.linspace(1.0, 1.25, 21)}, 25.0,
-                       mode="grid", out_dir=out / which, **KW)
+        return jh.scan(
+            base,
+            {MU: np.linspace(0.30, 0.45, 151), f"{C}[0]": np.linspace(1.0, 1.25, 21)},
+            25.0,
+            mode="grid",
+            out_dir=out / which,
+            **KW,
+        )
     if which == "xi-theta":
         sc = set_param(set_param(base, f"{C}[1]", 3.18), f"{C}[2]", 0.83)
-        return jh.scan(sc, {MU: np.linspace(0.345, 0.38, 71), f"{C}[0]": np.linspace(1.05, 1.30, 26)}, 25.0,
-                       mode="grid", out_dir=out / which, **KW)
+        return jh.scan(
+            sc,
+            {MU: np.linspace(0.345, 0.38, 71), f"{C}[0]": np.linspace(1.05, 1.30, 26)},
+            25.0,
+            mode="grid",
+            out_dir=out / which,
+            **KW,
+        )
     if which == "random":
         rng = np.random.default_rng(13)
         n = 480
@@ -91,9 +120,14 @@ def run(which, out, base):
         f = rng.integers(0, 4, n)
         mus = np.round(np.arange(0.354, 0.3731, 1e-3), 6)
         m = mus.size
-        pts = {MU: np.tile(mus, n), f"{C}[0]": np.repeat(x, m), f"{C}[1]": np.repeat(e, m),
-               f"{C}[2]": np.repeat(z, m), f"{A}[0]": np.repeat(np.array(FIXTURES)[f, 0], m),
-               f"{A}[1]": np.repeat(np.array(FIXTURES)[f, 1], m)}
+        pts = {
+            MU: np.tile(mus, n),
+            f"{C}[0]": np.repeat(x, m),
+            f"{C}[1]": np.repeat(e, m),
+            f"{C}[2]": np.repeat(z, m),
+            f"{A}[0]": np.repeat(np.array(FIXTURES)[f, 0], m),
+            f"{A}[1]": np.repeat(np.array(FIXTURES)[f, 1], m),
+        }
         return jh.scan(base, pts, 25.0, mode="points", out_dir=out / which, **KW)
     raise SystemExit(f"unknown map {which!r}")
 
@@ -103,11 +137,15 @@ def figure(res, out, dpi):
     if "xi-ramp" in res:
         r = res["xi-ramp"]
         mus, xs = r.coords[MU], r.coords[f"{C}[0]"]
-        im = axes[0].pcolormesh(mus, xs, np.degrees(np.asarray(r["final_psi"])).T, shading="nearest",
-                                cmap="twilight")
+        im = axes[0].pcolormesh(
+            mus, xs, np.degrees(np.asarray(r["final_psi"])).T, shading="nearest", cmap="twilight"
+        )
         fig.colorbar(im, ax=axes[0], label="ψ(t1) [°]")
-        axes[0].set(xlabel="μ", ylabel="ξ_C [m]", title="(a) paper-4.2's ψ(t1) ramp (μ = 0.4547 at ξ_C = 1)\n"
-                    "moves down and widens as ξ_C grows")
+        axes[0].set(
+            xlabel="μ",
+            ylabel="ξ_C [m]",
+            title="(a) paper-4.2's ψ(t1) ramp (μ = 0.4547 at ξ_C = 1)\nmoves down and widens as ξ_C grows",
+        )
         axes[0].axvline(0.3635, color="r", lw=0.8)
     if "xi-theta" in res:
         r = res["xi-theta"]
@@ -119,18 +157,24 @@ def figure(res, out, dpi):
         sc = jh.load_scenario("paper-4.3")
         axes[1].plot([0.3635], [float(sc.load.mass_centre[0])], "r*", ms=12, label="paper-4.3")
         axes[1].legend(loc="upper right")
-        axes[1].set(xlabel="μ", ylabel="ξ_C [m]", title="(b) η_C = 3.18, ζ_C = 0.83 m: ϑ(t1), 15° contour\n"
-                    "(the ramp paper-4.3 puts at μ* = 0.3635)")
+        axes[1].set(
+            xlabel="μ",
+            ylabel="ξ_C [m]",
+            title="(b) η_C = 3.18, ζ_C = 0.83 m: ϑ(t1), 15° contour\n"
+            "(the ramp paper-4.3 puts at μ* = 0.3635)",
+        )
     if "random" in res:
         s = step_size(res["random"], 20)
         mx = s.max(axis=1)
         axes[2].hist(mx, bins=np.logspace(-2, 2.5, 46))
         axes[2].set_xscale("log")
         axes[2].axvline(50, color="r", lw=0.8)
-        axes[2].set(xlabel="largest final-state step between neighbouring μ (Δμ = 1e-3) [° or 0.1 m]",
-                    ylabel="mass centres / fixtures",
-                    title=f"(c) 480 random plausible choices, μ ∈ [0.354, 0.373]:\n"
-                          f"{int((mx > 20).sum())} with a step > 20, {int((mx > 50).sum())} > 50")
+        axes[2].set(
+            xlabel="largest final-state step between neighbouring μ (Δμ = 1e-3) [° or 0.1 m]",
+            ylabel="mass centres / fixtures",
+            title=f"(c) 480 random plausible choices, μ ∈ [0.354, 0.373]:\n"
+            f"{int((mx > 20).sum())} with a step > 20, {int((mx > 50).sum())} > 50",
+        )
     fig.tight_layout()
     path = out / "calibration_maps.png"
     fig.savefig(path, dpi=dpi)
@@ -142,8 +186,12 @@ def main(argv=None) -> int:
     p.add_argument("--out", required=True)
     p.add_argument("--maps", default="corners,xi-ramp,xi-theta,random")
     p.add_argument("--dpi", type=int, default=80)
-    p.add_argument("--load", default="", help="name=path.npz,...: read a map saved by ScanResult.save "
-                   "instead of scanning (e.g. one run elsewhere)")
+    p.add_argument(
+        "--load",
+        default="",
+        help="name=path.npz,...: read a map saved by ScanResult.save "
+        "instead of scanning (e.g. one run elsewhere)",
+    )
     args = p.parse_args(argv)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -155,9 +203,11 @@ def main(argv=None) -> int:
         s = step_size(res["corners"], 61)
         mus = np.linspace(0.30, 0.45, 61)
         near = (mus[1:] > 0.355) & (mus[:-1] < 0.372)
-        print(f"corners: combinations with a final-state step > 30 [° or 0.1 m] between neighbouring μ "
-              f"anywhere: {int((s.max(axis=1) > 30).sum())} of {s.shape[0]}; within [0.355, 0.372]: "
-              f"{int((s[:, near].max(axis=1) > 30).sum())}")
+        print(
+            f"corners: combinations with a final-state step > 30 [° or 0.1 m] between neighbouring μ "
+            f"anywhere: {int((s.max(axis=1) > 30).sum())} of {s.shape[0]}; within [0.355, 0.372]: "
+            f"{int((s[:, near].max(axis=1) > 30).sum())}"
+        )
     figure(res, out, args.dpi)
     return 0
 

@@ -42,8 +42,16 @@ def main(argv=None) -> int:
     out.mkdir(parents=True, exist_ok=True)
     rows = []
     for preset, mu, obs, half, n in CASES:
-        c = jh.classify_change(jh.load_scenario(preset), param=MU, bracket=(mu - 1e-6, mu + 1e-6),
-                               observable=obs, half_window=half, n_window=n, t1=25.0, n_save=2501)
+        c = jh.classify_change(
+            jh.load_scenario(preset),
+            param=MU,
+            bracket=(mu - 1e-6, mu + 1e-6),
+            observable=obs,
+            half_window=half,
+            n_window=n,
+            t1=25.0,
+            n_save=2501,
+        )
         print(f"{preset}: {c.summary()}", flush=True)
         rows.append({"preset": preset, **c.to_dict()})
         (out / "classify.json").write_text(json.dumps(rows, indent=1))

@@ -32,10 +32,24 @@ CORNERS = ("D", "E", "F", "H")
 
 
 def _arrays(tr) -> dict[str, np.ndarray]:
-    return {k: np.asarray(getattr(tr, k)) for k in (
-        "ts", "position", "velocity", "euler", "corners", "normal_forces", "friction_forces",
-        "ground_reaction", "rope_tension", "hoist_work", "damping_loss", "friction_work", "impact_loss")} | {
-        "energy_residual": np.asarray(tr.energy_residual())}
+    return {
+        k: np.asarray(getattr(tr, k))
+        for k in (
+            "ts",
+            "position",
+            "velocity",
+            "euler",
+            "corners",
+            "normal_forces",
+            "friction_forces",
+            "ground_reaction",
+            "rope_tension",
+            "hoist_work",
+            "damping_loss",
+            "friction_work",
+            "impact_loss",
+        )
+    } | {"energy_residual": np.asarray(tr.energy_residual())}
 
 
 def plot(d: dict, phases, out: Path, title: str) -> None:
@@ -95,11 +109,15 @@ def main(argv=None) -> int:
     tr = simulate_rigid(sc, t1, n_save=n_save)
     t_second = time.perf_counter() - t0
     d = _arrays(tr)
-    print(f"paper-2.3 rigid model, t1 = {t1:g} s: {len(tr.phases)} phases, "
-          f"{int(tr.num_accepted_steps)} accepted / {int(tr.num_rejected_steps)} rejected steps")
+    print(
+        f"paper-2.3 rigid model, t1 = {t1:g} s: {len(tr.phases)} phases, "
+        f"{int(tr.num_accepted_steps)} accepted / {int(tr.num_rejected_steps)} rejected steps"
+    )
     print(f"first call (compile + solve) {t_first:.1f} s, second call {t_second:.2f} s")
-    print(f"energy balance residual max {np.abs(d['energy_residual']).max():.3g} J "
-          f"(hoist work {d['hoist_work'][-1]:.4g} J, impacts {d['impact_loss'][-1]:.4g} J)")
+    print(
+        f"energy balance residual max {np.abs(d['energy_residual']).max():.3g} J "
+        f"(hoist work {d['hoist_work'][-1]:.4g} J, impacts {d['impact_loss'][-1]:.4g} J)"
+    )
     log = tr.phase_log()
     print(log)
     (out / "phases.txt").write_text(log + "\n")

@@ -96,16 +96,22 @@ def main(argv=None) -> int:
     ela_tr, ela_first, ela_second = _timed(lambda: jaxhoist.simulate(sc, t1, n_save=n_save, throw=False))
     rig, ela = _arrays(rig_tr), _arrays(ela_tr)
     print(f"paper-4.1, t1 = {t1:g} s, {n_save} saved times")
-    print(f"rigid ground:      first call {rig_first:6.1f} s, second call {rig_second:6.2f} s, "
-          f"{len(rig_tr.phases)} phases, {int(rig_tr.num_accepted_steps)} steps, "
-          f"energy residual {np.abs(rig['energy_residual']).max():.3g} J")
-    print(f"elastic foundation: first call {ela_first:6.1f} s, second call {ela_second:6.2f} s, "
-          f"status {jaxhoist.SolveStatus(int(ela_tr.status)).name.lower()}, "
-          f"{int(ela_tr.num_accepted_steps)} steps, "
-          f"energy residual {np.abs(ela['energy_residual']).max():.3g} J")
-    for k, lab, unit, scale in (("position", "mass centre", "m", 1.0),
-                                ("rope_tension", "rope tension", "kN", 1e3),
-                                ("ground_reaction", "ground reaction", "kN", 1e3)):
+    print(
+        f"rigid ground:      first call {rig_first:6.1f} s, second call {rig_second:6.2f} s, "
+        f"{len(rig_tr.phases)} phases, {int(rig_tr.num_accepted_steps)} steps, "
+        f"energy residual {np.abs(rig['energy_residual']).max():.3g} J"
+    )
+    print(
+        f"elastic foundation: first call {ela_first:6.1f} s, second call {ela_second:6.2f} s, "
+        f"status {jaxhoist.SolveStatus(int(ela_tr.status)).name.lower()}, "
+        f"{int(ela_tr.num_accepted_steps)} steps, "
+        f"energy residual {np.abs(ela['energy_residual']).max():.3g} J"
+    )
+    for k, lab, unit, scale in (
+        ("position", "mass centre", "m", 1.0),
+        ("rope_tension", "rope tension", "kN", 1e3),
+        ("ground_reaction", "ground reaction", "kN", 1e3),
+    ):
         diff = np.abs(rig[k] - ela[k]).max() / scale
         print(f"  max |rigid - elastic| {lab}: {diff:.4g} {unit}")
     log = rig_tr.phase_log()

@@ -56,25 +56,37 @@ def main(argv=None) -> int:
     t_second = time.perf_counter() - t0
     d = trajectory_arrays(traj)
     status = jaxhoist.SolveStatus(int(d["status"]))
-    print(f"paper-4.2, t1 = {t1:g} s, {n_save} saved times: status {status.name.lower()}, "
-          f"{int(d['num_accepted_steps'])} accepted / {int(d['num_rejected_steps'])} rejected steps")
+    print(
+        f"paper-4.2, t1 = {t1:g} s, {n_save} saved times: status {status.name.lower()}, "
+        f"{int(d['num_accepted_steps'])} accepted / {int(d['num_rejected_steps'])} rejected steps"
+    )
     print(f"first call (compile + solve) {t_first:.2f} s, second call (solve) {t_second:.3f} s")
     lift = liftoff_time(d["ts"], d["normal_forces"])
     detach = corner_detach_times(d["ts"], d["normal_forces"])
-    print("first saved time with N_i = 0: "
-          + ", ".join(f"{c} {'-' if t is None else f'{t:g} s'}" for c, t in zip("DEFH", detach, strict=True))
-          + f"; lift-off (all N_i = 0): {'-' if lift is None else f'{lift:g} s'}")
+    print(
+        "first saved time with N_i = 0: "
+        + ", ".join(f"{c} {'-' if t is None else f'{t:g} s'}" for c, t in zip("DEFH", detach, strict=True))
+        + f"; lift-off (all N_i = 0): {'-' if lift is None else f'{lift:g} s'}"
+    )
     print(f"max |energy residual| {np.max(np.abs(d['energy_residual'])):.3g} J")
 
-    save_trajectory(out / "trajectory", traj, scenario, command=[sys.executable, *sys.argv],
-                    options={"solver": "Tsit5", "rtol": 1e-6, "atol": 1e-8, "t1": t1, "n_save": n_save})
+    save_trajectory(
+        out / "trajectory",
+        traj,
+        scenario,
+        command=[sys.executable, *sys.argv],
+        options={"solver": "Tsit5", "rtol": 1e-6, "atol": 1e-8, "t1": t1, "n_save": n_save},
+    )
     figs = {
-        "fig07_motion.png": plots.plot_motion(d, title="Fig. 7 analogue: motion of the lifted container "
-                                                       "(paper-4.2)"),
+        "fig07_motion.png": plots.plot_motion(
+            d, title="Fig. 7 analogue: motion of the lifted container (paper-4.2)"
+        ),
         "fig08_corner_forces.png": plots.plot_corner_forces(
-            d, title="Fig. 8 analogue: friction |T_i| and normal N_i forces at the corners"),
+            d, title="Fig. 8 analogue: friction |T_i| and normal N_i forces at the corners"
+        ),
         "fig09_corner_tracks.png": plots.plot_corner_tracks(
-            d, title="Fig. 9 analogue: corner tracks from above, arrows along the friction force"),
+            d, title="Fig. 9 analogue: corner tracks from above, arrows along the friction force"
+        ),
         "fig06_forces.png": plots.plot_forces(d, title="Rope tension S and ground reaction R (paper-4.2)"),
         "energy.png": plots.plot_energy(d, title="Energy balance (paper-4.2)"),
     }

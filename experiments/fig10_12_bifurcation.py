@@ -42,9 +42,15 @@ WIDE = (0.30, 0.33, 0.36, 0.39, 0.42)
 
 def histories(sc, mus, t1, n_save):
     """Mass-centre position, Euler angles (φ, ψ, ϑ), first all-off and last contact time per μ."""
-    res = jh.scan(sc, {MU: np.asarray(mus)}, t1, n_save=n_save, sort=False,
-                  observables=["liftoff_time", "last_contact_time", "final_position", "final_euler"],
-                  histories=["position", "euler"])
+    res = jh.scan(
+        sc,
+        {MU: np.asarray(mus)},
+        t1,
+        n_save=n_save,
+        sort=False,
+        observables=["liftoff_time", "last_contact_time", "final_position", "final_euler"],
+        histories=["position", "euler"],
+    )
     if not np.all(res.ok):
         raise SystemExit(f"solves failed: {res.failures()[:2]}")
     return res
@@ -82,9 +88,11 @@ def main(argv=None) -> int:
             eul = np.degrees(np.asarray(res["final_euler"])[i])
             t_off = float(np.asarray(res["liftoff_time"])[i])
             t_last = float(np.asarray(res["last_contact_time"])[i])
-            print(f"mu = {m:<7g} first all-off {t_off:7.3f} s, last contact {t_last:7.3f} s; at t1 "
-                  f"x, y = {pos[0]:.3f}, {pos[1]:.3f} m, phi, psi, theta = {eul[0]:.1f}, {eul[1]:.1f}, "
-                  f"{eul[2]:.1f} deg")
+            print(
+                f"mu = {m:<7g} first all-off {t_off:7.3f} s, last contact {t_last:7.3f} s; at t1 "
+                f"x, y = {pos[0]:.3f}, {pos[1]:.3f} m, phi, psi, theta = {eul[0]:.1f}, {eul[1]:.1f}, "
+                f"{eul[2]:.1f} deg"
+            )
     styles = ["-", "--", "-.", ":", "-"]
     deg = np.degrees(1.0)
     # Fig. 10: x and y, a wide sweep (left) and across μ* (right)
@@ -100,13 +108,18 @@ def main(argv=None) -> int:
     fig.tight_layout()
     fig.savefig(out / "fig10_x_y.png", dpi=args.dpi)
     for name, title, panels in (
-        ("fig11_y_phi.png", "Fig. 11 analogue: y and φ across μ* = 0.3635",
-         [("position", 1, 1.0, "y [m]"), ("euler", 0, deg, "φ [°]")]),
-        ("fig12_theta_psi.png", "Fig. 12 analogue: ϑ and ψ across μ* = 0.3635",
-         [("euler", 2, deg, "ϑ [°]"), ("euler", 1, deg, "ψ [°]")]),
+        (
+            "fig11_y_phi.png",
+            "Fig. 11 analogue: y and φ across μ* = 0.3635",
+            [("position", 1, 1.0, "y [m]"), ("euler", 0, deg, "φ [°]")],
+        ),
+        (
+            "fig12_theta_psi.png",
+            "Fig. 12 analogue: ϑ and ψ across μ* = 0.3635",
+            [("euler", 2, deg, "ϑ [°]"), ("euler", 1, deg, "ψ [°]")],
+        ),
     ):
-        fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex="col",
-                                 gridspec_kw={"width_ratios": [2, 1]})
+        fig, axes = plt.subplots(2, 2, figsize=(12, 7), sharex="col", gridspec_kw={"width_ratios": [2, 1]})
         for row, (key, comp, scale, label) in enumerate(panels):
             for col in range(2):
                 _panel(axes[row, col], ts, near, key, comp, NEAR, scale, label, styles)

@@ -128,9 +128,14 @@ def pick_checks(kind: np.ndarray, n_per_kind: int, rng) -> list[tuple[int, int]]
     for k in np.unique(kind):
         if KINDS[k] == "none":
             continue
-        cells = [(i, j) for i in range(nt) for j in range(na)
-                 if all(kind[i + di, (j + dj) % na] == k for di in (-1, 0, 1) for dj in (-1, 0, 1)
-                        if 0 <= i + di < nt)]
+        cells = [
+            (i, j)
+            for i in range(nt)
+            for j in range(na)
+            if all(
+                kind[i + di, (j + dj) % na] == k for di in (-1, 0, 1) for dj in (-1, 0, 1) if 0 <= i + di < nt
+            )
+        ]
         for c in rng.permutation(len(cells))[:n_per_kind]:
             picks.append(cells[c])
     return picks
@@ -141,13 +146,27 @@ def main(argv=None) -> int:
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--quick", action="store_true", help="31 x 24 directions, one check per motion")
     p.add_argument("--preset", default="paper-4.1")
-    p.add_argument("--mu", type=float, nargs="+", default=[0.15, 0.4, 0.6, 0.8],
-                   help="friction coefficients [-], one panel each")
+    p.add_argument(
+        "--mu",
+        type=float,
+        nargs="+",
+        default=[0.15, 0.4, 0.6, 0.8],
+        help="friction coefficients [-], one panel each",
+    )
     p.add_argument("--theta-max", type=float, default=80.0, help="largest angle from the vertical [deg]")
-    p.add_argument("--checks", type=int, default=None,
-                   help="simulated directions per μ and predicted motion (default 2; quick 1; 0: none)")
-    p.add_argument("--attachment", type=float, nargs=3, default=None,
-                   help="rope point B in the body frame from D [m] (default: the preset's)")
+    p.add_argument(
+        "--checks",
+        type=int,
+        default=None,
+        help="simulated directions per μ and predicted motion (default 2; quick 1; 0: none)",
+    )
+    p.add_argument(
+        "--attachment",
+        type=float,
+        nargs=3,
+        default=None,
+        help="rope point B in the body frame from D [m] (default: the preset's)",
+    )
     p.add_argument("--seed", type=int, default=0)
     args = p.parse_args(argv)
     out = Path(args.out)
@@ -177,8 +196,9 @@ def main(argv=None) -> int:
         sc = base.replace(**{"foundation.friction_coefficient": mu})
         ths = [thresholds(sc, e, inside) for e in dirs]
         names = [min(th, key=th.get) for th in ths]
-        kind_paper[m] = np.array([KINDS.index(n if math.isfinite(th[n]) else "none")
-                                  for n, th in zip(names, ths, strict=True)]).reshape(n_t, n_a)
+        kind_paper[m] = np.array(
+            [KINDS.index(n if math.isfinite(th[n]) else "none") for n, th in zip(names, ths, strict=True)]
+        ).reshape(n_t, n_a)
         # The exact slip limit replaces T = μN; it can only come before the other motions.
         others = np.array([min(v for k, v in th.items() if k != "slide") for th in ths])
         slip = slip_thresholds(sc, dirs, others)
@@ -188,11 +208,14 @@ def main(argv=None) -> int:
             kind.reshape(len(args.mu), -1)[m, k] = KINDS.index(name if math.isfinite(th[name]) else "none")
             pull.reshape(len(args.mu), -1)[m, k] = th[name] / G
     elapsed = time.perf_counter() - t0
-    print(f"{args.preset}: load {size.tolist()} m, G = {G:.6g} N, rope point B = {B.tolist()} m, "
-          f"|AB| = {L:.3f} m; {len(args.mu)} μ x {n_t} x {n_a} directions in {elapsed:.1f} s")
+    print(
+        f"{args.preset}: load {size.tolist()} m, G = {G:.6g} N, rope point B = {B.tolist()} m, "
+        f"|AB| = {L:.3f} m; {len(args.mu)} μ x {n_t} x {n_a} directions in {elapsed:.1f} s"
+    )
     for m, mu in enumerate(args.mu):
-        shares = ", ".join(f"{nm} {100 * np.mean(kind[m] == k):.1f} %" for k, nm in enumerate(KINDS)
-                           if np.any(kind[m] == k))
+        shares = ", ".join(
+            f"{nm} {100 * np.mean(kind[m] == k):.1f} %" for k, nm in enumerate(KINDS) if np.any(kind[m] == k)
+        )
         differ = 100 * np.mean(kind[m] != kind_paper[m])
         print(f"  μ = {mu:g}: {shares}; the paper's T = μN names another first motion on {differ:.1f} %")
 
@@ -213,22 +236,49 @@ def main(argv=None) -> int:
                 c1 = time.perf_counter()
                 ela, t_ela = elastic_first(jaxhoist.simulate(sc, t_end, n_save=2001))
                 c2 = time.perf_counter()
-                rec = dict(mu=mu, theta_deg=math.degrees(th), alpha_deg=math.degrees(al), predicted=predicted,
-                           pull_G=s / G, t_predicted=s / rate, rigid=rig, t_rigid=t_rig, elastic=ela,
-                           t_elastic=t_ela, wall_rigid_s=c1 - c0, wall_elastic_s=c2 - c1)
+                rec = dict(
+                    mu=mu,
+                    theta_deg=math.degrees(th),
+                    alpha_deg=math.degrees(al),
+                    predicted=predicted,
+                    pull_G=s / G,
+                    t_predicted=s / rate,
+                    rigid=rig,
+                    t_rigid=t_rig,
+                    elastic=ela,
+                    t_elastic=t_ela,
+                    wall_rigid_s=c1 - c0,
+                    wall_elastic_s=c2 - c1,
+                )
                 checks.append(rec)
-                print(f"  check μ = {mu:g}, θ = {rec['theta_deg']:5.1f}°, α = {rec['alpha_deg']:5.1f}°: "
-                      "statics "
-                      f"{predicted:10s} ({s / G:.3f} G, ~{s / rate:.2f} s) | rigid {rig:10s} at {t_rig:.3f} s"
-                      f" | elastic {ela:10s} at {t_ela:.3f} s", flush=True)
+                print(
+                    f"  check μ = {mu:g}, θ = {rec['theta_deg']:5.1f}°, α = {rec['alpha_deg']:5.1f}°: "
+                    "statics "
+                    f"{predicted:10s} ({s / G:.3f} G, ~{s / rate:.2f} s) | rigid {rig:10s} at {t_rig:.3f} s"
+                    f" | elastic {ela:10s} at {t_ela:.3f} s",
+                    flush=True,
+                )
         agree_r = sum(c["rigid"] == c["predicted"] for c in checks)
         agree_e = sum(c["elastic"] == c["predicted"] for c in checks)
-        print(f"checks: rigid model agrees with the statics in {agree_r}/{len(checks)}, "
-              f"elastic model in {agree_e}/{len(checks)}")
+        print(
+            f"checks: rigid model agrees with the statics in {agree_r}/{len(checks)}, "
+            f"elastic model in {agree_e}/{len(checks)}"
+        )
     record = dict(command=[sys.executable, *sys.argv], preset=args.preset, mu=args.mu, checks=checks)
     (out / "checks.json").write_text(json.dumps(record, indent=1) + "\n")
-    np.savez(out / "lift_map.npz", theta=thetas, alpha=alphas, mu=np.asarray(args.mu), kind=kind,
-             kind_paper=kind_paper, kinds=np.array(KINDS), pull_G=pull, B=B, size=size, rope_length=L)
+    np.savez(
+        out / "lift_map.npz",
+        theta=thetas,
+        alpha=alphas,
+        mu=np.asarray(args.mu),
+        kind=kind,
+        kind_paper=kind_paper,
+        kinds=np.array(KINDS),
+        pull_G=pull,
+        B=B,
+        size=size,
+        rope_length=L,
+    )
     plot(out, args, thetas, alphas, kind, kind_paper, pull, checks)
     print(f"wrote {out}/lift_map.png, lift_map.npz, checks.json")
     return 0
@@ -247,8 +297,16 @@ def plot(out: Path, args, thetas, alphas, kind, kind_paper, pull, checks) -> Non
     vmax = np.nanpercentile(pull[np.isfinite(pull)], 99)
     for m, mu in enumerate(args.mu):
         a = ax[0, m]
-        a.imshow(kind[m], origin="lower", extent=ext, aspect="auto", cmap=ListedColormap(COLOURS), vmin=-0.5,
-                 vmax=len(KINDS) - 0.5, interpolation="nearest")
+        a.imshow(
+            kind[m],
+            origin="lower",
+            extent=ext,
+            aspect="auto",
+            cmap=ListedColormap(COLOURS),
+            vmin=-0.5,
+            vmax=len(KINDS) - 0.5,
+            interpolation="nearest",
+        )
         differ = (kind[m] != kind_paper[m]).astype(float)
         if differ.any():
             a.contourf(al, th, differ, levels=[0.5, 1.5], hatches=["////"], colors="none")
@@ -261,8 +319,15 @@ def plot(out: Path, args, thetas, alphas, kind, kind_paper, pull, checks) -> Non
                 continue
             ok = c["rigid"] == c["predicted"] and c["elastic"] == c["predicted"]
             for x in (a, b):
-                x.plot(c["alpha_deg"], c["theta_deg"], "o" if ok else "x", ms=7, mfc="none",
-                       mec="k" if ok else "m", mew=1.5)
+                x.plot(
+                    c["alpha_deg"],
+                    c["theta_deg"],
+                    "o" if ok else "x",
+                    ms=7,
+                    mfc="none",
+                    mec="k" if ok else "m",
+                    mew=1.5,
+                )
         for x in (a, b):
             x.set_xlabel("azimuth α from DE towards DH [deg]")
         a.set_ylabel("angle of the rope from the vertical θ [deg]")

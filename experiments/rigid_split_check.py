@@ -21,8 +21,12 @@ import numpy as np  # noqa: E402
 import jaxhoist  # noqa: E402
 from jaxhoist.numerics.rigid_solve import simulate_rigid  # noqa: E402
 
-CASES = (("paper-2.3", None, 20.0, "elastic"), ("paper-4.1", None, 70.0, "elastic"),
-         ("paper-4.1", None, 70.0, "inextensible"), ("paper-2.3", 0.28, 12.0, "inextensible"))
+CASES = (
+    ("paper-2.3", None, 20.0, "elastic"),
+    ("paper-4.1", None, 70.0, "elastic"),
+    ("paper-4.1", None, 70.0, "inextensible"),
+    ("paper-2.3", 0.28, 12.0, "inextensible"),
+)
 
 
 def run() -> dict:

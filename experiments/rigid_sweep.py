@@ -291,8 +291,15 @@ def resolved_phases(tr) -> list[int]:
 CHATTER_CASES = (("paper-2.3", 0.30, 17.0), ("paper-2.3", 0.32, 12.4), ("paper-4.1", 0.38, 20.0))
 
 
-def elastic_check(out: Path, cases=ELASTIC_CASES, k=1.5e9, eps=1e-4, dt=0.002, preset_name="paper-2.3",
-                  name="rigid_elastic.json"):
+def elastic_check(
+    out: Path,
+    cases=ELASTIC_CASES,
+    k=1.5e9,
+    eps=1e-4,
+    dt=0.002,
+    preset_name="paper-2.3",
+    name="rigid_elastic.json",
+):
     """Rigid vs elastic (k, critically damped, ε, p_0 = 1e-4 m x 1.5e7/k) on paper-2.3 at the `cases`:
     the mass-centre distance, and in a window of 50 ms to 0.2 s after each resolved choice (from 10 ms
     after its start) the corners that carry load (mean N > 1e-3 G) in both models."""
@@ -382,10 +389,17 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="4 short runs (a minute or two)")
     p.add_argument("--plot-only", action="store_true", help="figures and summary from runs.jsonl")
     p.add_argument("--elastic", action="store_true", help="rigid vs elastic at k = 1.5e9 N/m (see above)")
-    p.add_argument("--elastic-chatter", action="store_true",
-                   help="rigid vs elastic at k = 1.5e9 N/m where sustained cycles were (CHATTER_CASES)")
-    p.add_argument("--shard", default="0/1", help="i/n: run every n-th of the runs still to do, from the "
-                   "i-th (parallel processes, each with its own --out; concatenate their runs.jsonl)")
+    p.add_argument(
+        "--elastic-chatter",
+        action="store_true",
+        help="rigid vs elastic at k = 1.5e9 N/m where sustained cycles were (CHATTER_CASES)",
+    )
+    p.add_argument(
+        "--shard",
+        default="0/1",
+        help="i/n: run every n-th of the runs still to do, from the "
+        "i-th (parallel processes, each with its own --out; concatenate their runs.jsonl)",
+    )
     p.add_argument("--only-preset", default=None, help="run only this preset")
     p.add_argument("--mus", default=None, help="comma-separated μ values: run only these (first)")
     args = p.parse_args(argv)
@@ -401,8 +415,11 @@ def main(argv=None) -> int:
     done = load_done(path)
     if not args.plot_only:
         runs = run_list(args.quick)
-        todo = [r for r in runs if r["key"] not in done
-                and (args.only_preset is None or r["preset"] == args.only_preset)]
+        todo = [
+            r
+            for r in runs
+            if r["key"] not in done and (args.only_preset is None or r["preset"] == args.only_preset)
+        ]
         if args.mus:
             wanted = {round(float(m), 3) for m in args.mus.split(",")}
             todo = [r for r in todo if round(r["mu"], 3) in wanted and not r["variant"]]

@@ -40,17 +40,24 @@ def main(argv=None) -> int:
     mus = np.linspace(0.2, 0.4, a.n)
     worst = 0.0
     for label, solver in (("default (Rosenbrock-W)", None), ("Tsit5", diffrax.Tsit5())):
-        kw = dict(n_save=31, observables=["final_position", "final_euler"], histories=("position",),
-                  lanes=a.lanes, solver=solver)
+        kw = dict(
+            n_save=31,
+            observables=["final_position", "final_euler"],
+            histories=("position",),
+            lanes=a.lanes,
+            solver=solver,
+        )
         runs = {}
         for n_dev, chunk in ((1, None), (2, None), (4, None), (2, 2 * a.lanes)):
             t = time.perf_counter()
             r = jh.scan(sc, {MU: mus}, a.t1, devices=jax.devices()[:n_dev], chunk_size=chunk, **kw)
             tm = r.attrs["timings_s"]
             runs[(n_dev, chunk)] = r
-            print(f"{label:24s} {n_dev} device(s), chunk {r.attrs['chunk_size']:4d}: "
-                  f"compile {tm['compile']:6.2f} s, compute {tm['compute']:6.3f} s, "
-                  f"wall {time.perf_counter() - t:6.2f} s")
+            print(
+                f"{label:24s} {n_dev} device(s), chunk {r.attrs['chunk_size']:4d}: "
+                f"compile {tm['compile']:6.2f} s, compute {tm['compute']:6.3f} s, "
+                f"wall {time.perf_counter() - t:6.2f} s"
+            )
         ref = runs[(1, None)]
         for key, r in runs.items():
             if key == (1, None):
@@ -59,8 +66,10 @@ def main(argv=None) -> int:
             h = float(np.nanmax(np.abs(ref.histories["position"] - r.histories["position"])))
             same = np.array_equal(ref.num_accepted_steps, r.num_accepted_steps)
             worst = max(worst, d, h)
-            print(f"{label:24s} {key[0]} device(s), chunk {r.attrs['chunk_size']:4d} vs 1 device: max |diff| "
-                  f"observables {d:.3g}, histories {h:.3g}, step counts equal: {same}")
+            print(
+                f"{label:24s} {key[0]} device(s), chunk {r.attrs['chunk_size']:4d} vs 1 device: max |diff| "
+                f"observables {d:.3g}, histories {h:.3g}, step counts equal: {same}"
+            )
     print(f"largest difference over all layouts: {worst:.3g}")
     return 0 if worst == 0.0 else 1
 

@@ -80,9 +80,12 @@ def main(argv=None) -> int:
         st = np.asarray(tr.num_accepted_steps + tr.num_rejected_steps)
         err = np.linalg.norm(np.asarray(tr.position[:, -1] - ref.position[:, -1]), axis=-1)
         rej = np.asarray(tr.num_rejected_steps).sum() / st.sum()
-        print(f"{name:28s} steps {st.sum():8d}, median {np.median(st):6.0f}, max {st.max():6d}, rejected "
-              f"{rej:4.0%}, max error {100 * err.max():.2f} cm, "
-              f"failed {int(np.sum(np.asarray(tr.status) != 0))}", flush=True)
+        print(
+            f"{name:28s} steps {st.sum():8d}, median {np.median(st):6.0f}, max {st.max():6d}, rejected "
+            f"{rej:4.0%}, max error {100 * err.max():.2f} cm, "
+            f"failed {int(np.sum(np.asarray(tr.status) != 0))}",
+            flush=True,
+        )
     return 0
 
 

@@ -102,9 +102,12 @@ def main(argv=None) -> int:
             tm, st = r.attrs["timings_s"], r.num_accepted_steps + r.num_rejected_steps
             err = np.linalg.norm(r["final_position"] - ref["final_position"], axis=-1)
             rej = r.num_rejected_steps.sum() / st.sum()
-            print(f"refresh {k}: {1e3 * tm['compute'] / a.n:.2f} ms per trajectory, steps median "
-                  f"{np.median(st):.0f} max {st.max()}, rejected {rej:.2f}, "
-                  f"max error {100 * err.max():.3f} cm, failed {(r.status != 0).sum()}", flush=True)
+            print(
+                f"refresh {k}: {1e3 * tm['compute'] / a.n:.2f} ms per trajectory, steps median "
+                f"{np.median(st):.0f} max {st.max()}, rejected {rej:.2f}, "
+                f"max error {100 * err.max():.3f} cm, failed {(r.status != 0).sum()}",
+                flush=True,
+            )
     return 0
 
 

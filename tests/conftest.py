@@ -110,9 +110,11 @@ def centred42(paper42) -> jh.Scenario:
     """paper-4.2's box with its mass centre at the box centre, rope at the top-face centre straight below the
     boom tip (a vertical lift through C: no tilt, no yaw, no horizontal force by symmetry), hoist stopped."""
     a, b, c = (float(x) for x in paper42.load.size)
-    return paper42.replace(**{
-        "load.mass_centre": [a / 2, b / 2, c / 2],
-        "rope.attachment": [a / 2, b / 2, c],
-        "boom.tip_position": [a / 2, b / 2, 10.0],
-        "hoist.speed": 0.0,
-    })
+    return paper42.replace(
+        **{
+            "load.mass_centre": [a / 2, b / 2, c / 2],
+            "rope.attachment": [a / 2, b / 2, c],
+            "boom.tip_position": [a / 2, b / 2, 10.0],
+            "hoist.speed": 0.0,
+        }
+    )

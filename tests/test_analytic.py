@@ -99,13 +99,15 @@ def pulled(paper42):
     a, b, c = (float(x) for x in paper42.load.size)
     m, k = float(paper42.load.mass), float(paper42.foundation.stiffness)
     z_b = c / 2 - m * G / (4 * k)  # B's height at rest on the springs
-    return paper42.replace(**{
-        "load.mass_centre": [a / 2, b / 2, c / 2],
-        "rope.attachment": [a, b / 2, c / 2],
-        "boom.tip_position": [a + 20.0, b / 2, z_b],
-        "hoist.speed": 0.5,
-        "foundation.friction_coefficient": 0.5,
-    })
+    return paper42.replace(
+        **{
+            "load.mass_centre": [a / 2, b / 2, c / 2],
+            "rope.attachment": [a, b / 2, c / 2],
+            "boom.tip_position": [a + 20.0, b / 2, z_b],
+            "hoist.speed": 0.5,
+            "foundation.friction_coefficient": 0.5,
+        }
+    )
 
 
 @pytest.mark.parametrize("law", ["coulomb", "bristle"])
@@ -152,9 +154,17 @@ def solve_from(scenario: jh.Scenario, y0: elastic.State, rope_length, ts, rtol=1
     def go(scenario, y0, rope_length, ts):
         c = elastic.constants(scenario, rope_length)
         sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(elastic.vector_field), diffrax.Tsit5(), t0=0.0, t1=ts[-1], dt0=None, y0=y0,
-            args=(scenario, c), saveat=diffrax.SaveAt(ts=ts),
-            stepsize_controller=diffrax.PIDController(rtol=rtol, atol=rtol * 1e-1), max_steps=100_000)
+            diffrax.ODETerm(elastic.vector_field),
+            diffrax.Tsit5(),
+            t0=0.0,
+            t1=ts[-1],
+            dt0=None,
+            y0=y0,
+            args=(scenario, c),
+            saveat=diffrax.SaveAt(ts=ts),
+            stepsize_controller=diffrax.PIDController(rtol=rtol, atol=rtol * 1e-1),
+            max_steps=100_000,
+        )
         return sol.ys
 
     return go(scenario, y0, jnp.asarray(rope_length), jnp.asarray(ts))
@@ -177,12 +187,20 @@ def test_free_swing_period(paper42):
     correction θ²/16 ~ 3e-5, hence 5e-4 relative tolerance."""
     m, d, l0, k_stiff = 1000.0, 0.5, 1.0, 1e8
     tip = np.array([0.5, 0.5, 6.0])
-    sc = paper42.replace(**{
-        "load.size": [1.0, 1.0, 1.0], "load.mass": m, "load.mass_centre": [0.5, 0.5, 0.5],
-        "rope.attachment": [0.5, 0.5, 1.0], "rope.stiffness": k_stiff, "rope.damping": 1e4,
-        "boom.tip_position": tip, "boom.stiffness": [k_stiff] * 3, "boom.damping": [2e4] * 3,
-        "hoist.speed": 0.0,
-    })
+    sc = paper42.replace(
+        **{
+            "load.size": [1.0, 1.0, 1.0],
+            "load.mass": m,
+            "load.mass_centre": [0.5, 0.5, 0.5],
+            "rope.attachment": [0.5, 0.5, 1.0],
+            "rope.stiffness": k_stiff,
+            "rope.damping": 1e4,
+            "boom.tip_position": tip,
+            "boom.stiffness": [k_stiff] * 3,
+            "boom.damping": [2e4] * 3,
+            "hoist.speed": 0.0,
+        }
+    )
     J = float(sc.load.inertia_tensor()[1, 1])
     assert abs(J - m * 2 / 12) < 1e-9
     l = l0 + m * G / k_stiff  # noqa: E741 (the rope length l of the docstring)
@@ -202,9 +220,18 @@ def test_free_swing_period(paper42):
     assert np.allclose(C + R @ np.array([0.0, 0.0, d]), B, atol=1e-14)
     n = sc.foundation.friction.state_size
     z = jnp.zeros(())
-    y0 = elastic.State(position=jnp.asarray(C), velocity=jnp.zeros(3), quaternion=q,
-                       angular_velocity=jnp.zeros(3), tip_position=jnp.asarray(A), tip_velocity=jnp.zeros(3),
-                       friction_state=jnp.zeros((4, n)), hoist_work=z, damping_loss=z, friction_work=z)
+    y0 = elastic.State(
+        position=jnp.asarray(C),
+        velocity=jnp.zeros(3),
+        quaternion=q,
+        angular_velocity=jnp.zeros(3),
+        tip_position=jnp.asarray(A),
+        tip_velocity=jnp.zeros(3),
+        friction_state=jnp.zeros((4, n)),
+        hoist_work=z,
+        damping_loss=z,
+        friction_work=z,
+    )
 
     ts = np.linspace(0.0, 3.6 * T_theory, N_SAVE)
     ys = solve_from(sc, y0, l0, ts)

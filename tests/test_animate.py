@@ -54,8 +54,9 @@ def _fresh_copy(src, dst):
 def test_gif_and_keyframes_are_valid_images_with_the_expected_frames(result_dir, tmp_path):
     d = _fresh_copy(result_dir, tmp_path / "r")
     calls = []
-    paths = an.animate(d, fps=4.0, duration=1.0, fmt="gif", n_keyframes=3, dpi=40,
-                       progress=lambda i, n: calls.append((i, n)))
+    paths = an.animate(
+        d, fps=4.0, duration=1.0, fmt="gif", n_keyframes=3, dpi=40, progress=lambda i, n: calls.append((i, n))
+    )
     gif, png = d / "animation.gif", d / "keyframes.png"
     assert paths == [gif, png]
     with Image.open(gif) as im:
@@ -92,8 +93,9 @@ def test_drawn_geometry_is_the_saved_geometry(result_dir, scene):
         assert [t.get_text() for t in art["labels"]] == ["D", "E", "F", "H"]
         rope = np.asarray(art["rope"].get_data_3d()).T  # (B, A)
         np.testing.assert_allclose(rope[1], arrays["tip_position"][k], atol=1e-12)
-        np.testing.assert_allclose(np.ravel(np.asarray(art["tip"].get_data_3d())), arrays["tip_position"][k],
-                                   atol=1e-12)
+        np.testing.assert_allclose(
+            np.ravel(np.asarray(art["tip"].get_data_3d())), arrays["tip_position"][k], atol=1e-12
+        )
         # B is the rope attachment, the top corner above D: D + c * (the body's ζ axis)
         np.testing.assert_allclose(rope[0], scene.top[k, 0], atol=1e-12)
         # the box is rigid: bottom edges a and b, vertical edges c
@@ -108,8 +110,9 @@ def test_drawn_geometry_is_the_saved_geometry(result_dir, scene):
         # every drawn point lies inside the axis limits, which are equal in scale
         for p in (*drawn, *rope, *top):
             assert np.all(p >= limits[:, 0]) and np.all(p <= limits[:, 1])
-    np.testing.assert_allclose(ax.get_box_aspect() / ax.get_box_aspect()[0],
-                               np.ptp(limits, axis=1) / np.ptp(limits[0]), rtol=1e-9)
+    np.testing.assert_allclose(
+        ax.get_box_aspect() / ax.get_box_aspect()[0], np.ptp(limits, axis=1) / np.ptp(limits[0]), rtol=1e-9
+    )
     # at rest (t = 0, slack-free rope with S = 0) the ground carries the weight: the four arrows add up to
     # the length that stands for m g
     assert arrays["rope_tension"][0] == 0.0
@@ -135,11 +138,24 @@ def test_rigid_phase_log_names_the_state(result_dir, tmp_path):
     n_t = arrays["ts"].size
     arrays["phase_index"] = (np.arange(n_t) >= n_t // 2).astype(np.int64)
     meta["phases"] = [
-        {"t_start": 0.0, "t_end": 0.5, "contact": ["stick"] * 4, "rest": True, "end": "rest:slip",
-         "rope": "elastic", "name": results.phase_name(["stick"] * 4, True)},
-        {"t_start": 0.5, "t_end": 1.0, "contact": ["free", "slide", "stick", "free"], "rest": False,
-         "end": "t1", "rope": "elastic",
-         "name": results.phase_name(["free", "slide", "stick", "free"], False)},
+        {
+            "t_start": 0.0,
+            "t_end": 0.5,
+            "contact": ["stick"] * 4,
+            "rest": True,
+            "end": "rest:slip",
+            "rope": "elastic",
+            "name": results.phase_name(["stick"] * 4, True),
+        },
+        {
+            "t_start": 0.5,
+            "t_end": 1.0,
+            "contact": ["free", "slide", "stick", "free"],
+            "rest": False,
+            "end": "t1",
+            "rope": "elastic",
+            "name": results.phase_name(["free", "slide", "stick", "free"], False),
+        },
     ]
     meta["solver"] = {"model": "rigid"}
     sc = an.scene_from_result(arrays, meta)

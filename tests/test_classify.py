@@ -193,9 +193,32 @@ def test_cli_bifurcation_classify(tmp_path, capsys):
     from jaxhoist.apps import cli
 
     out = tmp_path / "bif"
-    code = cli.main(["bifurcation", "paper-4.2", "--param", "foundation.friction_coefficient", "--bracket",
-                     "0.2", "0.4", "--observable", "final_x", "--t1", "0.3", "--n-save", "31", "--method",
-                     "bisection", "--tol", "1e-3", "--classify", "--quiet", "--no-plots", "--out", str(out)])
+    code = cli.main(
+        [
+            "bifurcation",
+            "paper-4.2",
+            "--param",
+            "foundation.friction_coefficient",
+            "--bracket",
+            "0.2",
+            "0.4",
+            "--observable",
+            "final_x",
+            "--t1",
+            "0.3",
+            "--n-save",
+            "31",
+            "--method",
+            "bisection",
+            "--tol",
+            "1e-3",
+            "--classify",
+            "--quiet",
+            "--no-plots",
+            "--out",
+            str(out),
+        ]
+    )
     assert code == 0
     assert "continuous crossing" in capsys.readouterr().out
     rec = json.loads((out / "bifurcation.json").read_text())

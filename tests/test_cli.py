@@ -26,6 +26,7 @@ SHORT = ["--t1", "0.5", "--n-save", "11"]
 
 def _no_compile(monkeypatch):
     """Make any attempt to compile fail the test (invalid input must be refused before compiling)."""
+
     def boom(*a, **k):
         raise AssertionError("compiled despite invalid input")
 
@@ -99,13 +100,51 @@ def test_simulate_csv_goes_into_identify_unchanged(tmp_path):
     sim = tmp_path / "sim"
     # rtol 1e-8: the data are then exact to well below the fit's tolerance (with the default rtol 1e-3 of the
     # Rosenbrock-W solver the path is off by ~1e-4 relative and the fit lands 4e-4 away from 0.3)
-    assert cli.main(["simulate", "paper-4.2", "--t1", "0.4", "--n-save", "21", "--out", str(sim), "--quiet",
-                     "--no-plots", "--set", "foundation.friction_coefficient=0.3", "--rtol", "1e-8",
-                     "--atol", "1e-10"]) == 0
+    assert (
+        cli.main(
+            [
+                "simulate",
+                "paper-4.2",
+                "--t1",
+                "0.4",
+                "--n-save",
+                "21",
+                "--out",
+                str(sim),
+                "--quiet",
+                "--no-plots",
+                "--set",
+                "foundation.friction_coefficient=0.3",
+                "--rtol",
+                "1e-8",
+                "--atol",
+                "1e-10",
+            ]
+        )
+        == 0
+    )
     fit = tmp_path / "fit"
-    code = cli.main(["identify", "paper-4.2", str(sim / "trajectory.csv"), "--fit", "mu", "--signals",
-                     "position", "--start", "mu=0.25", "--t1", "0.4", "--out", str(fit), "--no-plots",
-                     "--quiet", "--set", "hoist.speed=0.3"])
+    code = cli.main(
+        [
+            "identify",
+            "paper-4.2",
+            str(sim / "trajectory.csv"),
+            "--fit",
+            "mu",
+            "--signals",
+            "position",
+            "--start",
+            "mu=0.25",
+            "--t1",
+            "0.4",
+            "--out",
+            str(fit),
+            "--no-plots",
+            "--quiet",
+            "--set",
+            "hoist.speed=0.3",
+        ]
+    )
     doc = json.loads((fit / "estimates.json").read_text())
     assert code == 0, doc
     assert doc["estimates"]["foundation.friction_coefficient"]["value"] == pytest.approx(0.3, rel=1e-4)
@@ -120,8 +159,18 @@ def cli_plots():
 
 def test_summary_and_progress_lines(short_run, tmp_path, capsys):
     # same shapes and options as short_run: the compiled core is reused, so this is quick
-    code = cli.main(["simulate", "paper-4.2", *SHORT, "--out", str(tmp_path), "--no-plots",
-                     "--set", "foundation.friction_coefficient=0.3"])
+    code = cli.main(
+        [
+            "simulate",
+            "paper-4.2",
+            *SHORT,
+            "--out",
+            str(tmp_path),
+            "--no-plots",
+            "--set",
+            "foundation.friction_coefficient=0.3",
+        ]
+    )
     assert code == 0
     cap = capsys.readouterr()
     assert "compiling (cached in this process)" in cap.err and "solving ..." in cap.err
@@ -200,8 +249,15 @@ def test_extension_subcommands_plug_in(monkeypatch, capsys):
     broken = types.ModuleType("fake_broken_module")  # exists, but has no configure_parser: skipped
     monkeypatch.setitem(sys.modules, "fake_scan_module", fake)
     monkeypatch.setitem(sys.modules, "fake_broken_module", broken)
-    monkeypatch.setattr(cli, "EXTENSIONS", {"scan": "fake_scan_module", "other": "fake_broken_module",
-                                            "missing": "jaxhoist.apps.no_such_module"})
+    monkeypatch.setattr(
+        cli,
+        "EXTENSIONS",
+        {
+            "scan": "fake_scan_module",
+            "other": "fake_broken_module",
+            "missing": "jaxhoist.apps.no_such_module",
+        },
+    )
     assert cli.main(["scan", "--n", "7"]) == 0
     assert calls == [7]
     help_text = cli.build_parser().format_help()
@@ -215,10 +271,11 @@ def test_readme_scenario_reference_lists_every_field():
         tbl = table.split(":")[0]
         for field in fields:
             assert f"`{field}`" in section, f"README scenario reference lacks {tbl}.{field}"
-    for cmd in ('python3.11 -m venv .venv && .venv/bin/pip install -e . && .venv/bin/jaxhoist simulate '
-                'paper-4.2 --out out/paper-4.2',
-                'python3.11 -m venv .venv && .venv/bin/pip install -e ".[test]" && '
-                '.venv/bin/python -m pytest -q'):
+    for cmd in (
+        "python3.11 -m venv .venv && .venv/bin/pip install -e . && .venv/bin/jaxhoist simulate "
+        "paper-4.2 --out out/paper-4.2",
+        'python3.11 -m venv .venv && .venv/bin/pip install -e ".[test]" && .venv/bin/python -m pytest -q',
+    ):
         assert cmd in readme
 
 
@@ -264,9 +321,11 @@ def test_library_hints_use_the_flag_names(monkeypatch, capsys):
         p = subparsers.add_parser("scan")
 
         def run(args):
-            raise ScenarioError("out/x holds chunks of a different scan (other scenario, values, times, "
-                                "observables or solver options): use another out_dir, or resume=False to "
-                                "overwrite it")
+            raise ScenarioError(
+                "out/x holds chunks of a different scan (other scenario, values, times, "
+                "observables or solver options): use another out_dir, or resume=False to "
+                "overwrite it"
+            )
 
         p.set_defaults(func=run)
 

@@ -45,10 +45,18 @@ def test_energy_balance_over_paper_4_2(paper42, law):
 def _state(sc, position, velocity, q, omega, tip, tip_velocity):
     n = sc.foundation.friction.state_size
     z = jnp.zeros(())
-    return elastic.State(position=jnp.asarray(position), velocity=jnp.asarray(velocity), quaternion=q,
-                         angular_velocity=jnp.asarray(omega), tip_position=jnp.asarray(tip),
-                         tip_velocity=jnp.asarray(tip_velocity), friction_state=jnp.zeros((4, n)),
-                         hoist_work=z, damping_loss=z, friction_work=z)
+    return elastic.State(
+        position=jnp.asarray(position),
+        velocity=jnp.asarray(velocity),
+        quaternion=q,
+        angular_velocity=jnp.asarray(omega),
+        tip_position=jnp.asarray(tip),
+        tip_velocity=jnp.asarray(tip_velocity),
+        friction_state=jnp.zeros((4, n)),
+        hoist_work=z,
+        damping_loss=z,
+        friction_work=z,
+    )
 
 
 @jax.jit

@@ -17,13 +17,14 @@ G = 9.81
 def n_d_paper(a, b, G, S, B, C):
     """N_D of the paper's eq. (2.8), typed in independently of `linear_corner_loads`:
 
-        N_D = [3ab(G - S_z) + 2b(S_z x_B - G x_C - S_x z_B) + 2a(S_z y_B - G y_C - S_y z_B)] / (4ab).
+    N_D = [3ab(G - S_z) + 2b(S_z x_B - G x_C - S_x z_B) + 2a(S_z y_B - G y_C - S_y z_B)] / (4ab).
     """
     Sx, Sy, Sz = S
     xB, yB, zB = B
     xC, yC = C[0], C[1]
-    return (3 * a * b * (G - Sz) + 2 * b * (Sz * xB - G * xC - Sx * zB)
-            + 2 * a * (Sz * yB - G * yC - Sy * zB)) / (4 * a * b)
+    return (
+        3 * a * b * (G - Sz) + 2 * b * (Sz * xB - G * xC - Sx * zB) + 2 * a * (Sz * yB - G * yC - Sy * zB)
+    ) / (4 * a * b)
 
 
 def corner_loads_paper(a, b, G, S, B, C):
@@ -42,12 +43,14 @@ def corner_loads_paper(a, b, G, S, B, C):
     def my(S, B, C):
         return mirror(S, 1, b, True), mirror(B, 1, b), mirror(C, 1, b)
 
-    return np.array([
-        n_d_paper(a, b, G, S, B, C),
-        n_d_paper(a, b, G, *mx(S, B, C)),
-        n_d_paper(a, b, G, *mx(*my(S, B, C))),
-        n_d_paper(a, b, G, *my(S, B, C)),
-    ])
+    return np.array(
+        [
+            n_d_paper(a, b, G, S, B, C),
+            n_d_paper(a, b, G, *mx(S, B, C)),
+            n_d_paper(a, b, G, *mx(*my(S, B, C))),
+            n_d_paper(a, b, G, *my(S, B, C)),
+        ]
+    )
 
 
 @pytest.fixture(scope="module")

@@ -25,8 +25,16 @@ from jaxhoist.numerics.solve import solve  # noqa: E402
 MU = "foundation.friction_coefficient"
 DT = 1e-3
 T1 = 0.2
-FIELDS = ("position", "velocity", "euler", "angular_velocity", "tip_position", "hoist_work", "damping_loss",
-          "friction_work")
+FIELDS = (
+    "position",
+    "velocity",
+    "euler",
+    "angular_velocity",
+    "tip_position",
+    "hoist_work",
+    "damping_loss",
+    "friction_work",
+)
 
 
 @pytest.fixture(scope="module")
@@ -72,8 +80,18 @@ def test_scan_sensitivities_match_differences_of_the_same_steps(sc):
     solutions at μ ± 1e-5 (the same discrete map; measured agreement 7e-9 relative: the truncation of the
     difference, O(h²), and round-off / (2h) ~ 1e-11 m / 2e-5 over a derivative of 0.016 m)."""
     h = 1e-5
-    res = scan(sc, {MU: [0.3 - h, 0.3, 0.3 + h]}, T1, observables=["final_x"], n_save=2,
-               solver=diffrax.Bosh3(), dt0=DT, fixed_step=True, derivatives=True, lanes=4)
+    res = scan(
+        sc,
+        {MU: [0.3 - h, 0.3, 0.3 + h]},
+        T1,
+        observables=["final_x"],
+        n_save=2,
+        solver=diffrax.Bosh3(),
+        dt0=DT,
+        fixed_step=True,
+        derivatives=True,
+        lanes=4,
+    )
     assert np.all(res.ok) and np.all(res.num_accepted_steps == round(T1 / DT))
     x, dx = res["final_x"], res["d_final_x"][:, 0]
     central = (x[2] - x[0]) / (2 * h)

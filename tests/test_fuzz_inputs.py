@@ -17,8 +17,9 @@ from jaxhoist._errors import MAX_MESSAGE_CHARS
 from jaxhoist.apps import cli, simulate_cli
 
 PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2")
-FUZZ = settings(max_examples=60, derandomize=True, deadline=None,
-                suppress_health_check=[HealthCheck.too_slow])
+FUZZ = settings(
+    max_examples=60, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.too_slow]
+)
 
 
 def _text(name: str) -> str:
@@ -28,10 +29,34 @@ def _text(name: str) -> str:
 TEXTS = {n: _text(n) for n in PRESETS}
 
 # Values a user might type where a number, a 3-vector or a string belongs.
-WRONG_VALUES = ['"12.5"', "true", "[]", "[1.0, 2.0]", "[[1.0, 2.0, 3.0]]", "1" + "0" * 400, "-1", "nan",
-                "inf", "-inf", "{ a = 1 }", "1e999", "0x10", "1_000", "0.3_0", '"', "[1, [2, [3]]]",
-                "1e-320", "9" * 5000, "[" * 2000 + "]" * 2000, "[" + "0.3, " * 20000 + "0.3]", "1979-05-27",
-                "+0.0", "-0.0", "1e300", "1e-300"]
+WRONG_VALUES = [
+    '"12.5"',
+    "true",
+    "[]",
+    "[1.0, 2.0]",
+    "[[1.0, 2.0, 3.0]]",
+    "1" + "0" * 400,
+    "-1",
+    "nan",
+    "inf",
+    "-inf",
+    "{ a = 1 }",
+    "1e999",
+    "0x10",
+    "1_000",
+    "0.3_0",
+    '"',
+    "[1, [2, [3]]]",
+    "1e-320",
+    "9" * 5000,
+    "[" * 2000 + "]" * 2000,
+    "[" + "0.3, " * 20000 + "0.3]",
+    "1979-05-27",
+    "+0.0",
+    "-0.0",
+    "1e300",
+    "1e-300",
+]
 
 
 @st.composite
@@ -100,33 +125,87 @@ def _trap(*args, **kwargs):
     raise _Reached
 
 
-PATHS = ["foundation.friction_coefficient", "rope.stiffness", "hoist.speed", "load.size", "load.mass",
-         "load.mass_centre", "boom.tip_position", "boom.stiffness", "gravity", "rope.attachment",
-         "foundation.friction.regularisation_velocity", "t1", "name", "description", "load.mass.real",
-         "load", "foundation.friction", "rope.stifness", "_private", "load..mass", "load.mass[0]", ""]
+PATHS = [
+    "foundation.friction_coefficient",
+    "rope.stiffness",
+    "hoist.speed",
+    "load.size",
+    "load.mass",
+    "load.mass_centre",
+    "boom.tip_position",
+    "boom.stiffness",
+    "gravity",
+    "rope.attachment",
+    "foundation.friction.regularisation_velocity",
+    "t1",
+    "name",
+    "description",
+    "load.mass.real",
+    "load",
+    "foundation.friction",
+    "rope.stifness",
+    "_private",
+    "load..mass",
+    "load.mass[0]",
+    "",
+]
 NUMBERS = st.one_of(
     st.floats(allow_nan=True, allow_infinity=True).map(repr),
-    st.integers(-10**400, 10**400).map(str),
-    st.sampled_from(["0_3", "0x10", "1e", ".5", "5.", "+1", "--1", "1,5", "١", "½", "1e999", "nan", "inf",
-                     "", " ", "[", "]", "[1,", "true", "null", '"0.3"']),
+    st.integers(-(10**400), 10**400).map(str),
+    st.sampled_from(
+        [
+            "0_3",
+            "0x10",
+            "1e",
+            ".5",
+            "5.",
+            "+1",
+            "--1",
+            "1,5",
+            "١",
+            "½",
+            "1e999",
+            "nan",
+            "inf",
+            "",
+            " ",
+            "[",
+            "]",
+            "[1,",
+            "true",
+            "null",
+            '"0.3"',
+        ]
+    ),
 )
 VALUES = st.one_of(
     NUMBERS,
     st.lists(st.floats(allow_nan=True, allow_infinity=True), max_size=5).map(lambda v: str(v)),
-    st.lists(st.sampled_from(["1", "2.5", "0_1", "true", "[1]", '"a"', "1e400", "9" * 400]), max_size=4)
-    .map(lambda v: "[" + ", ".join(v) + "]"),
+    st.lists(st.sampled_from(["1", "2.5", "0_1", "true", "[1]", '"a"', "1e400", "9" * 400]), max_size=4).map(
+        lambda v: "[" + ", ".join(v) + "]"
+    ),
     st.integers(0, 3000).map(lambda n: "[" * n + "]" * n),
     st.text(max_size=20),
 )
 
 
 @FUZZ
-@given(path=st.one_of(st.sampled_from(PATHS), st.text(max_size=15)), value=VALUES,
-       sep=st.sampled_from(["=", "=", "=", ":", "=="]))
+@given(
+    path=st.one_of(st.sampled_from(PATHS), st.text(max_size=15)),
+    value=VALUES,
+    sep=st.sampled_from(["=", "=", "=", ":", "=="]),
+)
 def test_simulate_set_is_validated_or_refused_in_one_line(fuzz_dir, monkeypatch_module, path, value, sep):
     err = io.StringIO()
-    argv = ["simulate", "paper-4.2", "--quiet", "--out", str(fuzz_dir / "never-written"), "--set",
-            f"{path}{sep}{value}"]
+    argv = [
+        "simulate",
+        "paper-4.2",
+        "--quiet",
+        "--out",
+        str(fuzz_dir / "never-written"),
+        "--set",
+        f"{path}{sep}{value}",
+    ]
     with contextlib.redirect_stderr(err):
         try:
             code = cli.main(argv)

@@ -367,7 +367,9 @@ def test_plot_fit_shows_angles_in_degrees():
     fig = ident.plot_fit(res)
     axes = [ax for ax in fig.axes if ax.get_visible()]
     assert [ax.get_ylabel() for ax in axes] == [
-        "euler_psi [deg]", "angular_velocity_xi [deg/s]", "position_x [m]"
+        "euler_psi [deg]",
+        "angular_velocity_xi [deg/s]",
+        "position_x [m]",
     ]
     np.testing.assert_allclose(axes[0].lines[0].get_ydata(), np.degrees(0.1 * t))
     np.testing.assert_allclose(axes[1].lines[1].get_ydata(), np.degrees(0.2 + 1e-3))

@@ -33,8 +33,13 @@ def traj42():
 def test_npz_round_trip_preserves_arrays_units_and_scenario(traj42, tmp_path):
     scenario, traj = traj42
     arrays = results.trajectory_arrays(traj)
-    npz, meta = results.save_trajectory(tmp_path / "run" / "trajectory", traj, scenario,
-                                        command=["jaxhoist", "simulate", "paper-4.2"], options={"rtol": 1e-8})
+    npz, meta = results.save_trajectory(
+        tmp_path / "run" / "trajectory",
+        traj,
+        scenario,
+        command=["jaxhoist", "simulate", "paper-4.2"],
+        options={"rtol": 1e-8},
+    )
     assert npz.suffix == ".npz" and meta.suffix == ".json" and npz.parent == meta.parent
 
     loaded = results.load_trajectory(npz)
@@ -43,8 +48,9 @@ def test_npz_round_trip_preserves_arrays_units_and_scenario(traj42, tmp_path):
         assert loaded[name].shape == a.shape and loaded[name].dtype == a.dtype, name
         np.testing.assert_array_equal(loaded[name], a, err_msg=name)
     # the same file by stem or by sidecar path
-    np.testing.assert_array_equal(results.load_trajectory(tmp_path / "run" / "trajectory.json")["position"],
-                                  arrays["position"])
+    np.testing.assert_array_equal(
+        results.load_trajectory(tmp_path / "run" / "trajectory.json")["position"], arrays["position"]
+    )
 
     units = results.units(npz)
     assert units == {k: u for k, (u, _) in results.TRAJECTORY_ARRAYS.items()}
@@ -64,17 +70,26 @@ def test_npz_round_trip_preserves_arrays_units_and_scenario(traj42, tmp_path):
 
     # derived arrays stay consistent through the file: R = ΣN_i, E_mech = Σ terms
     np.testing.assert_allclose(loaded["ground_reaction"], loaded["normal_forces"].sum(axis=1), rtol=1e-12)
-    terms = sum(loaded[f"energy_{k}"] for k in ("kinetic", "potential", "ground_spring", "rope_spring",
-                                                 "boom_spring"))
+    terms = sum(
+        loaded[f"energy_{k}"] for k in ("kinetic", "potential", "ground_spring", "rope_spring", "boom_spring")
+    )
     np.testing.assert_allclose(loaded["energy_mechanical"], terms, rtol=1e-12)
-    np.testing.assert_allclose(loaded["energy_residual"], np.asarray(traj.energy_residual()),
-                               rtol=0, atol=1e-9)
+    np.testing.assert_allclose(
+        loaded["energy_residual"], np.asarray(traj.energy_residual()), rtol=0, atol=1e-9
+    )
 
 
 def test_liftoff_and_detach_times():
     ts = np.linspace(0.0, 4.0, 5)
-    n = np.array([[1.0, 1.0, 1.0, 1.0], [0.0, 2.0, 1.0, 1.0], [0.0, 0.0, 3.0, 0.0],
-                  [0.0, 0.0, 0.0, 0.0], [0.0, 0.0, 1.0, 0.0]])  # F touches down again at t = 4 s
+    n = np.array(
+        [
+            [1.0, 1.0, 1.0, 1.0],
+            [0.0, 2.0, 1.0, 1.0],
+            [0.0, 0.0, 3.0, 0.0],
+            [0.0, 0.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+        ]
+    )  # F touches down again at t = 4 s
     assert results.liftoff_time(ts, n) == 3.0
     assert results.corner_detach_times(ts, n) == [1.0, 2.0, 3.0, 2.0]
     assert results.liftoff_time(ts, np.ones((5, 4))) is None
@@ -133,12 +148,23 @@ def _fake_sweep(mu, data, units, components):
     from jaxhoist.apps.scan_result import ScanResult
 
     n = mu.size
-    return ScanResult(params=["foundation.friction_coefficient"], mode="sweep",
-                      coords={"foundation.friction_coefficient": mu}, shape=(n,), data=data,
-                      components=components, status=np.zeros(n, dtype=np.int32), reasons={},
-                      num_accepted_steps=np.full(n, 100), num_rejected_steps=np.zeros(n, dtype=int), ts=None,
-                      histories={}, units={"foundation.friction_coefficient": "-", **units}, descriptions={},
-                      attrs={})
+    return ScanResult(
+        params=["foundation.friction_coefficient"],
+        mode="sweep",
+        coords={"foundation.friction_coefficient": mu},
+        shape=(n,),
+        data=data,
+        components=components,
+        status=np.zeros(n, dtype=np.int32),
+        reasons={},
+        num_accepted_steps=np.full(n, 100),
+        num_rejected_steps=np.zeros(n, dtype=int),
+        ts=None,
+        histories={},
+        units={"foundation.friction_coefficient": "-", **units},
+        descriptions={},
+        attrs={},
+    )
 
 
 def test_scan_plots_use_degrees_and_draw_no_empty_panels(tmp_path):
@@ -148,8 +174,12 @@ def test_scan_plots_use_degrees_and_draw_no_empty_panels(tmp_path):
     psi = np.stack([np.zeros(5), 0.1 * mu, np.zeros(5)], axis=1)  # final (φ, ψ, ϑ) [rad]
     detach = np.stack([mu, np.full(5, np.inf), 2 * mu, np.full(5, np.inf)], axis=1)  # E and H never leave
     data = {"final_euler": psi, "liftoff_time": np.full(5, np.inf), "detachment_times": detach}
-    res = _fake_sweep(mu, data, {"final_euler": "rad", "liftoff_time": "s", "detachment_times": "s"},
-                      {"final_euler": ("phi", "psi", "theta"), "detachment_times": ("D", "E", "F", "H")})
+    res = _fake_sweep(
+        mu,
+        data,
+        {"final_euler": "rad", "liftoff_time": "s", "detachment_times": "s"},
+        {"final_euler": ("phi", "psi", "theta"), "detachment_times": ("D", "E", "F", "H")},
+    )
     fig = scan_plots.plot_sweep(res, "final_euler")
     assert "[deg]" in fig.get_suptitle() and "rad" not in fig.get_suptitle()
     np.testing.assert_allclose(fig.axes[1].lines[0].get_ydata(), np.degrees(0.1 * mu))
@@ -181,12 +211,32 @@ def test_rigid_results_keep_the_phase_log(traj42, tmp_path):
 
     scenario, traj = traj42
     n = N_SAVE
-    names = ("ts", "position", "velocity", "euler", "angular_velocity", "corners", "normal_forces",
-             "friction_forces", "ground_reaction", "rope_tension", "tip_position", "energy", "hoist_work",
-             "damping_loss", "friction_work", "states", "status", "num_accepted_steps", "num_rejected_steps")
+    names = (
+        "ts",
+        "position",
+        "velocity",
+        "euler",
+        "angular_velocity",
+        "corners",
+        "normal_forces",
+        "friction_forces",
+        "ground_reaction",
+        "rope_tension",
+        "tip_position",
+        "energy",
+        "hoist_work",
+        "damping_loss",
+        "friction_work",
+        "states",
+        "status",
+        "num_accepted_steps",
+        "num_rejected_steps",
+    )
     fields = {k: getattr(traj, k) for k in names}
-    phases = (PhaseRecord(0.0, 0.4, ("stick",) * 4, True, "rest:slip"),
-              PhaseRecord(0.4, T1, ("free", "slide", "slide", "free"), False, "t1"))
+    phases = (
+        PhaseRecord(0.0, 0.4, ("stick",) * 4, True, "rest:slip"),
+        PhaseRecord(0.4, T1, ("free", "slide", "slide", "free"), False, "t1"),
+    )
     index = jnp.asarray(np.arange(n) > n // 2, dtype=int)
     rigid_like = types.SimpleNamespace(**fields, impact_loss=jnp.zeros(n), phase_index=index, phases=phases)
     npz, meta = results.save_trajectory(tmp_path / "r", rigid_like, scenario)

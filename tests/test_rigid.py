@@ -20,8 +20,18 @@ N_SAVE = 61
 T1 = 1.5
 
 
-def _scenario(*, size=(1.0, 1.0, 1.0), mass=1000.0, mu=0.3, attachment=(0.5, 0.0, 0.5), tip=(0.5, -10.0, 0.5),
-              rope_stiffness=1e5, rope_damping=1e4, speed=0.1, travel=math.inf) -> jh.Scenario:
+def _scenario(
+    *,
+    size=(1.0, 1.0, 1.0),
+    mass=1000.0,
+    mu=0.3,
+    attachment=(0.5, 0.0, 0.5),
+    tip=(0.5, -10.0, 0.5),
+    rope_stiffness=1e5,
+    rope_damping=1e4,
+    speed=0.1,
+    travel=math.inf,
+) -> jh.Scenario:
     """A box pulled by a soft rope from a stiff, light boom tip (tip deflection ~ S / 1e9 m); the hoist
     runs at `speed` from t = 0+ and stops dead after taking in `travel` metres of rope."""
     return jh.Scenario(
@@ -30,7 +40,8 @@ def _scenario(*, size=(1.0, 1.0, 1.0), mass=1000.0, mu=0.3, attachment=(0.5, 0.0
         rope=jh.Rope(rope_stiffness, rope_damping, list(attachment)),
         hoist=jh.RampedHoist(speed, 0.0, travel),
         boom=jh.Boom(list(tip), 10.0, 1e9, 2e5),
-        name="rigid-test", t1=T1,
+        name="rigid-test",
+        t1=T1,
     )
 
 
@@ -50,8 +61,8 @@ def test_minimum_norm_corner_forces_are_the_linear_law(paper42):
     # Equilibrium of forces and of moments about D, unknowns (T_x, T_y, N) per corner; numpy pinv.
     E = np.zeros((6, 12))
     for i, (x, y) in enumerate(xy):
-        E[0:3, 3 * i:3 * i + 3] = np.eye(3)
-        E[3:6, 3 * i:3 * i + 3] = np.array([[0, 0, y], [0, 0, -x], [-y, x, 0]])  # r × F with r = (x, y, 0)
+        E[0:3, 3 * i : 3 * i + 3] = np.eye(3)
+        E[3:6, 3 * i : 3 * i + 3] = np.array([[0, 0, y], [0, 0, -x], [-y, x, 0]])  # r × F with r = (x, y, 0)
     rhs = np.concatenate([-S + [0, 0, G], -np.cross(B, S) + np.cross(C, [0, 0, -G]) * -1.0])
     lam = np.linalg.pinv(E) @ rhs
     lin = np.asarray(statics.rest_statics_jit(sc, jnp.asarray(S)).corner_loads)
@@ -175,8 +186,9 @@ def test_outputs_of_any_size(slide_run):
     # Coulomb friction μN once the slip is well under way (the first ms after the start, at slip speeds
     # below 1e-8 m/s, the slip direction still blends with the phase's starting hint).
     sliding = ts > t_s + 0.05
-    np.testing.assert_allclose(np.asarray(tr.friction_forces)[sliding, :, 1].sum(axis=1), 0.3 * 1000.0 * 9.81,
-                               rtol=1e-9)
+    np.testing.assert_allclose(
+        np.asarray(tr.friction_forces)[sliding, :, 1].sum(axis=1), 0.3 * 1000.0 * 9.81, rtol=1e-9
+    )
     assert np.all(np.asarray(tr.phase_index)[ts < t_s - 1e-3] == 0)
     resid = np.abs(np.asarray(tr.energy_residual()))
     assert resid.max() < 1e-6 * float(np.asarray(tr.hoist_work)[-1])
@@ -185,8 +197,15 @@ def test_outputs_of_any_size(slide_run):
 def test_tipping_about_an_edge_at_the_statics_threshold():
     """A tall box with high friction, pulled obliquely upwards from the middle of its top front edge, tips
     about its front bottom edge DE (F, H lift) when the pull reaches the statics tip threshold."""
-    sc = _scenario(size=(1.0, 1.0, 2.0), mu=0.9, attachment=(0.5, 0.0, 2.0), tip=(0.5, -6.0, 10.0),
-                   rope_stiffness=2e5, rope_damping=2e4, speed=0.05)
+    sc = _scenario(
+        size=(1.0, 1.0, 2.0),
+        mu=0.9,
+        attachment=(0.5, 0.0, 2.0),
+        tip=(0.5, -6.0, 10.0),
+        rope_stiffness=2e5,
+        rope_damping=2e4,
+        speed=0.05,
+    )
     tr = simulate_rigid(sc, T1, n_save=N_SAVE)
     ph = tr.phases
     assert ph[0].rest and ph[0].end == "rest:tip"
@@ -211,8 +230,16 @@ def test_rocking_impacts_settle_and_the_energy_balance_closes():
     started to tip about DE: it falls back, edge FH strikes the ground, the box rocks on alternate edges
     with plastic impacts (restitution 0) losing energy at each, and settles flat. The energy lost in the
     impacts closes the balance E(t) - E(0) = W_hoist - D_damping - W_friction - W_impact."""
-    sc = _scenario(size=(1.0, 1.0, 2.0), mu=0.9, attachment=(0.5, 0.0, 2.0), tip=(0.5, -6.0, 10.0),
-                   rope_stiffness=2e5, rope_damping=2e4, speed=0.05, travel=0.018)
+    sc = _scenario(
+        size=(1.0, 1.0, 2.0),
+        mu=0.9,
+        attachment=(0.5, 0.0, 2.0),
+        tip=(0.5, -6.0, 10.0),
+        rope_stiffness=2e5,
+        rope_damping=2e4,
+        speed=0.05,
+        travel=0.018,
+    )
     tr = simulate_rigid(sc, T1, n_save=N_SAVE)
     ph = tr.phases
     assert ph[0].end == "rest:tip" and ph[1].contact == ("stick", "stick", "free", "free")
@@ -233,8 +260,16 @@ def test_errors_are_raised_not_guessed():
     with pytest.raises(jh.ScenarioError, match="restitution"):
         simulate_rigid(_scenario(), T1, n_save=N_SAVE, restitution=1.5)
     # A phase budget too small for the rocking sequence: a clear error naming the last phases.
-    sc = _scenario(size=(1.0, 1.0, 2.0), mu=0.9, attachment=(0.5, 0.0, 2.0), tip=(0.5, -6.0, 10.0),
-                   rope_stiffness=2e5, rope_damping=2e4, speed=0.05, travel=0.018)
+    sc = _scenario(
+        size=(1.0, 1.0, 2.0),
+        mu=0.9,
+        attachment=(0.5, 0.0, 2.0),
+        tip=(0.5, -6.0, 10.0),
+        rope_stiffness=2e5,
+        rope_damping=2e4,
+        speed=0.05,
+        travel=0.018,
+    )
     with pytest.raises(RigidContactError, match="(?s)max_phases = 3.*impact:FH"):
         simulate_rigid(sc, T1, n_save=N_SAVE, max_phases=3)
 
@@ -282,8 +317,27 @@ tip_mass = {float(sc.boom.tip_mass)}
 stiffness = {np.asarray(sc.boom.stiffness).tolist()}
 damping = {np.asarray(sc.boom.damping).tolist()}
 """)
-    assert main(["simulate", str(path), "--model", "rigid", "--n-save", str(N_SAVE), "--rtol", "1e-8",
-                 "--atol", "1e-9", "--out", str(tmp_path / "out"), "--no-plots", "--quiet"]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                str(path),
+                "--model",
+                "rigid",
+                "--n-save",
+                str(N_SAVE),
+                "--rtol",
+                "1e-8",
+                "--atol",
+                "1e-9",
+                "--out",
+                str(tmp_path / "out"),
+                "--no-plots",
+                "--quiet",
+            ]
+        )
+        == 0
+    )
     arrays = load_trajectory(tmp_path / "out" / "trajectory")
     np.testing.assert_allclose(arrays["position"], np.asarray(ref.position), atol=1e-12)
     np.testing.assert_allclose(arrays["energy_residual"], np.asarray(ref.energy_residual()), atol=1e-9)

@@ -117,7 +117,8 @@ def test_compliant_phase_passes_a_rocking_train_and_hands_back_at_rest():
         rope=jh.Rope(2e5, 2e4, [0.5, 0.0, 2.0]),
         hoist=jh.RampedHoist(0.05, 0.0, 0.018),
         boom=jh.Boom([0.5, -6.0, 10.0], 10.0, 1e9, 2e5),
-        name="rigid-test", t1=1.5,
+        name="rigid-test",
+        t1=1.5,
     )
     rule = ChatterRule(window=1.0, min_impacts=1, decay=0.0)
     tr = simulate_rigid(sc, 1.5, n_save=61, chatter=rule)

@@ -60,6 +60,7 @@ def test_order_three_for_exact_and_wrong_jacobians(which):
     """Halving the step divides the error by ~2^3 whether W is the true Jacobian or a wrong one (only its
     diagonal, scaled by 0.7): the W-method keeps its order, which is what licenses the structured
     linearisation of the model."""
+
     def jac(t, y):
         J = jax.jacfwd(lambda yy: _smooth_rhs(t, yy, None))(y)
         return J if which == "exact" else 0.7 * jnp.diag(jnp.diag(J))
@@ -74,8 +75,11 @@ def _sliding_state(sc):
     """A state of paper-4.2 with every corner pressed in and sliding slowly (inside the friction
     regularisation for two corners), the rope taut."""
     y0, c = initial_state(sc)
-    y = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y0,
-                    (jnp.array([2e-4, -1e-4, -1e-3]), jnp.array([1e-4, -2e-4, 3e-4])))
+    y = eqx.tree_at(
+        lambda s: (s.velocity, s.angular_velocity),
+        y0,
+        (jnp.array([2e-4, -1e-4, -1e-3]), jnp.array([1e-4, -2e-4, 3e-4])),
+    )
     return y, (sc, c)
 
 
@@ -100,10 +104,19 @@ def test_linearisation_matches_the_model_derivatives(paper42):
         q = y.quaternion
         w1, x1, y1, z1 = q
         w2, x2, y2, z2 = dq
-        qn = jnp.array([w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2, w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
-                        w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2, w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2])
-        yy = eqx.tree_at(lambda s: (s.position, s.quaternion, s.tip_position), y,
-                         (y.position + X[:3], qn, y.tip_position + X[6:]))
+        qn = jnp.array(
+            [
+                w1 * w2 - x1 * x2 - y1 * y2 - z1 * z2,
+                w1 * x2 + x1 * w2 + y1 * z2 - z1 * y2,
+                w1 * y2 - x1 * z2 + y1 * w2 + z1 * x2,
+                w1 * z2 + x1 * y2 - y1 * x2 + z1 * w2,
+            ]
+        )
+        yy = eqx.tree_at(
+            lambda s: (s.position, s.quaternion, s.tip_position),
+            y,
+            (y.position + X[:3], qn, y.tip_position + X[6:]),
+        )
         f = vector_field(t0, yy, args)
         return jnp.concatenate([f.velocity, f.angular_velocity, f.tip_velocity])
 

@@ -138,8 +138,15 @@ def test_layout_independent_and_failing_group_mate_isolated(paper42, solver):
     base["boom.tip_mass"] = np.full(n, tip_m)
     bad = {k: v.copy() for k, v in base.items()}
     bad["rope.stiffness"][1], bad["boom.tip_mass"][1] = 1e16, 1e-12
-    kw = dict(mode="points", observables=["final_position"], n_save=11, lanes=4, sort=False, max_steps=2000,
-              solver=solver)
+    kw = dict(
+        mode="points",
+        observables=["final_position"],
+        n_save=11,
+        lanes=4,
+        sort=False,
+        max_steps=2000,
+        solver=solver,
+    )
     two = scan(paper42, bad, 0.5, chunk_size=8, **kw)
     one = scan(paper42, bad, 0.5, chunk_size=4, devices=jax.devices()[:1], **kw)
     clean = scan(paper42, base, 0.5, chunk_size=8, **kw)
@@ -519,8 +526,15 @@ def test_fingerprint_sees_constants_and_closures_of_custom_observables():
     members = MUS[:, None]
 
     def fp(fn):
-        spec = _Spec(paths=(MU,), observables=tuple(resolve({"x": fn})), histories=(),
-                     options=jh.SolverOptions(), lanes=2, devices=(), derivatives=False)
+        spec = _Spec(
+            paths=(MU,),
+            observables=tuple(resolve({"x": fn})),
+            histories=(),
+            options=jh.SolverOptions(),
+            lanes=2,
+            devices=(),
+            derivatives=False,
+        )
         return _fingerprint(sc, spec, members, ts, True)
 
     def closure(scale):
@@ -602,11 +616,22 @@ def test_fingerprint_is_the_same_in_every_process():
     from jaxhoist.numerics.batch import BatchSpec as _Spec
     from jaxhoist.numerics.observables import resolve
 
-    spec = _Spec(paths=(MU,), observables=tuple(resolve(KW["observables"])), histories=(),
-                 options=jh.SolverOptions(), lanes=2, devices=(), derivatives=False)
+    spec = _Spec(
+        paths=(MU,),
+        observables=tuple(resolve(KW["observables"])),
+        histories=(),
+        options=jh.SolverOptions(),
+        lanes=2,
+        devices=(),
+        derivatives=False,
+    )
     here = _fingerprint(oblique_box(), spec, MUS[:, None], np.linspace(0.0, T1, 3), True)
-    out = subprocess.run([sys.executable, "-c", _FP_WORKER, str(Path(__file__).parent)], capture_output=True,
-                         text=True, timeout=300)
+    out = subprocess.run(
+        [sys.executable, "-c", _FP_WORKER, str(Path(__file__).parent)],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
     assert out.returncode == 0, out.stderr[-2000:]
     assert out.stdout.strip().splitlines()[-1] == here
 

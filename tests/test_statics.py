@@ -28,8 +28,11 @@ def _dir(v):
 def _paper_N_D(a, b, G, S, B, C):
     """Eq. (2.8) as printed in the paper."""
     Sx, Sy, Sz = S
-    return (3 * a * b * (G - Sz) + 2 * b * (Sz * B[0] - G * C[0] - Sx * B[2])
-            + 2 * a * (Sz * B[1] - G * C[1] - Sy * B[2])) / (4 * a * b)
+    return (
+        3 * a * b * (G - Sz)
+        + 2 * b * (Sz * B[0] - G * C[0] - Sx * B[2])
+        + 2 * a * (Sz * B[1] - G * C[1] - Sy * B[2])
+    ) / (4 * a * b)
 
 
 def test_corner_loads_match_paper_eq_2_8_and_balance(paper42):
@@ -104,9 +107,13 @@ def test_tip_corner_and_lift_first():
     """A centred box pulled from its top-face centre along the diagonal tips about corner F; a vertical
     pull through the mass centre lifts at S = G and never tips."""
     a, b, c = 2.0, 3.0, 4.0  # tall, so that it tips (at 0.42 G) before it slides (0.68 G)
-    sc = jh.Scenario(load=jh.Load([a, b, c], 1000.0), foundation=jh.Foundation(1e7, 1e5, 0.8),
-                     rope=jh.Rope(1e7, 1e4, [a / 2, b / 2, c]), hoist=jh.ConstantSpeedHoist(0.1),
-                     boom=jh.Boom([a, b, 10.0], 500.0, 5e6))
+    sc = jh.Scenario(
+        load=jh.Load([a, b, c], 1000.0),
+        foundation=jh.Foundation(1e7, 1e5, 0.8),
+        rope=jh.Rope(1e7, 1e4, [a / 2, b / 2, c]),
+        hoist=jh.ConstantSpeedHoist(0.1),
+        boom=jh.Boom([a, b, 10.0], 500.0, 5e6),
+    )
     G = 1000.0 * 9.81
     e = _dir([a, b, 1.0])
     s, kind, edges = statics.tip_threshold(sc, e)
@@ -130,10 +137,12 @@ def test_twist_threshold_closed_form(paper42, p41):
     r = statics.rest_statics_jit(paper42, jnp.asarray(s * e), attachment=jnp.asarray(B))
     assert float(r.reaction_point[0]) == pytest.approx(1.1, rel=1e-9)
     assert abs(float(r.friction_moment)) == pytest.approx(float(r.twist_limit), rel=1e-9)
-    assert statics.rest_statics_jit(paper42, jnp.asarray(0.99 * s * e),
-                                    attachment=jnp.asarray(B)).holds()["twist"]
-    assert not statics.rest_statics_jit(paper42, jnp.asarray(1.01 * s * e),
-                                    attachment=jnp.asarray(B)).holds()["twist"]
+    assert statics.rest_statics_jit(paper42, jnp.asarray(0.99 * s * e), attachment=jnp.asarray(B)).holds()[
+        "twist"
+    ]
+    assert not statics.rest_statics_jit(
+        paper42, jnp.asarray(1.01 * s * e), attachment=jnp.asarray(B)
+    ).holds()["twist"]
     # A rope point on the box keeps the friction line inside the rectangle: twist never fails.
     assert statics.twist_threshold(p41, _dir(A_TIP - np.asarray(p41.rope.attachment))) == math.inf
 
@@ -171,9 +180,13 @@ def _socp_rho(F, M, pts, loads, mu):
         return x[8] * w - np.sqrt(np.sum(T**2, axis=1) + 1e-30)
 
     x0 = np.concatenate([np.tile(-F / 4, 4), [2.0]])
-    res = minimize(lambda x: x[8], x0, constraints=[{"type": "eq", "fun": cons_eq},
-                                                    {"type": "ineq", "fun": cons_in}],
-                   method="SLSQP", options={"ftol": 1e-13, "maxiter": 1000})
+    res = minimize(
+        lambda x: x[8],
+        x0,
+        constraints=[{"type": "eq", "fun": cons_eq}, {"type": "ineq", "fun": cons_in}],
+        method="SLSQP",
+        options={"ftol": 1e-13, "maxiter": 1000},
+    )
     # SLSQP may stop with "positive directional derivative" at this tight ftol; accept a feasible point.
     assert np.max(np.abs(cons_eq(res.x))) < 1e-10 and np.min(cons_in(res.x)) > -1e-10
     return res.x[8]

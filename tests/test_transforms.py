@@ -129,8 +129,17 @@ def test_no_recompile_when_leaf_values_change(paper42, guarded_core):
     `eqx.tree_at` (float64 arrays), t1 as a float, numpy or JAX scalar, saved times of the same length."""
     kw = dict(n_save=3, rtol=1e-4, atol=1e-6)
     jh.simulate(paper42, 0.05, **kw)
-    jh.simulate(paper42.replace(**{"foundation.friction_coefficient": 0.3, "rope.stiffness": 1.0e7,
-                                   "load.mass_centre": [1.1, 2.4, 1.0]}), 0.05, **kw)
+    jh.simulate(
+        paper42.replace(
+            **{
+                "foundation.friction_coefficient": 0.3,
+                "rope.stiffness": 1.0e7,
+                "load.mass_centre": [1.1, 2.4, 1.0],
+            }
+        ),
+        0.05,
+        **kw,
+    )
     jh.simulate(eqx.tree_at(_mu, paper42, jnp.asarray(0.35, dtype=jnp.float64)), 0.05, **kw)
     jh.simulate(eqx.tree_at(_mu, paper42, np.asarray(0.35)), 0.05, **kw)
     jh.simulate(paper42, np.float64(0.04), **kw)

@@ -23,19 +23,46 @@ PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2")
 FEW = settings(max_examples=25, derandomize=True, deadline=None)
 
 # Numeric fields that must be > 0 or >= 0 (negative is invalid), as "table.field" of the scenario file.
-NONNEGATIVE = ("t1", "gravity", "load.size", "load.density", "load.mass", "foundation.stiffness",
-               "foundation.damping", "foundation.damping_onset", "foundation.friction_coefficient",
-               "foundation.friction.deflection", "foundation.friction.breakaway_ratio",
-               "foundation.friction.relaxation_time", "foundation.friction.regularisation_velocity",
-               "rope.stiffness", "rope.damping", "rope.damping_onset", "rope.slack", "hoist.speed",
-               "boom.tip_mass", "boom.stiffness", "boom.damping")
+NONNEGATIVE = (
+    "t1",
+    "gravity",
+    "load.size",
+    "load.density",
+    "load.mass",
+    "foundation.stiffness",
+    "foundation.damping",
+    "foundation.damping_onset",
+    "foundation.friction_coefficient",
+    "foundation.friction.deflection",
+    "foundation.friction.breakaway_ratio",
+    "foundation.friction.relaxation_time",
+    "foundation.friction.regularisation_velocity",
+    "rope.stiffness",
+    "rope.damping",
+    "rope.damping_onset",
+    "rope.slack",
+    "hoist.speed",
+    "boom.tip_mass",
+    "boom.stiffness",
+    "boom.damping",
+)
 # Negative is fine for these (positions), but NaN and inf are not; a negative mass centre or rope point
 # leaves the box, which is tested below.
 ANY_SIGN = ("boom.tip_position",)
 # Fields every scenario file must give (a missing one must be named).
-REQUIRED = ("load.size", "foundation.stiffness", "foundation.damping", "foundation.friction_coefficient",
-            "rope.stiffness", "rope.damping", "rope.attachment", "hoist.speed", "boom.tip_position",
-            "boom.tip_mass", "boom.stiffness")
+REQUIRED = (
+    "load.size",
+    "foundation.stiffness",
+    "foundation.damping",
+    "foundation.friction_coefficient",
+    "rope.stiffness",
+    "rope.damping",
+    "rope.attachment",
+    "hoist.speed",
+    "boom.tip_position",
+    "boom.tip_mass",
+    "boom.stiffness",
+)
 
 
 def _numeric_fields(d: dict, prefix: str = "") -> list[str]:
@@ -82,8 +109,11 @@ def _expect_error_naming(d: dict, path: str):
 
 
 @FEW
-@given(preset=st.sampled_from(PRESETS), data=st.data(),
-       bad=st.sampled_from([-1.5, float("nan"), float("inf"), float("-inf")]))
+@given(
+    preset=st.sampled_from(PRESETS),
+    data=st.data(),
+    bad=st.sampled_from([-1.5, float("nan"), float("inf"), float("-inf")]),
+)
 def test_bad_number_names_its_field(preset_dicts, preset, data, bad):
     d = copy.deepcopy(preset_dicts[preset])
     fields = [f for f in _numeric_fields(d) if f in NONNEGATIVE + ANY_SIGN]
@@ -99,8 +129,11 @@ def test_bad_number_names_its_field(preset_dicts, preset, data, bad):
 
 
 @FEW
-@given(preset=st.sampled_from(PRESETS), axis=st.integers(0, 2),
-       where=st.sampled_from(["negative", "beyond", "nan"]))
+@given(
+    preset=st.sampled_from(PRESETS),
+    axis=st.integers(0, 2),
+    where=st.sampled_from(["negative", "beyond", "nan"]),
+)
 def test_rope_point_and_mass_centre_outside_the_box(preset_dicts, preset, axis, where):
     """B must lie on or in the box, C strictly inside it: each refused, naming its field."""
     for path in ("rope.attachment", "load.mass_centre"):
@@ -124,16 +157,20 @@ def test_rope_point_and_mass_centre_outside_the_box(preset_dicts, preset, axis, 
 def _typo(key: str, kind: str, i: int) -> str:
     i = i % len(key)
     if kind == "drop":
-        return key[:i] + key[i + 1:]
+        return key[:i] + key[i + 1 :]
     if kind == "double":
         return key[:i] + key[i] + key[i:]
     j = min(i + 1, len(key) - 1)  # swap neighbours
-    return key[:i] + key[j] + key[i] + key[j + 1:] if j > i else key[:-2] + key[-1] + key[-2]
+    return key[:i] + key[j] + key[i] + key[j + 1 :] if j > i else key[:-2] + key[-1] + key[-2]
 
 
 @FEW
-@given(preset=st.sampled_from(PRESETS), data=st.data(), kind=st.sampled_from(["drop", "double", "swap"]),
-       i=st.integers(0, 30))
+@given(
+    preset=st.sampled_from(PRESETS),
+    data=st.data(),
+    kind=st.sampled_from(["drop", "double", "swap"]),
+    i=st.integers(0, 30),
+)
 def test_misspelled_field_is_named_with_a_hint(preset_dicts, preset, data, kind, i):
     d = copy.deepcopy(preset_dicts[preset])
     path = data.draw(st.sampled_from(_numeric_fields(d)))
@@ -151,8 +188,11 @@ def test_misspelled_field_is_named_with_a_hint(preset_dicts, preset, data, kind,
 
 
 @FEW
-@given(preset=st.sampled_from(PRESETS), data=st.data(),
-       wrong=st.sampled_from(["12.5", True, None, [1.0, 2.0], [[1.0, 2.0, 3.0]] * 3]))
+@given(
+    preset=st.sampled_from(PRESETS),
+    data=st.data(),
+    wrong=st.sampled_from(["12.5", True, None, [1.0, 2.0], [[1.0, 2.0, 3.0]] * 3]),
+)
 def test_wrong_type_names_its_field(preset_dicts, preset, data, wrong):
     """A string, a boolean, a list of the wrong length or a matrix where a number or a 3-vector belongs
     (None stands for a value TOML cannot hold: it must be refused too)."""
@@ -163,8 +203,16 @@ def test_wrong_type_names_its_field(preset_dicts, preset, data, wrong):
     _expect_error_naming(d, path)
 
 
-@pytest.mark.parametrize("path", ["rope.stiffness", "hoist.speed", "load.size", "boom.damping",
-                                  "foundation.friction.regularisation_velocity"])
+@pytest.mark.parametrize(
+    "path",
+    [
+        "rope.stiffness",
+        "hoist.speed",
+        "load.size",
+        "boom.damping",
+        "foundation.friction.regularisation_velocity",
+    ],
+)
 def test_table_where_a_value_belongs_names_its_field(preset_dicts, path):
     d = copy.deepcopy(preset_dicts["paper-4.2"])
     table, key = _get(d, path)
@@ -215,10 +263,24 @@ def test_presets_themselves_are_valid(preset_dicts):
 
 # Float leaves of a Scenario (paper-4.2: regularised Coulomb friction) that must be positive or
 # non-negative, by dotted path.
-LEAVES = ("load.mass", "load.size", "foundation.stiffness", "foundation.damping",
-          "foundation.friction_coefficient", "foundation.friction.regularisation_velocity",
-          "rope.stiffness", "rope.damping", "rope.slack", "hoist.speed", "boom.tip_mass", "boom.stiffness",
-          "boom.damping", "gravity", "foundation.damping_onset", "rope.damping_onset")
+LEAVES = (
+    "load.mass",
+    "load.size",
+    "foundation.stiffness",
+    "foundation.damping",
+    "foundation.friction_coefficient",
+    "foundation.friction.regularisation_velocity",
+    "rope.stiffness",
+    "rope.damping",
+    "rope.slack",
+    "hoist.speed",
+    "boom.tip_mass",
+    "boom.stiffness",
+    "boom.damping",
+    "gravity",
+    "foundation.damping_onset",
+    "rope.damping_onset",
+)
 
 
 @FEW
@@ -252,10 +314,16 @@ def test_without_x64_a_clear_error(paper42):
 
 def test_bad_times_and_options(paper42):
     with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
-        for kw, word in [(dict(t1=-1.0), "t1"), (dict(t1=float("nan")), "t1"),
-                         (dict(ts=np.array([0.1, 0.2])), "ts"), (dict(ts=np.array([0.0, 0.2, 0.1])), "ts"),
-                         (dict(t1=1.0, rtol=-1e-6), "rtol"), (dict(t1=1.0, max_steps=0), "max_steps"),
-                         (dict(t1=1.0, adjoint="backward"), "adjoint"), (dict(t1=1.0, n_save=1), "n_save")]:
+        for kw, word in [
+            (dict(t1=-1.0), "t1"),
+            (dict(t1=float("nan")), "t1"),
+            (dict(ts=np.array([0.1, 0.2])), "ts"),
+            (dict(ts=np.array([0.0, 0.2, 0.1])), "ts"),
+            (dict(t1=1.0, rtol=-1e-6), "rtol"),
+            (dict(t1=1.0, max_steps=0), "max_steps"),
+            (dict(t1=1.0, adjoint="backward"), "adjoint"),
+            (dict(t1=1.0, n_save=1), "n_save"),
+        ]:
             with pytest.raises(jh.ScenarioError, match=word):
                 jh.simulate(paper42, **kw)
 
@@ -285,12 +353,15 @@ def _load_error(path) -> str:
     return _one_bounded_line(str(info.value))
 
 
-@pytest.mark.parametrize("old,new,field", [
-    ("t1 = 25.0", "t1 = 1" + "0" * 400, "t1"),
-    ("tip_mass = 500.0", "tip_mass = " + "9" * 330, "boom.tip_mass"),
-    ("size = [2.5, 6.0, 2.5]", "size = [2.5, 1" + "0" * 320 + ", 2.5]", "load.size"),
-    ("speed = 0.3", "speed = " + "7" * 5000, "speed"),  # beyond Python's 4300-digit int conversion limit
-])
+@pytest.mark.parametrize(
+    "old,new,field",
+    [
+        ("t1 = 25.0", "t1 = 1" + "0" * 400, "t1"),
+        ("tip_mass = 500.0", "tip_mass = " + "9" * 330, "boom.tip_mass"),
+        ("size = [2.5, 6.0, 2.5]", "size = [2.5, 1" + "0" * 320 + ", 2.5]", "load.size"),
+        ("speed = 0.3", "speed = " + "7" * 5000, "speed"),  # beyond Python's 4300-digit int conversion limit
+    ],
+)
 def test_integer_too_large_for_a_float_names_its_field(tmp_path, old, new, field):
     path = tmp_path / "big.toml"
     text = _preset_text()
@@ -363,22 +434,25 @@ def _set_error(paper42, item: str) -> str:
     return _one_bounded_line(str(info.value))
 
 
-@pytest.mark.parametrize("item,field", [
-    ("t1=5", "t1"),                                   # a static setting, not a float leaf: use --t1
-    ("name=5", "name"),
-    ("hoist.speed=[0.3,0.3,0.3]", "hoist.speed"),     # a vector where a number belongs
-    ("load.mass_centre=[1.0, 2.5]", "load.mass_centre"),
-    ("load.mass.real=5", "load.mass"),                # an attribute of the array, not a field
-    ("load.mass.shape=5", "load.mass"),
-    ("foundation._check=5", "foundation"),
-    ("foundation.friction_coefficient=0_3", "foundation.friction_coefficient"),  # not 3: refused
-    ("foundation.friction_coefficient=0x1p-2", "foundation.friction_coefficient"),
-    ("rope.stiffness=1e7 ", None),                    # fine (whitespace): no error expected
-    ("hoist.speed=" + "[" * 5000 + "]" * 5000, "hoist.speed"),
-    ("hoist.speed=1" + "0" * 400, "hoist.speed"),
-    ("load.size=[2.5, 1" + "0" * 400 + ", 2.5]", "load.size"),
-    ("load.size=[" + ", ".join(["1.0"] * 300_000) + "]", "load.size"),
-])
+@pytest.mark.parametrize(
+    "item,field",
+    [
+        ("t1=5", "t1"),  # a static setting, not a float leaf: use --t1
+        ("name=5", "name"),
+        ("hoist.speed=[0.3,0.3,0.3]", "hoist.speed"),  # a vector where a number belongs
+        ("load.mass_centre=[1.0, 2.5]", "load.mass_centre"),
+        ("load.mass.real=5", "load.mass"),  # an attribute of the array, not a field
+        ("load.mass.shape=5", "load.mass"),
+        ("foundation._check=5", "foundation"),
+        ("foundation.friction_coefficient=0_3", "foundation.friction_coefficient"),  # not 3: refused
+        ("foundation.friction_coefficient=0x1p-2", "foundation.friction_coefficient"),
+        ("rope.stiffness=1e7 ", None),  # fine (whitespace): no error expected
+        ("hoist.speed=" + "[" * 5000 + "]" * 5000, "hoist.speed"),
+        ("hoist.speed=1" + "0" * 400, "hoist.speed"),
+        ("load.size=[2.5, 1" + "0" * 400 + ", 2.5]", "load.size"),
+        ("load.size=[" + ", ".join(["1.0"] * 300_000) + "]", "load.size"),
+    ],
+)
 def test_bad_override_names_its_field(paper42, item, field):
     from jaxhoist.io.scenario import apply_overrides
 
@@ -395,13 +469,16 @@ def test_bad_override_names_its_field(paper42, item, field):
 # ---- physically absurd but finite values
 
 
-@pytest.mark.parametrize("path,value,field", [
-    ("foundation.stiffness", 1e-300, "foundation.stiffness"),
-    ("foundation.stiffness", 1.0, "foundation.stiffness"),   # the weight would sink the box below ground
-    ("rope.stiffness", 1e300, "rope.stiffness"),
-    ("load.mass", 1e300, "load.mass"),
-    ("gravity", 1e-200, "gravity"),
-])
+@pytest.mark.parametrize(
+    "path,value,field",
+    [
+        ("foundation.stiffness", 1e-300, "foundation.stiffness"),
+        ("foundation.stiffness", 1.0, "foundation.stiffness"),  # the weight would sink the box below ground
+        ("rope.stiffness", 1e300, "rope.stiffness"),
+        ("load.mass", 1e300, "load.mass"),
+        ("gravity", 1e-200, "gravity"),
+    ],
+)
 def test_absurd_but_finite_values_are_flagged(paper42, path, value, field):
     with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
         with pytest.raises(jh.ScenarioError) as info:
@@ -426,8 +503,15 @@ def test_plausible_extremes_still_accepted(paper42):
 # ---- the Python API refuses what the CLI refuses (issue 12 point 5)
 
 
-@pytest.mark.parametrize("path,value", [("foundation.friction_coefficient", -0.1), ("rope.stiffness", -5.0),
-                                        ("hoist.speed", float("nan")), ("foundation.stiffness", 1e-300)])
+@pytest.mark.parametrize(
+    "path,value",
+    [
+        ("foundation.friction_coefficient", -0.1),
+        ("rope.stiffness", -5.0),
+        ("hoist.speed", float("nan")),
+        ("foundation.stiffness", 1e-300),
+    ],
+)
 def test_api_and_cli_give_the_same_message(paper42, path, value):
     cli_msg = _set_error(paper42, f"{path}={value}")
     with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
@@ -437,9 +521,14 @@ def test_api_and_cli_give_the_same_message(paper42, path, value):
     assert re.search(_named(path), cli_msg)
 
 
-@pytest.mark.parametrize("path,hint", [("foundation.friction_coeficient", "friction_coefficient"),
-                                       ("fundation.stiffness", "foundation"),
-                                       ("rope.stifness", "stiffness")])
+@pytest.mark.parametrize(
+    "path,hint",
+    [
+        ("foundation.friction_coeficient", "friction_coefficient"),
+        ("fundation.stiffness", "foundation"),
+        ("rope.stifness", "stiffness"),
+    ],
+)
 def test_replace_typo_suggests_the_closest_field(paper42, path, hint):
     with pytest.raises(jh.ScenarioError) as info:
         paper42.replace(**{path: 0.3})
@@ -548,19 +637,23 @@ def _cli(monkeypatch, capsys, argv) -> tuple[int, str]:
     return code, err
 
 
-@pytest.mark.parametrize("extra,word", [
-    (["--set", "t1=5"], "--t1"),
-    (["--set", "hoist.speed=[0.3,0.3,0.3]"], "hoist.speed"),
-    (["--set", "load.mass.real=5"], "load.mass"),
-    (["--set", "foundation.friction_coefficient=0_3"], "foundation.friction_coefficient"),
-    (["--set", "foundation.stiffness=1e-300"], "foundation.stiffness"),
-    (["--t1", "0_5"], "--t1"),
-    (["--rtol", "1_0"], "--rtol"),
-    (["--n-save", "1_1"], "--n-save"),
-])
+@pytest.mark.parametrize(
+    "extra,word",
+    [
+        (["--set", "t1=5"], "--t1"),
+        (["--set", "hoist.speed=[0.3,0.3,0.3]"], "hoist.speed"),
+        (["--set", "load.mass.real=5"], "load.mass"),
+        (["--set", "foundation.friction_coefficient=0_3"], "foundation.friction_coefficient"),
+        (["--set", "foundation.stiffness=1e-300"], "foundation.stiffness"),
+        (["--t1", "0_5"], "--t1"),
+        (["--rtol", "1_0"], "--rtol"),
+        (["--n-save", "1_1"], "--n-save"),
+    ],
+)
 def test_cli_simulate_bad_arguments_exit_2(monkeypatch, capsys, tmp_path, extra, word):
-    code, err = _cli(monkeypatch, capsys, ["simulate", "paper-4.2", "--quiet", "--out", str(tmp_path / "o"),
-                                           *extra])
+    code, err = _cli(
+        monkeypatch, capsys, ["simulate", "paper-4.2", "--quiet", "--out", str(tmp_path / "o"), *extra]
+    )
     assert code == 2 and word in err, err
     assert not (tmp_path / "o").exists()
 
@@ -624,8 +717,13 @@ def test_failed_run_summary_prints_no_event_times():
     ts = np.linspace(0.0, 1.0, 11)
     normal = np.full((11, 4), np.inf)
     normal[0] = 1e5
-    arrays = {"status": np.int32(1), "ts": ts, "normal_forces": normal, "position": np.zeros((11, 3)),
-              "energy_residual": np.zeros(11)}
+    arrays = {
+        "status": np.int32(1),
+        "ts": ts,
+        "normal_forces": normal,
+        "position": np.zeros((11, 3)),
+        "energy_residual": np.zeros(11),
+    }
     status = summary_status(arrays)
     assert status == SolveStatus.MAX_STEPS
     text = "\n".join(event_lines(status, ts, normal))
@@ -637,19 +735,29 @@ def test_failed_run_summary_prints_no_event_times():
     assert summary_status(ok) == SolveStatus.NONFINITE
 
 
-@pytest.mark.parametrize("extra,word", [
-    (["--scan", "-5"], "--scan"),
-    (["--scan", "1"], "--scan"),
-    (["--observable", "final_position"], "final_position"),
-    (["--observable", "detach:Q-D"], "detach:Q-D"),
-    (["--observable", "final_posture"], "final_position"),
-    (["--param", "t1"], "t1"),
-    (["--tol", "1_0"], "--tol"),
-    (["--bracket", "0_2", "0.4"], "--bracket"),
-])
+@pytest.mark.parametrize(
+    "extra,word",
+    [
+        (["--scan", "-5"], "--scan"),
+        (["--scan", "1"], "--scan"),
+        (["--observable", "final_position"], "final_position"),
+        (["--observable", "detach:Q-D"], "detach:Q-D"),
+        (["--observable", "final_posture"], "final_position"),
+        (["--param", "t1"], "t1"),
+        (["--tol", "1_0"], "--tol"),
+        (["--bracket", "0_2", "0.4"], "--bracket"),
+    ],
+)
 def test_cli_bifurcation_bad_arguments_exit_2(monkeypatch, capsys, extra, word):
-    argv = ["bifurcation", "paper-4.2", "--param", "foundation.friction_coefficient",
-            "--bracket", "0.2", "0.4"]
+    argv = [
+        "bifurcation",
+        "paper-4.2",
+        "--param",
+        "foundation.friction_coefficient",
+        "--bracket",
+        "0.2",
+        "0.4",
+    ]
     code, err = _cli(monkeypatch, capsys, [*argv, *extra])
     assert code == 2 and word in err, err
 
@@ -673,13 +781,17 @@ def test_measurement_bom_header_is_read(tmp_path):
     np.testing.assert_allclose(m.t, [0.0, 0.1, 0.2])
 
 
-@pytest.mark.parametrize("content,word", [
-    (GOOD_CSV.replace("1.5", "1_5"), "line 3"),                      # underscores: not 15
-    (GOOD_CSV.encode("utf-16"), "UTF-16"),
-    (GOOD_CSV.encode() + b"0.3,\xe9\n", "UTF-8"),
-    (GOOD_CSV.replace("1.5", "1.5\x00"), "NUL"),
-    (GOOD_CSV.replace("1.5", "1" + "0" * 400), "position_x"),       # 1e400: not finite
-], ids=["underscore", "utf-16", "latin-1", "nul", "huge"])
+@pytest.mark.parametrize(
+    "content,word",
+    [
+        (GOOD_CSV.replace("1.5", "1_5"), "line 3"),  # underscores: not 15
+        (GOOD_CSV.encode("utf-16"), "UTF-16"),
+        (GOOD_CSV.encode() + b"0.3,\xe9\n", "UTF-8"),
+        (GOOD_CSV.replace("1.5", "1.5\x00"), "NUL"),
+        (GOOD_CSV.replace("1.5", "1" + "0" * 400), "position_x"),  # 1e400: not finite
+    ],
+    ids=["underscore", "utf-16", "latin-1", "nul", "huge"],
+)
 def test_measurement_bad_bytes_and_numbers(tmp_path, content, word):
     from jaxhoist.io.measurement import MeasurementError, read_measurement
 

@@ -92,10 +92,18 @@ class Scene:
         """Axis limits [[x0, x1], [y0, y1], [z0, z1]] [m] holding every drawn point of every frame, with a
         margin; z starts at the ground or below."""
         n_t = self.ts.shape[0]
-        arrow_tails = self.corners - np.stack([np.zeros((n_t, 4)), np.zeros((n_t, 4)),
-                                               np.stack([self.arrows(k) for k in range(n_t)])], -1)
-        pts = np.concatenate([self.corners.reshape(-1, 3), self.top.reshape(-1, 3), self.tip,
-                              self.rope_point, arrow_tails.reshape(-1, 3)])
+        arrow_tails = self.corners - np.stack(
+            [np.zeros((n_t, 4)), np.zeros((n_t, 4)), np.stack([self.arrows(k) for k in range(n_t)])], -1
+        )
+        pts = np.concatenate(
+            [
+                self.corners.reshape(-1, 3),
+                self.top.reshape(-1, 3),
+                self.tip,
+                self.rope_point,
+                arrow_tails.reshape(-1, 3),
+            ]
+        )
         lo, hi = pts.min(axis=0), pts.max(axis=0)
         lo[2] = min(lo[2], 0.0)
         pad = 0.06 * max(float(np.max(hi - lo)), 1e-3)
@@ -118,8 +126,13 @@ def contact_state(normal_forces: np.ndarray) -> str:
     return "contact " + ", ".join(on) if on else "in the air (no contact)"
 
 
-def scene_from_result(arrays: dict[str, np.ndarray], meta: dict[str, Any], where: Path | str = "<result>",
-                      *, arrow_length: float | None = None) -> Scene:
+def scene_from_result(
+    arrays: dict[str, np.ndarray],
+    meta: dict[str, Any],
+    where: Path | str = "<result>",
+    *,
+    arrow_length: float | None = None,
+) -> Scene:
     """Build the `Scene` of a saved result.
 
     **Arguments**
@@ -166,8 +179,9 @@ def scene_from_result(arrays: dict[str, np.ndarray], meta: dict[str, Any], where
     name = str((meta.get("scenario") or {}).get("name", where.name))
     tip = np.asarray(arrays["tip_position"], dtype=float)
     tension = np.asarray(arrays["rope_tension"], dtype=float)
-    return Scene(ts, corners, top, rope_point, tip, n, tension, weight, float(arrow_length), state, model,
-                 name)
+    return Scene(
+        ts, corners, top, rope_point, tip, n, tension, weight, float(arrow_length), state, model, name
+    )
 
 
 def load_scene(result_dir: str | Path, **kw) -> Scene:
@@ -178,8 +192,10 @@ def load_scene(result_dir: str | Path, **kw) -> Scene:
     d = Path(result_dir)
     npz = d / "trajectory.npz" if d.is_dir() else d
     if not npz.is_file() or not npz.with_suffix(".json").is_file():
-        raise ScenarioError(f"{result_dir}: no trajectory.npz and trajectory.json here (write them with "
-                            f"`jaxhoist simulate ... --out {result_dir}`)")
+        raise ScenarioError(
+            f"{result_dir}: no trajectory.npz and trajectory.json here (write them with "
+            f"`jaxhoist simulate ... --out {result_dir}`)"
+        )
     try:
         meta = load_metadata(npz)
     except json.JSONDecodeError as e:
@@ -208,12 +224,22 @@ def _setup_axes(ax, limits: np.ndarray, elev: float, azim: float) -> None:
 def frame_text(scene: Scene, k: int) -> str:
     """The text block of saved time `k`: clock, rope tension, contact state or phase, the N_i."""
     forces = " ".join(f"{n} {v / 1e3:5.1f}" for n, v in zip(CORNERS, scene.normal_forces[k], strict=True))
-    return (f"t = {scene.ts[k]:7.3f} s   S = {scene.rope_tension[k] / 1e3:6.1f} kN\n{scene.state[k]}\n"
-            f"N [kN]: {forces}")
+    return (
+        f"t = {scene.ts[k]:7.3f} s   S = {scene.rope_tension[k] / 1e3:6.1f} kN\n{scene.state[k]}\n"
+        f"N [kN]: {forces}"
+    )
 
 
-def draw_frame(ax, scene: Scene, k: int, limits: np.ndarray | None = None, *, elev: float = 20.0,
-               azim: float = -35.0, info: bool = True) -> dict[str, Any]:
+def draw_frame(
+    ax,
+    scene: Scene,
+    k: int,
+    limits: np.ndarray | None = None,
+    *,
+    elev: float = 20.0,
+    azim: float = -35.0,
+    info: bool = True,
+) -> dict[str, Any]:
     """Draw saved time `k` of `scene` into the (cleared) 3-D axes `ax`.
 
     **Arguments**
@@ -232,13 +258,22 @@ def draw_frame(ax, scene: Scene, k: int, limits: np.ndarray | None = None, *, el
     _setup_axes(ax, limits, elev, azim)
     out: dict[str, Any] = {}
     (x0, x1), (y0, y1) = limits[0], limits[1]
-    ground = Poly3DCollection([[(x0, y0, 0.0), (x1, y0, 0.0), (x1, y1, 0.0), (x0, y1, 0.0)]],
-                              facecolor="0.75", edgecolor="0.5", alpha=0.3)
+    ground = Poly3DCollection(
+        [[(x0, y0, 0.0), (x1, y0, 0.0), (x1, y1, 0.0), (x0, y1, 0.0)]],
+        facecolor="0.75",
+        edgecolor="0.5",
+        alpha=0.3,
+    )
     out["ground"] = ax.add_collection3d(ground)
     c, top = scene.corners[k], scene.top[k]
     verts = np.concatenate([c, top])
-    box = Poly3DCollection([[tuple(verts[i]) for i in f] for f in _FACES], facecolor="tan", edgecolor="0.2",
-                           linewidths=0.9, alpha=0.3)
+    box = Poly3DCollection(
+        [[tuple(verts[i]) for i in f] for f in _FACES],
+        facecolor="tan",
+        edgecolor="0.2",
+        linewidths=0.9,
+        alpha=0.3,
+    )
     out["box"] = ax.add_collection3d(box)
     centre = c.mean(axis=0)
     span = float(np.max(limits[:, 1] - limits[:, 0]))
@@ -250,16 +285,43 @@ def draw_frame(ax, scene: Scene, k: int, limits: np.ndarray | None = None, *, el
         # N_i pushes the corner up: an arrow from below the corner ending at it
         out["arrows"][name] = None
         if arrows[i] > 1e-3 * scene.arrow_length:
-            out["arrows"][name] = ax.quiver(c[i, 0], c[i, 1], c[i, 2] - arrows[i], 0.0, 0.0, arrows[i],
-                                            color=col, linewidth=2.5,
-                                            arrow_length_ratio=min(0.4, 0.06 * span / arrows[i]))
-        (dot,) = ax.plot([c[i, 0]], [c[i, 1]], [c[i, 2]], "o", ms=7, color=col,
-                         markerfacecolor=col if touching else "white", markeredgewidth=1.8)
+            out["arrows"][name] = ax.quiver(
+                c[i, 0],
+                c[i, 1],
+                c[i, 2] - arrows[i],
+                0.0,
+                0.0,
+                arrows[i],
+                color=col,
+                linewidth=2.5,
+                arrow_length_ratio=min(0.4, 0.06 * span / arrows[i]),
+            )
+        (dot,) = ax.plot(
+            [c[i, 0]],
+            [c[i, 1]],
+            [c[i, 2]],
+            "o",
+            ms=7,
+            color=col,
+            markerfacecolor=col if touching else "white",
+            markeredgewidth=1.8,
+        )
         out["corners"].append(dot)
         d = c[i, :2] - centre[:2]
         d = d / (np.linalg.norm(d) or 1.0) * 0.05 * span
-        out["labels"].append(ax.text(c[i, 0] + d[0], c[i, 1] + d[1], c[i, 2] + 0.01 * span, name, color=col,
-                                     fontsize=12, fontweight="bold", ha="center", va="bottom"))
+        out["labels"].append(
+            ax.text(
+                c[i, 0] + d[0],
+                c[i, 1] + d[1],
+                c[i, 2] + 0.01 * span,
+                name,
+                color=col,
+                fontsize=12,
+                fontweight="bold",
+                ha="center",
+                va="bottom",
+            )
+        )
     b, a = scene.rope_point[k], scene.tip[k]
     (out["rope"],) = ax.plot([b[0], a[0]], [b[1], a[1]], [b[2], a[2]], color="k", lw=1.5)
     (out["tip"],) = ax.plot([a[0]], [a[1]], [a[2]], "v", ms=9, color="crimson")
@@ -280,8 +342,10 @@ def _figure(n_cols: int = 1, size: tuple[float, float] = (6.0, 7.0)) -> tuple[Fi
 
 
 def _legend(scene: Scene) -> str:
-    return (f"dot: corner D, E, F, H (filled: on the ground);  arrow: N_i, {scene.arrow_length:.3g} m = "
-            f"weight m g = {scene.weight / 1e3:.4g} kN;  A: boom tip;  B-A: rope")
+    return (
+        f"dot: corner D, E, F, H (filled: on the ground);  arrow: N_i, {scene.arrow_length:.3g} m = "
+        f"weight m g = {scene.weight / 1e3:.4g} kN;  A: boom tip;  B-A: rope"
+    )
 
 
 def keyframe_indices(scene: Scene, n: int = 5) -> list[int]:
@@ -322,8 +386,9 @@ def plot_keyframes(scene: Scene, n: int = 5, *, indices: Sequence[int] | None = 
     return fig
 
 
-def frame_indices(n_t: int, t1: float, *, fps: float, duration: float | None = None,
-                  stride: int | None = None) -> np.ndarray:
+def frame_indices(
+    n_t: int, t1: float, *, fps: float, duration: float | None = None, stride: int | None = None
+) -> np.ndarray:
     """Indices of the saved times to show: every `stride`-th (and the last), or `fps * duration` equally
     spaced ones (at most all of them); default duration min(t1, 10 s).
 
@@ -350,9 +415,16 @@ def ffmpeg_available() -> bool:
     return shutil.which("ffmpeg") is not None
 
 
-def save_animation(scene: Scene, path: str | Path, indices: Sequence[int] | np.ndarray, *, fps: float = 20.0,
-                   fmt: str | None = None, dpi: int = 90,
-                   progress: Callable[[int, int], None] | None = None) -> Path:
+def save_animation(
+    scene: Scene,
+    path: str | Path,
+    indices: Sequence[int] | np.ndarray,
+    *,
+    fps: float = 20.0,
+    fmt: str | None = None,
+    dpi: int = 90,
+    progress: Callable[[int, int], None] | None = None,
+) -> Path:
     """Render the frames `indices` of `scene` and write them as an animated GIF (Pillow) or MP4 (ffmpeg).
 
     **Arguments**
@@ -377,14 +449,22 @@ def save_animation(scene: Scene, path: str | Path, indices: Sequence[int] | np.n
         raise ScenarioError("--format mp4 needs ffmpeg on PATH; install it or use --format gif")
     path = Path(path).with_suffix("." + fmt)
     path.parent.mkdir(parents=True, exist_ok=True)
-    writer = PillowWriter(fps=fps) if fmt == "gif" else FFMpegWriter(fps=fps, codec="libx264",  # pyright: ignore[reportArgumentType]  # matplotlib's stubs say int; a float fps works
-                                                                    extra_args=["-pix_fmt", "yuv420p"])
+    writer = (
+        PillowWriter(fps=fps)
+        if fmt == "gif"
+        else FFMpegWriter(
+            fps=fps,
+            codec="libx264",  # pyright: ignore[reportArgumentType]  # matplotlib's stubs say int; a float fps works
+            extra_args=["-pix_fmt", "yuv420p"],
+        )
+    )
     fig, (ax,) = _figure(1)
     FigureCanvasAgg(fig)
     limits = scene.limits()
     fig.suptitle(f"{scene.name} ({scene.model} model)", fontsize=11)
-    fig.text(0.5, 0.005, _legend(scene).replace(";  ", "\n", 1), fontsize=7, ha="center", va="bottom",
-             color="0.3")
+    fig.text(
+        0.5, 0.005, _legend(scene).replace(";  ", "\n", 1), fontsize=7, ha="center", va="bottom", color="0.3"
+    )
     tmp = path.with_name(path.stem + ".partial" + path.suffix)
     with writer.saving(fig, str(tmp), dpi):
         for j, k in enumerate(indices):
@@ -396,9 +476,18 @@ def save_animation(scene: Scene, path: str | Path, indices: Sequence[int] | np.n
     return path
 
 
-def animate(result_dir: str | Path, *, fps: float = 20.0, duration: float | None = None,
-            stride: int | None = None, fmt: str | None = None, keyframes: bool = True, n_keyframes: int = 5,
-            dpi: int = 90, progress: Callable[[int, int], None] | None = None) -> list[Path]:
+def animate(
+    result_dir: str | Path,
+    *,
+    fps: float = 20.0,
+    duration: float | None = None,
+    stride: int | None = None,
+    fmt: str | None = None,
+    keyframes: bool = True,
+    n_keyframes: int = 5,
+    dpi: int = 90,
+    progress: Callable[[int, int], None] | None = None,
+) -> list[Path]:
     """Write `RESULT_DIR/animation.gif` (or `.mp4`) and `RESULT_DIR/keyframes.png` from the saved
     `trajectory.npz` + `trajectory.json` of `jaxhoist simulate` (either model, any scenario).
 

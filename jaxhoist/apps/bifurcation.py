@@ -587,7 +587,21 @@ def locate_bifurcation(
 
 
 def _multisection(
-    scenario, param, obs, lo, hi, level, tol, ts, options, max_solves, k, lanes, n_uniform, unit, wall0,
+    scenario,
+    param,
+    obs,
+    lo,
+    hi,
+    level,
+    tol,
+    ts,
+    options,
+    max_solves,
+    k,
+    lanes,
+    n_uniform,
+    unit,
+    wall0,
     progress=None,
 ):
     """Each round solves `k` points in one vmapped scan and keeps the first sign change."""
@@ -1013,8 +1027,11 @@ def _classify_cli(args, scenario, found, boundary, kw) -> list:
 
     scenarios = [scenario] * len(found)
     if boundary is not None:
-        scenarios = [set_param(scenario, boundary.along, q) for q, b in
-                     zip(boundary.along_values, boundary.points, strict=True) if b is not None]
+        scenarios = [
+            set_param(scenario, boundary.along, q)
+            for q, b in zip(boundary.along_values, boundary.points, strict=True)
+            if b is not None
+        ]
     classes = []
     for sc, b in zip(scenarios, found, strict=True):
         c = classify_change(sc, b, **kw)

@@ -43,11 +43,21 @@ EVENT_TIMES = ("liftoff_time", "last_contact_time")
 COUNT = "impacts"
 OBSERVABLES = (*FINAL_STATE, *EVENT_TIMES, COUNT)
 # what counts as a material change of each final-state coordinate (m or rad): 1 cm, 1 degree
-_MATERIAL = {"final_x": 0.01, "final_y": 0.01, "final_phi": np.radians(1.0), "final_theta": np.radians(1.0),
-             "final_psi": np.radians(1.0)}
+_MATERIAL = {
+    "final_x": 0.01,
+    "final_y": 0.01,
+    "final_phi": np.radians(1.0),
+    "final_theta": np.radians(1.0),
+    "final_psi": np.radians(1.0),
+}
 
-KINDS = ("final-state jump", "steep ramp", "event-count change", "event-definition change",
-         "continuous crossing")
+KINDS = (
+    "final-state jump",
+    "steep ramp",
+    "event-count change",
+    "event-definition change",
+    "continuous crossing",
+)
 
 
 @dataclasses.dataclass
@@ -207,8 +217,9 @@ def classify_samples(
         inner = abs(y[i_hi] - y[i_lo])
         window_change[name] = full
         fractions[name] = float(inner / full) if full > 0 else 0.0
-    jumped = [n for n in fractions if fractions[n] > jump_fraction and
-              abs(ys[n][i_hi] - ys[n][i_lo]) > _MATERIAL[n]]
+    jumped = [
+        n for n in fractions if fractions[n] > jump_fraction and abs(ys[n][i_hi] - ys[n][i_lo]) > _MATERIAL[n]
+    ]
     # a ramp: the coordinate that changes most (in units of its material size) changes materially across
     # the window; its 10-90 % width
     width = ramp_obs = None
@@ -217,8 +228,10 @@ def classify_samples(
         if window_change[ramp_obs] > 10 * _MATERIAL[ramp_obs]:
             width = ramp_width(x, ys[ramp_obs])
             if not width < 0.5 * (x[-1] - x[0]):  # spread over the window: a gradual change, not a ramp
-                notes.append(f"{ramp_obs} changes across the window but gradually (10-90 % over {width:.2g}, "
-                             f"more than half the window): no steep ramp")
+                notes.append(
+                    f"{ramp_obs} changes across the window but gradually (10-90 % over {width:.2g}, "
+                    f"more than half the window): no steep ramp"
+                )
                 width = None
         if width is None:
             ramp_obs = None
@@ -229,14 +242,19 @@ def classify_samples(
     for name in EVENT_TIMES:
         if name in ys:
             a, b = ys[name][i_lo], ys[name][i_hi]
-            events[name] = float(b - a) if (np.isfinite(a) and np.isfinite(b)) else (
-                0.0 if a == b else float("inf"))
+            events[name] = (
+                float(b - a) if (np.isfinite(a) and np.isfinite(b)) else (0.0 if a == b else float("inf"))
+            )
 
     def ev_jumps(name):
         return name in events and abs(events[name]) > event_tol
 
-    definition = ev_jumps("liftoff_time") and "last_contact_time" in events and not ev_jumps(
-        "last_contact_time") and not jumped
+    definition = (
+        ev_jumps("liftoff_time")
+        and "last_contact_time" in events
+        and not ev_jumps("last_contact_time")
+        and not jumped
+    )
     count = counts is not None and counts[0] != counts[1]
     if jumped:
         facets.append("final-state jump")
@@ -260,8 +278,9 @@ def classify_samples(
         width = None
         ramp_obs = None
     elif width is not None and facets[0] != "steep ramp":
-        notes.append(f"the final state varies across the window ({ramp_obs} 10-90 % over {width:.2g}), "
-                     f"continuously")
+        notes.append(
+            f"the final state varies across the window ({ramp_obs} 10-90 % over {width:.2g}), continuously"
+        )
     return ChangeClass(
         kind=facets[0],
         facets=facets,

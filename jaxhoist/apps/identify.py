@@ -282,8 +282,13 @@ def identify(
         outs.append(out)
     best = int(np.argmin([s.cost if np.isfinite(s.cost) else np.inf for s in runs]))
     return _result(
-        prob, starts, runs, outs[best], best,
-        max_relative_se=max_relative_se, condition_limit=condition_limit,
+        prob,
+        starts,
+        runs,
+        outs[best],
+        best,
+        max_relative_se=max_relative_se,
+        condition_limit=condition_limit,
         timings=(wall0, compile_time),
     )
 

@@ -160,10 +160,22 @@ def plot_corner_tracks(data, *, n_arrows: int = 40, n_outlines: int = 6, title: 
     last = len(t) - 1 if lift is None else int(np.searchsorted(t, lift))
     for k, idx in enumerate(np.linspace(0, last, max(n_outlines, 2)).round().astype(int)):
         poly = np.vstack([c[idx, :, :2], c[idx, :1, :2]])
-        ax.plot(poly[:, 0], poly[:, 1], color="0.55", lw=0.9 if k == 0 else 0.7, ls="-" if k == 0 else "--",
-                zorder=1)
-        ax.annotate(f"{t[idx]:.1f} s", poly[0], fontsize="x-small", color="0.35", xytext=(3, -9),
-                    textcoords="offset points")
+        ax.plot(
+            poly[:, 0],
+            poly[:, 1],
+            color="0.55",
+            lw=0.9 if k == 0 else 0.7,
+            ls="-" if k == 0 else "--",
+            zorder=1,
+        )
+        ax.annotate(
+            f"{t[idx]:.1f} s",
+            poly[0],
+            fontsize="x-small",
+            color="0.35",
+            xytext=(3, -9),
+            textcoords="offset points",
+        )
     sample = np.linspace(0, len(t) - 1, max(n_arrows, 1)).round().astype(int)
     for i in range(4):
         col = CORNER_COLOURS[i]
@@ -172,16 +184,32 @@ def plot_corner_tracks(data, *, n_arrows: int = 40, n_outlines: int = 6, title: 
         # contact segments: keep a point if it or a neighbour touches, so short contacts still show as lines
         near = touch | np.r_[touch[1:], False] | np.r_[False, touch[:-1]]
         ax.plot(x, y, color=col, lw=0.7, alpha=0.45, zorder=2)
-        ax.plot(np.where(near, x, np.nan), np.where(near, y, np.nan), color=col, lw=2.0, zorder=3,
-                label=f"{CORNERS[i]}")
+        ax.plot(
+            np.where(near, x, np.nan),
+            np.where(near, y, np.nan),
+            color=col,
+            lw=2.0,
+            zorder=3,
+            label=f"{CORNERS[i]}",
+        )
         ax.plot(x[0], y[0], "o", color=col, ms=5, zorder=4)
         T = d["friction_forces"][sample, i, :2]
         mag = np.linalg.norm(T, axis=-1)
         on = touch[sample] & (mag > 0.0)
         if np.any(on):
             u = T[on] / mag[on, None]
-            ax.quiver(x[sample[on]], y[sample[on]], u[:, 0] * arrow_len, u[:, 1] * arrow_len, angles="xy",
-                      scale_units="xy", scale=1.0, color=col, width=0.0045, zorder=5)
+            ax.quiver(
+                x[sample[on]],
+                y[sample[on]],
+                u[:, 0] * arrow_len,
+                u[:, 1] * arrow_len,
+                angles="xy",
+                scale_units="xy",
+                scale=1.0,
+                color=col,
+                width=0.0045,
+                zorder=5,
+            )
     ax.plot([], [], color="0.3", lw=2.0, label="on the ground")
     ax.plot([], [], color="0.3", lw=0.7, alpha=0.45, label="in the air")
     ax.set_aspect("equal", adjustable="datalim")
@@ -240,8 +268,9 @@ def save_figure(fig: Figure, path: str | Path, *, dpi: int = 110) -> Path:
     return path
 
 
-def save_all(data, out_dir: str | Path, *, prefix: str = "", dpi: int = 110,
-             title_prefix: str = "") -> list[Path]:
+def save_all(
+    data, out_dir: str | Path, *, prefix: str = "", dpi: int = 110, title_prefix: str = ""
+) -> list[Path]:
     """Write every plot of `PLOTS` as `<out_dir>/<prefix><name>.png`; returns the paths."""
     d = as_arrays(data)
     paths = []

@@ -57,8 +57,16 @@ def _bar(total: float | int, desc: str, unit: str, *, quiet: bool = False, bar_f
     """A tqdm progress bar on stderr (a disabled one with `quiet`)."""
     from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, unit=unit, file=sys.stderr, disable=quiet, dynamic_ncols=True,
-                leave=True, bar_format=bar_format)
+    return tqdm(
+        total=total,
+        desc=desc,
+        unit=unit,
+        file=sys.stderr,
+        disable=quiet,
+        dynamic_ncols=True,
+        leave=True,
+        bar_format=bar_format,
+    )
 
 
 class _LineSink:
@@ -138,10 +146,15 @@ class ScanProgressBar(_TqdmReport):
         from tqdm import tqdm
 
         if self.bar is None:
-            self.bar = tqdm(total=p.total, desc="scan", unit="member", file=self.stream or sys.stderr,
-                            disable=self.quiet, dynamic_ncols=True,
-                            bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} members "
-                            "[{postfix}]")
+            self.bar = tqdm(
+                total=p.total,
+                desc="scan",
+                unit="member",
+                file=self.stream or sys.stderr,
+                disable=self.quiet,
+                dynamic_ncols=True,
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} members [{postfix}]",
+            )
         rate = f"{p.rate:.3g} members/s" if p.rate else "compiling"
         eta = "?" if p.eta is None else _fmt_seconds(p.eta)
         loaded = ", resumed from disk" if p.loaded else ""
@@ -154,7 +167,6 @@ class ScanProgressBar(_TqdmReport):
         self.bar.refresh()
         if p.done >= p.total:
             self.close()
-
 
 
 class LocatorProgressBar(_TqdmReport):
@@ -177,11 +189,18 @@ class LocatorProgressBar(_TqdmReport):
         key = r.get("point")
         if self.bar is None or key != self.key:
             self.close()
-            desc = "locating" if key is None else (
-                f"point {key + 1}/{r['n_points']} ({r['along_value']:.6g})")
-            self.bar = tqdm(total=100.0, desc=desc, unit="%", file=self.stream or sys.stderr,
-                            disable=self.quiet, dynamic_ncols=True,
-                            bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}, {postfix}]")
+            desc = (
+                "locating" if key is None else (f"point {key + 1}/{r['n_points']} ({r['along_value']:.6g})")
+            )
+            self.bar = tqdm(
+                total=100.0,
+                desc=desc,
+                unit="%",
+                file=self.stream or sys.stderr,
+                disable=self.quiet,
+                dynamic_ncols=True,
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}, {postfix}]",
+            )
             self.key = key
         if r["iteration"] == 1:  # a new call (a wider retry, the next candidate jump): a new first bracket
             self.w0 = r["width"]
@@ -194,9 +213,10 @@ class LocatorProgressBar(_TqdmReport):
         g = r["indicator"][-1] if isinstance(r["indicator"], list) else r["indicator"]
         self.bar.set_postfix_str(
             f"it {r['iteration']} {r['kind']}, p = {x:.10g}, g = {g:.3g}, width {w:.3g}, "
-            f"{r['n_solves']} solves", refresh=False)
+            f"{r['n_solves']} solves",
+            refresh=False,
+        )
         self.bar.refresh()
-
 
 
 class FitProgressBar(_TqdmReport):
@@ -213,15 +233,21 @@ class FitProgressBar(_TqdmReport):
         if self.bar is None or r["start"] != self.start:
             self.close()
             desc = "fit" if r["n_starts"] == 1 else f"fit, start {r['start'] + 1}/{r['n_starts']}"
-            self.bar = tqdm(total=self.total, desc=desc, unit="eval", file=self.stream or sys.stderr,
-                            disable=self.quiet, dynamic_ncols=True)
+            self.bar = tqdm(
+                total=self.total,
+                desc=desc,
+                unit="eval",
+                file=self.stream or sys.stderr,
+                disable=self.quiet,
+                dynamic_ncols=True,
+            )
             self.start = r["start"]
         self.bar.n = r["iteration"]
         mark = "" if r["improved"] else " (rejected)"
         self.bar.set_postfix_str(
-            f"cost {r['cost']:.6g}{mark}, best {r['best_cost']:.6g}, step {r['step']:.3g}", refresh=False)
+            f"cost {r['cost']:.6g}{mark}, best {r['best_cost']:.6g}, step {r['step']:.3g}", refresh=False
+        )
         self.bar.refresh()
-
 
 
 def _fmt_seconds(s: float) -> str:

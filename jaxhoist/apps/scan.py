@@ -203,7 +203,15 @@ def scan(
     run = _Run(spec, scenario, ts, solve_rows, order, chunk, store, done_chunks, wall0)
     flat, timings = run.chunks(progress_mod.resolve(progress))
     result = _assemble(
-        scenario, spec, flat, order, invalid, mode=mode, coords=coords, shape=shape, ts=ts,
+        scenario,
+        spec,
+        flat,
+        order,
+        invalid,
+        mode=mode,
+        coords=coords,
+        shape=shape,
+        ts=ts,
         attrs={
             "scenario": scenario.name,
             "t1": float(ts[-1]),
@@ -376,8 +384,11 @@ class _Run:
         self.compute_time += time.perf_counter() - t_start
         if self.store is not None:
             lo = k * self.chunk
-            record = {"members": [lo, lo + rows.shape[0]], "devices": self._here(),
-                      "wall_s": round(time.perf_counter() - t_start, 4)}
+            record = {
+                "members": [lo, lo + rows.shape[0]],
+                "devices": self._here(),
+                "wall_s": round(time.perf_counter() - t_start, 4),
+            }
             self.store.write(k, res, idx, record)
         return res
 

@@ -15,6 +15,7 @@ from .progress_bars import StepTimer, _bar, _LineSink, _percent_to_bar, _phase_t
 
 # ---------------------------------------------------------------------------------------- simulate
 
+
 def _cache_key(scenario, ts, options):
     from ..numerics.compile_cache import structure_key
 
@@ -30,7 +31,8 @@ def _compiled_solve(scenario, ts, options):
     from ..numerics.solve import solve
 
     fn, _ = compiled(
-        "cli-simulate", _cache_key(scenario, ts, options),
+        "cli-simulate",
+        _cache_key(scenario, ts, options),
         lambda: eqx.filter_jit(solve).lower(scenario, ts, options),
     )
     return fn
@@ -117,8 +119,9 @@ def run_simulate(args: argparse.Namespace) -> int:
             options = SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
         else:
             # diffrax's progress meter (TextProgressMeter) unless --quiet; its lines become a bar on stderr
-            options = SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps,
-                                    progress=not args.quiet)
+            options = SolverOptions(
+                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps, progress=not args.quiet
+            )
         ts = jnp.linspace(0.0, 1.0, args.n_save) * jnp.asarray(t1, dtype=jnp.float64)
     out_dir = Path(args.out) if args.out else Path("out") / scenario.name
     check_out_dir(out_dir, "--out", refuse_existing=True, overwrite=args.overwrite)
@@ -131,9 +134,19 @@ def run_simulate(args: argparse.Namespace) -> int:
         from ..numerics.rigid_solve import simulate_rigid
 
         label = "solving with the rigid-ground model (each phase compiles on first use)"
-        with progress(label, bar=True), _bar(float(t1), "rigid model", "s", quiet=args.quiet, bar_format=(
-            "{desc}: {percentage:3.0f}%|{bar}| t = {n:.3f}/{total:.3g} s [{elapsed}<{remaining}{postfix}]"
-        )) as bar:
+        with (
+            progress(label, bar=True),
+            _bar(
+                float(t1),
+                "rigid model",
+                "s",
+                quiet=args.quiet,
+                bar_format=(
+                    "{desc}: {percentage:3.0f}%|{bar}| t = {n:.3f}/{total:.3g} s "
+                    "[{elapsed}<{remaining}{postfix}]"
+                ),
+            ) as bar,
+        ):
             with contextlib.redirect_stdout(_LineSink(_phase_to_bar(bar))):
                 traj = simulate_rigid(
                     scenario,
@@ -152,9 +165,16 @@ def run_simulate(args: argparse.Namespace) -> int:
         cached = is_cached("cli-simulate", _cache_key(scenario, ts, options))
         with progress("compiling (cached in this process)" if cached else "compiling"):
             solve_fn = _compiled_solve(scenario, ts, options)
-        with progress("solving", bar=True), _bar(100.0, "solving", "%", quiet=args.quiet, bar_format=(
-            "{desc}: {percentage:3.0f}%|{bar}| t = {n:.0f}% of t1 [{elapsed}<{remaining}]"
-        )) as bar:
+        with (
+            progress("solving", bar=True),
+            _bar(
+                100.0,
+                "solving",
+                "%",
+                quiet=args.quiet,
+                bar_format=("{desc}: {percentage:3.0f}%|{bar}| t = {n:.0f}% of t1 [{elapsed}<{remaining}]"),
+            ) as bar,
+        ):
             with contextlib.redirect_stdout(_LineSink(_percent_to_bar(bar))):
                 traj = jax.block_until_ready(solve_fn(scenario, ts, options))
         wall_solve = progress.times["solving"]
@@ -219,11 +239,20 @@ def configure_simulate(subparsers) -> None:
         metavar="N",
         help="number of equally spaced saved times from 0 to t1 (default 501)",
     )
-    p.add_argument("--rtol", type=number_arg, default=None, metavar="R",
-                   help=_RTOL_HELP + " (default 1e-3 with the default Rosenbrock-W solver; 1e-6 with --model "
-                   "rigid)")
-    p.add_argument("--atol", type=number_arg, default=None, metavar="A",
-                   help=_ATOL_HELP + " (default 1e-5 with the default solver; 1e-8 with --model rigid)")
+    p.add_argument(
+        "--rtol",
+        type=number_arg,
+        default=None,
+        metavar="R",
+        help=_RTOL_HELP + " (default 1e-3 with the default Rosenbrock-W solver; 1e-6 with --model rigid)",
+    )
+    p.add_argument(
+        "--atol",
+        type=number_arg,
+        default=None,
+        metavar="A",
+        help=_ATOL_HELP + " (default 1e-5 with the default solver; 1e-8 with --model rigid)",
+    )
     p.add_argument(
         "--max-steps",
         type=count_arg,
@@ -308,6 +337,7 @@ def _write_results(args, out_dir: Path, traj, scenario, options, t1, overrides, 
         )
         csv_path = save_trajectory_csv(out_dir / "trajectory.csv", arrays)
         md = load_metadata(npz)
-        nc_path = save_trajectory_netcdf(out_dir / "trajectory.nc", arrays,
-                                         {k: md[k] for k in ("command", "scenario", "solver", "status")})
+        nc_path = save_trajectory_netcdf(
+            out_dir / "trajectory.nc", arrays, {k: md[k] for k in ("command", "scenario", "solver", "status")}
+        )
     return arrays, [npz, meta, csv_path.name, nc_path.name]

@@ -32,8 +32,11 @@ TRAJECTORY_ARRAYS: dict[str, tuple[str, str]] = {
     "ts": ("s", "saved times t"),
     "position": ("m", "mass centre C in world axes (x, y, z); shape (n_t, 3)"),
     "velocity": ("m/s", "velocity of the mass centre C in world axes; shape (n_t, 3)"),
-    "euler": ("rad", "Euler angles (phi, psi, theta), R = R_Z(psi) R_Y(theta) R_X(phi); "
-                     "phi, psi unwrapped along time; shape (n_t, 3)"),
+    "euler": (
+        "rad",
+        "Euler angles (phi, psi, theta), R = R_Z(psi) R_Y(theta) R_X(phi); "
+        "phi, psi unwrapped along time; shape (n_t, 3)",
+    ),
     "angular_velocity": ("rad/s", "angular velocity omega in body axes (xi, eta, zeta); shape (n_t, 3)"),
     "quaternion": ("-", "orientation quaternion (w, x, y, z), body -> world; shape (n_t, 4)"),
     "corners": ("m", "bottom corners D, E, F, H in world axes; shape (n_t, 4, 3)"),
@@ -43,8 +46,10 @@ TRAJECTORY_ARRAYS: dict[str, tuple[str, str]] = {
     "rope_tension": ("N", "rope tension S; shape (n_t,)"),
     "tip_position": ("m", "boom tip A in world axes; shape (n_t, 3)"),
     "tip_velocity": ("m/s", "velocity of the boom tip A; shape (n_t, 3)"),
-    "friction_state": ("m", "friction-law state per corner (bristle deflection; empty for Coulomb); "
-                            "shape (n_t, 4, n)"),
+    "friction_state": (
+        "m",
+        "friction-law state per corner (bristle deflection; empty for Coulomb); shape (n_t, 4, n)",
+    ),
     "energy_kinetic": ("J", "kinetic energy of load and boom tip"),
     "energy_potential": ("J", "potential energy m g Z_C + m_0 g Z_A"),
     "energy_ground_spring": ("J", "elastic energy of the foundation springs"),
@@ -131,8 +136,15 @@ def phase_records(traj) -> list[dict[str, Any]]:
     """The phase log of a rigid-model trajectory as JSON-ready dicts (t_start, t_end [s], contact per corner,
     rest, end, rope, name); empty for a trajectory without one."""
     return [
-        {"t_start": float(p.t_start), "t_end": float(p.t_end), "contact": list(p.contact),
-         "rest": bool(p.rest), "end": p.end, "rope": p.rope, "name": phase_name(p.contact, p.rest, p.rope)}
+        {
+            "t_start": float(p.t_start),
+            "t_end": float(p.t_end),
+            "contact": list(p.contact),
+            "rest": bool(p.rest),
+            "end": p.end,
+            "rope": p.rope,
+            "name": phase_name(p.contact, p.rest, p.rope),
+        }
         for p in getattr(traj, "phases", ())
     ]
 
@@ -219,8 +231,14 @@ def _jsonable(x):
     return repr(x)
 
 
-def save_arrays(path: str | Path, arrays: Mapping[str, Any], units: Mapping[str, tuple[str, str] | str],
-                metadata: Mapping[str, Any] | None = None, *, kind: str = FORMAT) -> tuple[Path, Path]:
+def save_arrays(
+    path: str | Path,
+    arrays: Mapping[str, Any],
+    units: Mapping[str, tuple[str, str] | str],
+    metadata: Mapping[str, Any] | None = None,
+    *,
+    kind: str = FORMAT,
+) -> tuple[Path, Path]:
     """Write `arrays` to `<stem>.npz` and a JSON sidecar `<stem>.json` describing them.
 
     **Arguments**
@@ -263,9 +281,15 @@ def save_arrays(path: str | Path, arrays: Mapping[str, Any], units: Mapping[str,
     return npz_path, json_path
 
 
-def save_trajectory(path: str | Path, traj, scenario=None, *, command: Sequence[str] | None = None,
-                    options: Mapping[str, Any] | None = None,
-                    extra: Mapping[str, Any] | None = None) -> tuple[Path, Path]:
+def save_trajectory(
+    path: str | Path,
+    traj,
+    scenario=None,
+    *,
+    command: Sequence[str] | None = None,
+    options: Mapping[str, Any] | None = None,
+    extra: Mapping[str, Any] | None = None,
+) -> tuple[Path, Path]:
     """Save a single (or batched) `Trajectory` as `<stem>.npz` + `<stem>.json`.
 
     **Arguments**
@@ -286,8 +310,11 @@ def save_trajectory(path: str | Path, traj, scenario=None, *, command: Sequence[
         "command": list(command) if command is not None else None,
         "scenario": scenario_metadata(scenario) if scenario is not None else None,
         "solver": dict(options or {}),
-        "status": ([SolveStatus(int(s)).name.lower() for s in status.ravel()] if status.ndim
-                   else SolveStatus(int(status)).name.lower()),
+        "status": (
+            [SolveStatus(int(s)).name.lower() for s in status.ravel()]
+            if status.ndim
+            else SolveStatus(int(status)).name.lower()
+        ),
     }
     if hasattr(traj, "phases"):
         meta["phases"] = phase_records(traj)
@@ -403,12 +430,23 @@ def save_trajectory_netcdf(path: str | Path, data, metadata: Mapping[str, Any] |
     n_fs = d["friction_state"].shape[-1] if d["friction_state"].ndim == 3 else 0
     if n_fs:
         dims["friction_state_dim"] = n_fs
-    by_shape = {(): (), (n_t,): ("time",), (n_t, 3): ("time", "xyz"), (n_t, 4): ("time", "corner"),
-                (n_t, 4, 3): ("time", "corner", "xyz"),
-                (n_t, 4, n_fs): ("time", "corner", "friction_state_dim")}
+    by_shape = {
+        (): (),
+        (n_t,): ("time",),
+        (n_t, 3): ("time", "xyz"),
+        (n_t, 4): ("time", "corner"),
+        (n_t, 4, 3): ("time", "corner", "xyz"),
+        (n_t, 4, n_fs): ("time", "corner", "friction_state_dim"),
+    }
     table = {**TRAJECTORY_ARRAYS, **RIGID_ARRAYS}
-    variables = [("corner_name", ("corner", "name_strlen"), np.array([[c] for c in "DEFH"], dtype="S1"),
-                  {"long_name": "corner label"})]
+    variables = [
+        (
+            "corner_name",
+            ("corner", "name_strlen"),
+            np.array([[c] for c in "DEFH"], dtype="S1"),
+            {"long_name": "corner label"},
+        )
+    ]
     for name, a in d.items():
         if name == "quaternion":
             vdims = ("time", "quat")

@@ -163,8 +163,15 @@ class ScanStore:
     every chunk once all are on disk (several processes).
     """
 
-    def __init__(self, out: str | Path, fingerprint: str, *, proc: int = 0, n_proc: int = 1,
-                 wait_timeout: float = 24 * 3600.0):
+    def __init__(
+        self,
+        out: str | Path,
+        fingerprint: str,
+        *,
+        proc: int = 0,
+        n_proc: int = 1,
+        wait_timeout: float = 24 * 3600.0,
+    ):
         self.out = Path(out)
         self.fingerprint = fingerprint
         self.proc, self.n_proc = proc, n_proc
@@ -194,7 +201,8 @@ class ScanStore:
             int(old["chunk_size"])
         except (OSError, ValueError, KeyError, TypeError) as e:
             warnings.warn(
-                f"{mpath} is unreadable ({type(e).__name__}); the scan starts afresh", ScanStoreWarning,
+                f"{mpath} is unreadable ({type(e).__name__}); the scan starts afresh",
+                ScanStoreWarning,
                 stacklevel=4,
             )
             return None
@@ -218,7 +226,9 @@ class ScanStore:
             for k_str, entry in old.get("chunks", {}).items():
                 k = int(k_str)
                 res, why = read_chunk(
-                    self.path(k), self.fingerprint, order[k * chunk : (k + 1) * chunk],
+                    self.path(k),
+                    self.fingerprint,
+                    order[k * chunk : (k + 1) * chunk],
                     (entry or {}).get("sha256"),
                 )
                 if res is not None:

@@ -39,8 +39,11 @@ from .solve import outputs
 def supports(solver) -> bool:
     """True if `solver` is a diffrax explicit Runge-Kutta method with a single Butcher tableau."""
     tab = getattr(type(solver), "tableau", None)
-    return (isinstance(solver, diffrax.AbstractERK) and isinstance(tab, diffrax.ButcherTableau)
-            and not tab.implicit)
+    return (
+        isinstance(solver, diffrax.AbstractERK)
+        and isinstance(tab, diffrax.ButcherTableau)
+        and not tab.implicit
+    )
 
 
 def _scale(h, f):
@@ -113,11 +116,19 @@ def solve_fixed(scenario: Scenario, ts: Float[Array, " n_t"], options):
     # Finite motion state at t1 (the energy integrals follow from it): checking only these leaves lets XLA
     # drop the energy integrals from the step loop when no observable reads them (~30 % of a step's cost).
     y1 = jax.tree_util.tree_map(lambda x: x[-1], ys)
-    motion = (y1.position, y1.velocity, y1.quaternion, y1.angular_velocity, y1.tip_position, y1.tip_velocity,
-              y1.friction_state)
+    motion = (
+        y1.position,
+        y1.velocity,
+        y1.quaternion,
+        y1.angular_velocity,
+        y1.tip_position,
+        y1.tip_velocity,
+        y1.friction_state,
+    )
     finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in motion]))
-    status = jnp.where(n > options.max_steps, SolveStatus.MAX_STEPS,
-                       jnp.where(finite, SolveStatus.OK, SolveStatus.NONFINITE)).astype(jnp.int32)
+    status = jnp.where(
+        n > options.max_steps, SolveStatus.MAX_STEPS, jnp.where(finite, SolveStatus.OK, SolveStatus.NONFINITE)
+    ).astype(jnp.int32)
     stats = {"num_accepted_steps": n, "num_rejected_steps": jnp.zeros_like(n)}
     return outputs(ts, ys, scenario, c, status, stats)
 
@@ -126,7 +137,3 @@ def steps_needed(ts, dt: float) -> int:
     """Host-side count of the steps `integrate` takes on the concrete saved times `ts`."""
     span = np.diff(np.asarray(ts, dtype=np.float64))
     return int(np.sum(np.maximum(np.ceil(span / float(dt) - 1e-9), 1.0)))
-
-
-
-

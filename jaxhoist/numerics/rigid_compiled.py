@@ -24,15 +24,25 @@ class _Options:
 
 
 def _phase_solve(scenario, c, phase, settings, y0, t0, t1, ts, options: _Options, inextensible: bool = False):
-    event = diffrax.Event(rigid.event_condition,
-                          root_finder=optx.Bisection(rtol=1e-14, atol=options.event_atol), direction=False)
+    event = diffrax.Event(
+        rigid.event_condition,
+        root_finder=optx.Bisection(rtol=1e-14, atol=options.event_atol),
+        direction=False,
+    )
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(rigid.vector_field),  # pyright: ignore[reportArgumentType]  # jaxtyping Scalar vs diffrax RealScalarLike
-        diffrax.Tsit5(), t0=t0, t1=t1, dt0=None, y0=y0,
+        diffrax.Tsit5(),
+        t0=t0,
+        t1=t1,
+        dt0=None,
+        y0=y0,
         args=(scenario, c, phase, settings) + ((True,) if inextensible else ()),
         saveat=diffrax.SaveAt(ts=ts, t1=True),
         stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
-        max_steps=options.max_steps, event=event, throw=False)
+        max_steps=options.max_steps,
+        event=event,
+        throw=False,
+    )
     return sol.ts, sol.ys, sol.result, sol.stats["num_accepted_steps"], sol.stats["num_rejected_steps"]
 
 
@@ -56,13 +66,15 @@ def _eval_candidates(t, y, scenario, c, settings, contact, hints, rope, inextens
 @eqx.filter_jit
 def _eval_rope_impulses(t, y, scenario, c, modes, slip_dirs, normal_target, rcond):
     return jax.vmap(lambda m, s: rigid.rope_impulse_response(t, y, scenario, c, m, s, normal_target, rcond))(
-        modes, slip_dirs)
+        modes, slip_dirs
+    )
 
 
 @eqx.filter_jit
 def _eval_impulses(y, scenario, c, modes, slip_dirs, normal_target, rcond):
     return jax.vmap(lambda m, s: rigid.impulse_response(y, scenario, c, m, s, normal_target, rcond))(
-        modes, slip_dirs)
+        modes, slip_dirs
+    )
 
 
 _contact_matrices = eqx.filter_jit(rigid.contact_matrices)
@@ -96,8 +108,9 @@ def _forces(t, y, scenario, c, phase, settings, inextensible=False):
 
 @eqx.filter_jit
 def _outputs(ts, ys, scenario, c, phases, settings, inextensible=False):
-    return jax.vmap(lambda t, y, ph: rigid.output(t, y, scenario, c, ph, settings, inextensible))(ts, ys,
-                                                                                               phases)
+    return jax.vmap(lambda t, y, ph: rigid.output(t, y, scenario, c, ph, settings, inextensible))(
+        ts, ys, phases
+    )
 
 
 #: Saved samples per output evaluation (`_chunked_outputs`): one compiled shape serves every `n_save`.

@@ -78,8 +78,16 @@ class ChatterRule:
     def check(self) -> None:
         """Raise `ScenarioError` naming the first field that is not a positive finite number (`decay` may
         be 0, `min_impacts` and `samples` are integers >= 1 and >= 2)."""
-        for name in ("window", "stiffness", "regularisation_velocity", "rope_stiffness", "chunk", "steady",
-                     "max_duration", "load_fraction"):
+        for name in (
+            "window",
+            "stiffness",
+            "regularisation_velocity",
+            "rope_stiffness",
+            "chunk",
+            "steady",
+            "max_duration",
+            "load_fraction",
+        ):
             v = getattr(self, name)
             if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
                 raise ScenarioError(f"ChatterRule.{name} must be a positive finite number, got {v!r}")
@@ -88,8 +96,9 @@ class ChatterRule:
         if not (isinstance(self.min_impacts, int) and self.min_impacts >= 1):
             raise ScenarioError(f"ChatterRule.min_impacts must be an integer >= 1, got {self.min_impacts!r}")
         if not (isinstance(self.min_switches, int) and self.min_switches >= 1):
-            raise ScenarioError(f"ChatterRule.min_switches must be an integer >= 1, "
-                                f"got {self.min_switches!r}")
+            raise ScenarioError(
+                f"ChatterRule.min_switches must be an integer >= 1, got {self.min_switches!r}"
+            )
         if not (isinstance(self.samples, int) and self.samples >= 2):
             raise ScenarioError(f"ChatterRule.samples must be an integer >= 2, got {self.samples!r}")
 
@@ -111,8 +120,10 @@ class ChatterRule:
         early, late = float(np.mean(recent[:half])), float(np.mean(recent[-half:]))
         if late < self.decay * early and len(recent) < 4 * self.min_impacts:
             return ""  # a decaying train (a rocking load settling), unless it is very dense
-        return (f"{len(recent)} impacts in {self.window * 1e3:g} ms, losses not decaying "
-                f"({early:.3g} -> {late:.3g} J)")
+        return (
+            f"{len(recent)} impacts in {self.window * 1e3:g} ms, losses not decaying "
+            f"({early:.3g} -> {late:.3g} J)"
+        )
 
 
 def compliant_scenario(scenario: Scenario, rule: ChatterRule, inextensible: bool) -> Scenario:
@@ -121,24 +132,37 @@ def compliant_scenario(scenario: Scenario, rule: ChatterRule, inextensible: bool
     elastic rope, critically damped for the boom tip's mass, damper acting at once."""
     k = float(rule.stiffness)
     m = float(scenario.load.mass)
-    sc = scenario.replace(**{"foundation.stiffness": k, "foundation.damping": math.sqrt(k * m),
-                             "foundation.damping_onset": 1e-4 * 1.5e7 / k})
+    sc = scenario.replace(
+        **{
+            "foundation.stiffness": k,
+            "foundation.damping": math.sqrt(k * m),
+            "foundation.damping_onset": 1e-4 * 1.5e7 / k,
+        }
+    )
     sc = eqx.tree_at(lambda s: s.foundation.friction, sc, RegularisedCoulomb(rule.regularisation_velocity))
     if inextensible:
         kr = float(rule.rope_stiffness)
         m0 = float(scenario.boom.tip_mass)
-        sc = sc.replace(**{"rope.stiffness": kr, "rope.damping": 2.0 * math.sqrt(kr * m0),
-                           "rope.damping_onset": 0.0})
+        sc = sc.replace(
+            **{"rope.stiffness": kr, "rope.damping": 2.0 * math.sqrt(kr * m0), "rope.damping_onset": 0.0}
+        )
     return sc
 
 
 def _chunk_solve(scenario, c, y0, t0, t1, ts_user, ts_dense, rtol, atol, max_steps):
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(elastic.vector_field),  # pyright: ignore[reportArgumentType]  # jaxtyping Scalar vs diffrax RealScalarLike
-        diffrax.Tsit5(), t0=t0, t1=t1, dt0=None, y0=y0,
+        diffrax.Tsit5(),
+        t0=t0,
+        t1=t1,
+        dt0=None,
+        y0=y0,
         args=(scenario, c),
         saveat=diffrax.SaveAt(subs=[diffrax.SubSaveAt(ts=ts_user), diffrax.SubSaveAt(ts=ts_dense)]),
-        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol), max_steps=max_steps, throw=False)
+        stepsize_controller=diffrax.PIDController(rtol=rtol, atol=atol),
+        max_steps=max_steps,
+        throw=False,
+    )
     ys = sol.ys
     assert ys is not None  # SaveAt(subs=...) saves
     return ys[0], ys[1], sol.result, sol.stats["num_accepted_steps"], sol.stats["num_rejected_steps"]
@@ -167,9 +191,14 @@ def elastic_outputs(ts, ys, scenario, c):
 
     def one(t, y):
         snap = elastic.snapshot(t, y, scenario, c)
-        return dict(corners=snap.corners, normal=snap.normal, friction=snap.friction,
-                    rope_tension=snap.rope_tension, energy=energy_mod.energy(y, snap, scenario, c),
-                    euler=kinematics.matrix_to_euler(snap.rotation))
+        return dict(
+            corners=snap.corners,
+            normal=snap.normal,
+            friction=snap.friction,
+            rope_tension=snap.rope_tension,
+            energy=energy_mod.energy(y, snap, scenario, c),
+            euler=kinematics.matrix_to_euler(snap.rotation),
+        )
 
     return jax.vmap(one)(ts, ys)
 
@@ -198,8 +227,9 @@ class Episode:
     rejected: int
 
 
-def run_episode(drv, t0: float, y0: elastic.State, t1: float, ts: np.ndarray, filled: np.ndarray,
-                rule: ChatterRule) -> Episode:
+def run_episode(
+    drv, t0: float, y0: elastic.State, t1: float, ts: np.ndarray, filled: np.ndarray, rule: ChatterRule
+) -> Episode:
     """Integrate the compliant model from (t0, y0) until the loaded corners are steady (or `max_duration`,
     or `t1`), then hand the state back (module docstring). `drv` is the rigid driver (`_Driver`): its
     scenario, constants, tolerances, settings and velocity projections are used; `ts`/`filled`: the saved
@@ -220,14 +250,25 @@ def run_episode(drv, t0: float, y0: elastic.State, t1: float, ts: np.ndarray, fi
             t_next = t_stop
         ts_c = jnp.clip(jnp.asarray(ts, dtype=jnp.float64), t, t_next)
         dense = jnp.linspace(t, t_next, rule.samples)
-        yu, yd, result, acc, rej = _chunk_solve_jit(sc_c, c, y, jnp.asarray(t, dtype=jnp.float64),
-                                                    jnp.asarray(t_next, dtype=jnp.float64), ts_c, dense,
-                                                    opt.rtol, opt.atol, opt.max_steps)
+        yu, yd, result, acc, rej = _chunk_solve_jit(
+            sc_c,
+            c,
+            y,
+            jnp.asarray(t, dtype=jnp.float64),
+            jnp.asarray(t_next, dtype=jnp.float64),
+            ts_c,
+            dense,
+            opt.rtol,
+            opt.atol,
+            opt.max_steps,
+        )
         accepted += int(acc)
         rejected += int(rej)
         if result != diffrax.RESULTS.successful:
-            raise RigidContactError(f"the compliant phase from t = {t:.9g} s failed at {t_next:.9g} s: "
-                                    f"{result} (raise max_steps = {opt.max_steps} or loosen rtol/atol)")
+            raise RigidContactError(
+                f"the compliant phase from t = {t:.9g} s failed at {t_next:.9g} s: "
+                f"{result} (raise max_steps = {opt.max_steps} or loosen rtol/atol)"
+            )
         ks = np.nonzero((ts >= t) & (ts <= t_next) & ~filled)[0]
         if ks.size:
             user_idx.append(ks)
@@ -252,9 +293,19 @@ def run_episode(drv, t0: float, y0: elastic.State, t1: float, ts: np.ndarray, fi
     y_el = y
     y_hb, loss = handback(drv, sc_c, t, y_el, last)
     index = np.concatenate(user_idx) if user_idx else np.zeros(0, dtype=np.int64)
-    states = (jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *user_states) if user_states else None)
-    return Episode(t_end=t, y_end=y_hb, y_before_handback=y_el, user_states=states, user_index=index,
-                   loaded=last, steady=steady, handback_loss=loss, accepted=accepted, rejected=rejected)
+    states = jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *user_states) if user_states else None
+    return Episode(
+        t_end=t,
+        y_end=y_hb,
+        y_before_handback=y_el,
+        user_states=states,
+        user_index=index,
+        loaded=last,
+        steady=steady,
+        handback_loss=loss,
+        accepted=accepted,
+        rejected=rejected,
+    )
 
 
 def _onto_ground(drv, t, y, loaded, iterations: int = 3):
@@ -270,8 +321,11 @@ def _onto_ground(drv, t, y, loaded, iterations: int = 3):
         w, v = q[0], q[1:]
         dq = np.concatenate([[1.0], 0.5 * d[3:]])  # q ⊗ (1, dθ/2): a rotation dθ in body axes
         q1 = np.array([w * dq[0] - v @ dq[1:], *(w * dq[1:] + dq[0] * v + np.cross(v, dq[1:]))])
-        y = eqx.tree_at(lambda s: (s.position, s.quaternion), y,
-                        (y.position + jnp.asarray(d[:3]), jnp.asarray(q1 / np.linalg.norm(q1))))
+        y = eqx.tree_at(
+            lambda s: (s.position, s.quaternion),
+            y,
+            (y.position + jnp.asarray(d[:3]), jnp.asarray(q1 / np.linalg.norm(q1))),
+        )
     return y
 
 
@@ -285,8 +339,9 @@ def handback(drv, sc_c: Scenario, t: float, y: elastic.State, loaded: np.ndarray
     if np.any(loaded):
         y = _onto_ground(drv, t, y, loaded)
     if drv.inextensible:
-        B = kinematics.points_world(y.position, kinematics.quat_to_matrix(y.quaternion),
-                                    drv.c.attachment_rel[None])[0]
+        B = kinematics.points_world(
+            y.position, kinematics.quat_to_matrix(y.quaternion), drv.c.attachment_rel[None]
+        )[0]
         AB = y.tip_position - B
         L = float(forces.safe_norm(AB))
         length = float(drv.c.rope_length - drv.sc.hoist.shortening(jnp.asarray(t)))

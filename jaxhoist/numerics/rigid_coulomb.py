@@ -9,8 +9,9 @@ import numpy as np
 from ..physics.rigid import FREE, SLIDE, STICK
 
 
-def coulomb_pattern(mats, in_contact, resting, mu: float, G: float, g: float, n_outer: int = 12,
-                    debug: bool = False):
+def coulomb_pattern(
+    mats, in_contact, resting, mu: float, G: float, g: float, n_outer: int = 12, debug: bool = False
+):
     """Which resting contacts stick and in which direction the others start to slide, for the contact set
     `in_contact`, from Coulomb's law in its maximum-dissipation form.
 
@@ -40,7 +41,7 @@ def coulomb_pattern(mats, in_contact, resting, mu: float, G: float, g: float, n_
     mov = in_contact & ~resting
     tdir = np.zeros((4, 2))
     tdir[mov] = cv[mov, :2] / speed[mov, None]
-    Gz = jac[idx, 2, :]                       # (n_c, 6)
+    Gz = jac[idx, 2, :]  # (n_c, 6)
     rz = target[idx, 2] - bias[idx, 2]
     if mats.rope_row is not None:  # the taut inextensible rope: one more equality (coordinates incl. tip)
         Gz = np.concatenate([Gz, mats.rope_row[None, :]], axis=0)
@@ -48,8 +49,8 @@ def coulomb_pattern(mats, in_contact, resting, mu: float, G: float, g: float, n_
     u0 = np.linalg.lstsq(Gz, rz, rcond=None)[0]
     _, sv, Vt = np.linalg.svd(Gz)
     rank = int(np.sum(sv > 1e-10 * sv.max()))
-    Z = Vt[rank:].T                           # null space of the contact rows (6, 6 - rank)
-    A = jac[:, :2, :]                         # horizontal rows (4, 2, 6)
+    Z = Vt[rank:].T  # null space of the contact rows (6, 6 - rank)
+    A = jac[:, :2, :]  # horizontal rows (4, 2, 6)
     b = bias[:, :2]
 
     def multipliers(u, Nt, eps):
@@ -61,7 +62,7 @@ def coulomb_pattern(mats, in_contact, resting, mu: float, G: float, g: float, n_
             r = r - A[i].T @ (-mu * Nt[i] * s / np.sqrt(s @ s + eps**2))
         lam = np.linalg.lstsq(Gz.T, r, rcond=None)[0]
         N = np.zeros(4)
-        N[idx] = lam[:idx.size]
+        N[idx] = lam[: idx.size]
         return N
 
     def minimise(Nt, q, eps_list):
@@ -117,8 +118,10 @@ def coulomb_pattern(mats, in_contact, resting, mu: float, G: float, g: float, n_
     u = u0 + Z @ q
     if debug:
         ah = np.einsum("kij,j->ki", A, u) + b
-        print(f"    coulomb_pattern {in_contact.astype(int)}: outer it {it}, N = {np.round(Nt, 3)}, "
-              f"|a_h| = {np.linalg.norm(ah, axis=1)}, u = {u}")
+        print(
+            f"    coulomb_pattern {in_contact.astype(int)}: outer it {it}, N = {np.round(Nt, 3)}, "
+            f"|a_h| = {np.linalg.norm(ah, axis=1)}, u = {u}"
+        )
     _classify(modes, hints, idx, mov, tdir, A, b, u, eps_final)
     return modes, hints
 

@@ -34,19 +34,19 @@ from .rigid_coulomb import coulomb_pattern
 from .rigid_records import _fmt
 
 _DEFAULT_TOL = dict(
-    z=1e-7,            # a corner is on the ground if Z < z L
-    v=1e-6,            # ... and |v_z| < v V; it rests if also |v_h| < v V
-    force=1e-7,        # consistency tolerance on forces [G]
-    accel=1e-7,        # consistency tolerance on accelerations [g]
-    rest=1e-9,         # tolerance of the rest conditions (dimensionless guards)
+    z=1e-7,  # a corner is on the ground if Z < z L
+    v=1e-6,  # ... and |v_z| < v V; it rests if also |v_h| < v V
+    force=1e-7,  # consistency tolerance on forces [G]
+    accel=1e-7,  # consistency tolerance on accelerations [g]
+    rest=1e-9,  # tolerance of the rest conditions (dimensionless guards)
     guard_start=1e-9,  # every guard starts at least this positive (offsets)
-    min_phase=1e-6,    # [s] a phase shorter than this is merged into the previous record (`_merge`)
-    trigger=1e-6,      # guards within this of zero at an event count as fired
-    lookahead=1e-5,    # the look-ahead runs until the fired guards are below -lookahead
-    align=1e-2,        # a corner sliding from rest must accelerate along its sliding direction (relative)
-    jump=1e-3,         # normal-force jumps closer than this [G] count as equally continuous
-    bounce=1e-4,       # impacts slower than bounce V are plastic (no restitution): avoids Zeno bouncing
-    relax=1e3,         # fallback 1 of the configuration choice: tolerances times this (degenerate contacts)
+    min_phase=1e-6,  # [s] a phase shorter than this is merged into the previous record (`_merge`)
+    trigger=1e-6,  # guards within this of zero at an event count as fired
+    lookahead=1e-5,  # the look-ahead runs until the fired guards are below -lookahead
+    align=1e-2,  # a corner sliding from rest must accelerate along its sliding direction (relative)
+    jump=1e-3,  # normal-force jumps closer than this [G] count as equally continuous
+    bounce=1e-4,  # impacts slower than bounce V are plastic (no restitution): avoids Zeno bouncing
+    relax=1e3,  # fallback 1 of the configuration choice: tolerances times this (degenerate contacts)
 )
 
 
@@ -68,13 +68,24 @@ class _Candidates:
 
 
 class _Driver:
-    def __init__(self, scenario: Scenario, c: Constants, settings: rigid.Settings, options: _Options,
-                 restitution: float, tol: dict):
+    def __init__(
+        self,
+        scenario: Scenario,
+        c: Constants,
+        settings: rigid.Settings,
+        options: _Options,
+        restitution: float,
+        tol: dict,
+    ):
         self.sc, self.c, self.settings, self.options = scenario, c, settings, options
         self.e = float(restitution)
         sc = rigid.scales(scenario)
-        self.G, self.L, self.V, self.g = (float(sc.force), float(sc.length), float(sc.velocity),
-                                          float(sc.acceleration))
+        self.G, self.L, self.V, self.g = (
+            float(sc.force),
+            float(sc.length),
+            float(sc.velocity),
+            float(sc.acceleration),
+        )
         self.mu = float(scenario.foundation.friction_coefficient)
         self.v_stop = float(settings.stop_velocity)
         self.tol = tol
@@ -94,8 +105,9 @@ class _Driver:
         return out
 
     def guards(self, t, y, phase) -> np.ndarray:
-        return _np(_raw_guards_jit(jnp.asarray(t), y, self.sc, self.c, phase, self.settings,
-                                   self.inextensible))
+        return _np(
+            _raw_guards_jit(jnp.asarray(t), y, self.sc, self.c, phase, self.settings, self.inextensible)
+        )
 
     def matrices(self, t, y, rope: int = rigid.ROPE_ELASTIC):
         m = _contact_matrices(jnp.asarray(t), y, self.sc, self.c, self.settings, rope)
@@ -116,8 +128,9 @@ class _Driver:
         # Strongly typed float64 everywhere (a weakly typed leaf would compile the solve a second time).
         t0, t1 = jnp.asarray(t0, dtype=jnp.float64), jnp.asarray(t1, dtype=jnp.float64)
         ts_c = jnp.clip(jnp.asarray(ts, dtype=jnp.float64), t0, t1)
-        out = _phase_solve_jit(self.sc, self.c, phase, self.settings, y, t0, t1, ts_c, self.options,
-                               self.inextensible)
+        out = _phase_solve_jit(
+            self.sc, self.c, phase, self.settings, y, t0, t1, ts_c, self.options, self.inextensible
+        )
         sts, sys_, result, acc, rej = out
         self.accepted += int(acc)
         self.rejected += int(rej)
@@ -144,8 +157,9 @@ class _Driver:
         du = -Minv @ J.T @ np.linalg.pinv(J @ Minv @ J.T, rcond=1e-10) @ (J @ u)
         u1 = u + du
         loss = 0.5 * u @ mats.mass @ u - 0.5 * u1 @ mats.mass @ u1
-        return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
-                           (jnp.asarray(u1[:3]), jnp.asarray(u1[3:]))), float(loss)
+        return eqx.tree_at(
+            lambda s: (s.velocity, s.angular_velocity), y, (jnp.asarray(u1[:3]), jnp.asarray(u1[3:]))
+        ), float(loss)
 
     def _project_taut(self, t, y, full: np.ndarray, normal: np.ndarray, rate_error: float = 0.0):
         """`_project` with the taut inextensible rope: the boom tip's velocity joins the coordinates and
@@ -166,9 +180,11 @@ class _Driver:
         _, _, s_dot = map(float, _rope_state(jnp.asarray(t), y, self.sc, self.c))
         work = float(lam[-1]) * s_dot  # the rope impulse P = λ_rope pulls the tip towards B
         loss = work - (0.5 * u1 @ mats.mass @ u1 - 0.5 * u @ mats.mass @ u)
-        y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work), y,
-                         (jnp.asarray(u1[:3]), jnp.asarray(u1[3:6]), jnp.asarray(u1[6:]),
-                          y.hoist_work + work))
+        y1 = eqx.tree_at(
+            lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work),
+            y,
+            (jnp.asarray(u1[:3]), jnp.asarray(u1[3:6]), jnp.asarray(u1[6:]), y.hoist_work + work),
+        )
         return y1, float(loss)
 
     def project(self, t, y, phase: Phase):
@@ -178,8 +194,9 @@ class _Driver:
         impulse; the kinetic energy it removes [J] is returned."""
         if phase.rest:
             _, _, ke = self.kin(t, y)
-            return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
-                               (jnp.zeros(3), jnp.zeros(3))), ke
+            return eqx.tree_at(
+                lambda s: (s.velocity, s.angular_velocity), y, (jnp.zeros(3), jnp.zeros(3))
+            ), ke
         contact, starting = _np(phase.contact), _np(phase.starting)
         full, normal = (contact == STICK) | ((contact == SLIDE) & starting), contact != FREE
         if self.inextensible and int(phase.rope) == rigid.ROPE_TAUT:
@@ -255,8 +272,9 @@ class _Driver:
 
         excluded: list[int] = []  # consistent but not repeated (noted where that changed the choice)
 
-        strict, why, rope_rejected, (violation, reasons) = self._check(cand, 1.0, near, resting, rope, t,
-                                                                       where)
+        strict, why, rope_rejected, (violation, reasons) = self._check(
+            cand, 1.0, near, resting, rope, t, where
+        )
         consistent = not_again(strict)
         if not consistent and rope_rejected:
             raise _RopeWouldPush  # only the rope's S >= 0 failed: it goes slack
@@ -282,25 +300,37 @@ class _Driver:
                 # 3. the least inconsistent configuration, as a short regularised phase (its guards end it).
                 k = int(np.argmin(violation))
                 consistent = [k]
-                self.notes.append(f"regularised: no consistent configuration, least violation "
-                                  f"{violation[k]:.2g} ({reasons[k]})")
+                self.notes.append(
+                    f"regularised: no consistent configuration, least violation "
+                    f"{violation[k]:.2g} ({reasons[k]})"
+                )
         if previous is not None and int(previous.rope) != rope:
             previous = eqx.tree_at(lambda p: p.rope, previous, jnp.asarray(rope, dtype=jnp.int32))
         if previous is not None:
-            prev_N = _np(_forces(jnp.asarray(t), y, self.sc, self.c, previous, self.settings,
-                                 self.inextensible))[:, 2]
+            prev_N = _np(
+                _forces(jnp.asarray(t), y, self.sc, self.c, previous, self.settings, self.inextensible)
+            )[:, 2]
         else:
             prev_N = None
         mats, n_ref = cand.mats, cand.n_ref
         best = self._rank(combos, consistent, force, accel, prev_N, n_ref, near, mats)
-        if excluded and self._rank(combos, consistent + excluded, force, accel, prev_N, n_ref, near, mats,
-                                   quiet=True) in excluded:
+        if (
+            excluded
+            and self._rank(combos, consistent + excluded, force, accel, prev_N, n_ref, near, mats, quiet=True)
+            in excluded
+        ):
             self.notes.append(f"{_fmt(self.exclude)} not repeated after its guard fired")
         combo = combos[best]
         hint = np.where((combo == SLIDE)[:, None], hints[best], 0.0)
         flat3 = bool(np.all(near)) and int(np.sum(combo != FREE)) == 3
-        return rigid.make_phase(combo, rest=False, slip_hint=hint, starting=(combo == SLIDE) & resting,
-                                free_on_ground=(combo == FREE) & near & flat3, rope=rope)
+        return rigid.make_phase(
+            combo,
+            rest=False,
+            slip_hint=hint,
+            starting=(combo == SLIDE) & resting,
+            free_on_ground=(combo == FREE) & near & flat3,
+            rope=rope,
+        )
 
     def _candidates(self, t, y, near, resting, rope: int) -> _Candidates:
         """Every contact set of the corners `near` the ground with its Coulomb pattern (`coulomb_pattern`),
@@ -314,8 +344,9 @@ class _Driver:
             for subset in itertools.combinations(near_idx, r):
                 in_contact = np.zeros(4, dtype=bool)
                 in_contact[list(subset)] = True
-                modes, hints = coulomb_pattern(mats, in_contact, resting, self.mu, self.G, self.g,
-                                               debug=self.debug)
+                modes, hints = coulomb_pattern(
+                    mats, in_contact, resting, self.mu, self.G, self.g, debug=self.debug
+                )
                 if reference is None:
                     reference = (modes, hints)
                 n_stick, n_contact = int(np.sum(modes == STICK)), int(np.sum(modes != FREE))
@@ -328,23 +359,45 @@ class _Driver:
         n_max = 16
         contact = np.zeros((n_max, 4), dtype=np.int32)
         hints = np.zeros((n_max, 4, 2))
-        contact[:len(combos)] = np.array(combos)
-        hints[:len(combos)] = np.array(hints_list)
+        contact[: len(combos)] = np.array(combos)
+        hints[: len(combos)] = np.array(hints_list)
         if ref_row == len(combos):  # a skipped (rest-like) configuration leaves room for it
             contact[ref_row], hints[ref_row] = reference
-        force, acc_c, accel, tension = _eval_candidates(jnp.asarray(t), y, self.sc, self.c, self.settings,
-                                                        jnp.asarray(contact), jnp.asarray(hints),
-                                                        jnp.asarray(rope, dtype=jnp.int32), self.inextensible)
+        force, acc_c, accel, tension = _eval_candidates(
+            jnp.asarray(t),
+            y,
+            self.sc,
+            self.c,
+            self.settings,
+            jnp.asarray(contact),
+            jnp.asarray(hints),
+            jnp.asarray(rope, dtype=jnp.int32),
+            self.inextensible,
+        )
         force, acc_c, accel, tension = map(_np, (force, acc_c, accel, tension))
-        return _Candidates(combos=combos, hints=hints, force=force, acc_c=acc_c, accel=accel, tension=tension,
-                           n_ref=force[ref_row, :, 2], mats=mats)
+        return _Candidates(
+            combos=combos,
+            hints=hints,
+            force=force,
+            acc_c=acc_c,
+            accel=accel,
+            tension=tension,
+            n_ref=force[ref_row, :, 2],
+            mats=mats,
+        )
 
     def _check(self, cand: _Candidates, scale: float, near, resting, rope: int, t, where: str):
         """Consistency of every candidate with the tolerances times `scale`: (consistent indices,
         [(combo, reason)] of the others, whether only the rope's S >= 0 failed somewhere, and per
         candidate its largest violation in units of G or g)."""
-        combos, hints, force, acc_c, accel, tension = (cand.combos, cand.hints, cand.force, cand.acc_c,
-                                                       cand.accel, cand.tension)
+        combos, hints, force, acc_c, accel, tension = (
+            cand.combos,
+            cand.hints,
+            cand.force,
+            cand.acc_c,
+            cand.accel,
+            cand.tension,
+        )
         tF, tA = scale * self.tol["force"] * self.G, scale * self.tol["accel"] * self.g
         consistent, why, violation, reasons = [], [], np.zeros(len(combos)), [""] * len(combos)
         rope_rejected = False
@@ -369,8 +422,10 @@ class _Driver:
                     along = float(ah @ h)
                     perp = float(np.linalg.norm(ah - along * h))
                     if along < -tA or perp > tA + self.tol["align"] * np.linalg.norm(ah):
-                        bad = (f"{rigid.CORNERS[i]} would not slide along its friction direction "
-                               f"(a_h = {ah}, t = {h})")
+                        bad = (
+                            f"{rigid.CORNERS[i]} would not slide along its friction direction "
+                            f"(a_h = {ah}, t = {h})"
+                        )
                         v = max(-along, perp - self.tol["align"] * np.linalg.norm(ah)) / self.g
                 if bad:
                     ok, worst = False, max(worst, v)
@@ -382,8 +437,10 @@ class _Driver:
             violation[k], reasons[k] = worst, reason
             (consistent if ok else why).append(k if ok else (combo, reason))
             if self.debug and scale == 1.0:
-                print(f"  [{where} t={t:.9g}] {_fmt(combo)}: {'ok' if ok else reason}; "
-                      f"N={np.round(N, 1)} accel={np.round(accel[k], 6)}")
+                print(
+                    f"  [{where} t={t:.9g}] {_fmt(combo)}: {'ok' if ok else reason}; "
+                    f"N={np.round(N, 1)} accel={np.round(accel[k], 6)}"
+                )
         return consistent, why, rope_rejected, (violation, reasons)
 
     def _rank(self, combos, consistent, force, accel, prev_N, n_ref, near, mats, quiet=False) -> int:
@@ -411,18 +468,29 @@ class _Driver:
         n_contacts = lambda k: int(np.sum(combos[k] != FREE))  # noqa: E731
         top = max(n_contacts(k) for k in consistent)
         group = [k for k in consistent if n_contacts(k) == top]
-        keys = {k: (round(jump(k) / tJ), round(released(k) / tJ), -int(np.sum(combos[k] == STICK)),
-                    gauss(k)) for k in group}
+        keys = {
+            k: (round(jump(k) / tJ), round(released(k) / tJ), -int(np.sum(combos[k] == STICK)), gauss(k))
+            for k in group
+        }
         group.sort(key=lambda k: keys[k])
         best = group[0]
         tA = self.tol["accel"] * self.g
         a_scale = np.linalg.norm(accel[best]) + tA
-        rivals = [k for k in group[1:] if keys[k][0] == keys[best][0]
-                  and np.linalg.norm(accel[k] - accel[best]) > 1e-5 * a_scale + 10 * tA]
+        rivals = [
+            k
+            for k in group[1:]
+            if keys[k][0] == keys[best][0]
+            and np.linalg.norm(accel[k] - accel[best]) > 1e-5 * a_scale + 10 * tA
+        ]
         if rivals and not quiet:
             k = rivals[0]
-            rule = ("stiff-foundation rule" if keys[k][1] != keys[best][1] else
-                    "most sticking" if keys[k][2] != keys[best][2] else "least constraint")
+            rule = (
+                "stiff-foundation rule"
+                if keys[k][1] != keys[best][1]
+                else "most sticking"
+                if keys[k][2] != keys[best][2]
+                else "least constraint"
+            )
             ref = f" (N_ref = {np.round(n_ref, 1).tolist()} N)" if rule.startswith("stiff") else ""
             self.notes.append(f"{rule}: {_fmt(combos[best])} over {_fmt(combos[k])}{ref}")
         return best
@@ -431,4 +499,3 @@ class _Driver:
     def impact(self, t, y, striking: list[int], taut: bool = False, normal_only: bool = False):
         """Velocity jump at an impact of the `striking` corners: `numerics.rigid_impacts.impact`."""
         return rigid_impacts.impact(self, t, y, striking, taut=taut, normal_only=normal_only)
-

@@ -60,12 +60,31 @@ def impact(drv, t, y, striking: list[int], taut: bool = False, normal_only: bool
     def solve(sc, mu, combos):
         # Sliding impulses need a direction: the pre-impact slip, else the opposite of the sticking one.
         sticking = _modes([np.where(cb == SLIDE, STICK, cb) for cb in combos])
-        _, _, imp0, _ = map(_np, _eval_impulses(y, sc, drv.c, jnp.asarray(sticking),
-                                                jnp.asarray(np.zeros((81, 4, 2))),
-                                                jnp.asarray(normal_target), drv.settings.rcond))
+        _, _, imp0, _ = map(
+            _np,
+            _eval_impulses(
+                y,
+                sc,
+                drv.c,
+                jnp.asarray(sticking),
+                jnp.asarray(np.zeros((81, 4, 2))),
+                jnp.asarray(normal_target),
+                drv.settings.rcond,
+            ),
+        )
         sd = _slide_directions(combos, slipping, dirs, imp0) if mu > 0 else np.zeros((81, 4, 2))
-        out = map(_np, _eval_impulses(y, sc, drv.c, jnp.asarray(_modes(combos)), jnp.asarray(sd),
-                                      jnp.asarray(normal_target), drv.settings.rcond))
+        out = map(
+            _np,
+            _eval_impulses(
+                y,
+                sc,
+                drv.c,
+                jnp.asarray(_modes(combos)),
+                jnp.asarray(sd),
+                jnp.asarray(normal_target),
+                drv.settings.rcond,
+            ),
+        )
         v1, w1, imp, cv1 = out
         return v1, w1, _consistent_impulses(combos, imp, cv1, sd, mask, mu, tP, tV)
 
@@ -75,8 +94,9 @@ def impact(drv, t, y, striking: list[int], taut: bool = False, normal_only: bool
     if not consistent:
         # A grazing touch or a Painlevé-type impact: the frictionless impulse (contacts FREE or SLIDE
         # with μ = 0), which a plastic impact always has.
-        sc0 = eqx.tree_at(lambda s: s.foundation.friction_coefficient, drv.sc,
-                          jnp.zeros((), dtype=jnp.float64))
+        sc0 = eqx.tree_at(
+            lambda s: s.foundation.friction_coefficient, drv.sc, jnp.zeros((), dtype=jnp.float64)
+        )
         combos = [cb for cb in combos if not np.any(cb == STICK)]
         v1, w1, consistent = solve(sc0, 0.0, combos)
         if consistent:
@@ -88,6 +108,7 @@ def impact(drv, t, y, striking: list[int], taut: bool = False, normal_only: bool
         consistent = [0]
     best = consistent[0]
     u_best = np.concatenate([v1[best], w1[best]])
+
     def counts(k):
         return int(np.sum(combos[k] != FREE)), int(np.sum(combos[k] == STICK))
 
@@ -96,26 +117,28 @@ def impact(drv, t, y, striking: list[int], taut: bool = False, normal_only: bool
         return du > 1e-6 * (np.linalg.norm(u_best) + tV)
 
     def after(k):
-        return eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
-                           (jnp.asarray(v1[k]), jnp.asarray(w1[k])))
+        return eqx.tree_at(
+            lambda s: (s.velocity, s.angular_velocity), y, (jnp.asarray(v1[k]), jnp.asarray(w1[k]))
+        )
 
     tied = [k for k in consistent[1:] if counts(k) == counts(best) and differs(k)]
     if tied:
         # Newton's law is not unique for simultaneous multi-corner impacts: maximal dissipation.
         ke = {k: drv.kin(t, after(k))[2] for k in [best, *tied]}
         new = min(ke, key=lambda k: ke[k])
-        drv.notes.append(f"{len(tied) + 1} consistent impulses: maximal dissipation, "
-                          f"{_fmt(combos[new])}")
+        drv.notes.append(f"{len(tied) + 1} consistent impulses: maximal dissipation, {_fmt(combos[new])}")
         best = new
-    y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y,
-                     (jnp.asarray(v1[best]), jnp.asarray(w1[best])))
+    y1 = eqx.tree_at(
+        lambda s: (s.velocity, s.angular_velocity), y, (jnp.asarray(v1[best]), jnp.asarray(w1[best]))
+    )
     _, _, ke1 = drv.kin(t, y1)
     loss = ke0 - ke1
     if loss < -1e-9 * max(ke0, 1.0):
         raise RigidContactError(
             f"t = {t:.9g} s: the impact of corner(s) {[rigid.CORNERS[i] for i in striking]} would gain "
             f"kinetic energy ({-loss:.4g} J) with restitution {drv.e} and friction μ = {drv.mu}: "
-            "Newton's restitution law is not energy-consistent here; lower the restitution")
+            "Newton's restitution law is not energy-consistent here; lower the restitution"
+        )
     return y1, loss
 
 
@@ -160,9 +183,12 @@ def _consistent_impulses(combos, imp, cv1, sd, involved, mu, tP, tV) -> list[int
         ok = True
         for i in range(4):
             Pz, Ph = imp[k, i, 2], np.linalg.norm(imp[k, i, :2])
-            if (cb[i] != FREE and Pz < -tP) or (cb[i] == STICK and Ph > mu * Pz + tP) or (
-                    cb[i] == SLIDE and float(cv1[k, i, :2] @ sd[k, i]) < -tV) or (
-                    cb[i] == FREE and involved[i] and cv1[k, i, 2] < -tV):
+            if (
+                (cb[i] != FREE and Pz < -tP)
+                or (cb[i] == STICK and Ph > mu * Pz + tP)
+                or (cb[i] == SLIDE and float(cv1[k, i, :2] @ sd[k, i]) < -tV)
+                or (cb[i] == FREE and involved[i] and cv1[k, i, 2] < -tV)
+            ):
                 ok = False
                 break
         if ok:
@@ -171,8 +197,7 @@ def _consistent_impulses(combos, imp, cv1, sd, involved, mu, tP, tV) -> list[int
     return consistent
 
 
-def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=None,
-               fallback: bool = False):
+def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=None, fallback: bool = False):
     """The inextensible rope snapping taut (or the hoist starting with a speed jump): a plastic jerk that
     sets d|AB|/dt = dl/dt, with the corners on the ground taking impulses as in `_Driver.impact` (every
     combination of free / slide / stick tried; consistent: P >= 0, normal impulses >= 0, sticking ones in
@@ -197,15 +222,35 @@ def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=
     # First pass: sticking impulses give the slide directions.
     sticking = _modes([np.where(cb == SLIDE, STICK, cb) for cb in combos])
     tj = jnp.asarray(t if t_rate is None else t_rate, dtype=jnp.float64)
-    out0 = map(_np, _eval_rope_impulses(tj, y, drv.sc, drv.c, jnp.asarray(sticking),
-                                        jnp.asarray(np.zeros((81, 4, 2))),
-                                        jnp.asarray(normal_target), drv.settings.rcond))
+    out0 = map(
+        _np,
+        _eval_rope_impulses(
+            tj,
+            y,
+            drv.sc,
+            drv.c,
+            jnp.asarray(sticking),
+            jnp.asarray(np.zeros((81, 4, 2))),
+            jnp.asarray(normal_target),
+            drv.settings.rcond,
+        ),
+    )
     imp0 = list(out0)[3]
     sd = _slide_directions(combos, slipping, dirs, imp0)
     modes = _modes(combos)
-    v1, w1, tip1, imp, P, cv1 = map(_np, _eval_rope_impulses(tj, y, drv.sc, drv.c, jnp.asarray(modes),
-                                                              jnp.asarray(sd), jnp.asarray(normal_target),
-                                                              drv.settings.rcond))
+    v1, w1, tip1, imp, P, cv1 = map(
+        _np,
+        _eval_rope_impulses(
+            tj,
+            y,
+            drv.sc,
+            drv.c,
+            jnp.asarray(modes),
+            jnp.asarray(sd),
+            jnp.asarray(normal_target),
+            drv.settings.rcond,
+        ),
+    )
     tP = drv.tol["force"] * drv.G * 1e-3  # impulses [N s]
     tV = drv.tol["v"] * drv.V
     consistent = [k for k in _consistent_impulses(combos, imp, cv1, sd, near, drv.mu, tP, tV) if P[k] >= -tP]
@@ -213,12 +258,21 @@ def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=
     if not consistent and fallback:
         # As for corner impacts: the frictionless jerk (contacts FREE or SLIDE with μ = 0); if even that has
         # none, the jerk on the boom tip alone (below).
-        sc0 = eqx.tree_at(lambda s: s.foundation.friction_coefficient, drv.sc,
-                          jnp.zeros((), dtype=jnp.float64))
+        sc0 = eqx.tree_at(
+            lambda s: s.foundation.friction_coefficient, drv.sc, jnp.zeros((), dtype=jnp.float64)
+        )
         combos = [cb for cb in combos if not np.any(cb == STICK)]
         sd = np.zeros((81, 4, 2))
-        out = _eval_rope_impulses(tj, y, sc0, drv.c, jnp.asarray(_modes(combos)), jnp.asarray(sd),
-                                  jnp.asarray(normal_target), drv.settings.rcond)
+        out = _eval_rope_impulses(
+            tj,
+            y,
+            sc0,
+            drv.c,
+            jnp.asarray(_modes(combos)),
+            jnp.asarray(sd),
+            jnp.asarray(normal_target),
+            drv.settings.rcond,
+        )
         v1, w1, tip1, imp, P, cv1 = map(_np, out)
         consistent = [k for k in _consistent_impulses(combos, imp, cv1, sd, near, 0.0, tP, tV) if P[k] >= -tP]
         if consistent:
@@ -227,8 +281,10 @@ def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=
             consistent, tip_alone = [0], True
             drv.notes.append("no consistent jerk: on the tip alone")
     if not consistent:
-        raise _RopeWouldPush(f"t = {t:.9g} s: the jerk of the inextensible rope has no consistent impulse "
-                             "(Painlevé-type impact inconsistency)")
+        raise _RopeWouldPush(
+            f"t = {t:.9g} s: the jerk of the inextensible rope has no consistent impulse "
+            "(Painlevé-type impact inconsistency)"
+        )
     best = consistent[0]
     _, _, s_dot = map(float, _rope_state(tj, y, drv.sc, drv.c))
     m0 = float(drv.sc.boom.tip_mass)
@@ -237,24 +293,34 @@ def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=
         return drv.kin(t, yy)[2] + 0.5 * m0 * float(np.sum(_np(yy.tip_velocity) ** 2))
 
     work = float(P[best]) * s_dot
-    y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work), y,
-                     (jnp.asarray(v1[best]), jnp.asarray(w1[best]), jnp.asarray(tip1[best]),
-                      y.hoist_work + work))
+    y1 = eqx.tree_at(
+        lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work),
+        y,
+        (jnp.asarray(v1[best]), jnp.asarray(w1[best]), jnp.asarray(tip1[best]), y.hoist_work + work),
+    )
     # Settling, as after corner impacts: a load flat on the ground that the jerk would move slower than
     # Settings.rest_velocity stays at rest (the ground takes its share of the impulse) and the jerk acts on
     # the boom tip alone. Without it, a resting load under a rope whose tip lags the hoist chatters: each
     # small jerk lifts it, it falls back and the rope slackens, and the tip springs back into the next jerk.
-    if not striking and np.all(near) and float(np.max(np.linalg.norm(cv1[best], axis=1))) < float(
-            drv.settings.rest_velocity):
+    if (
+        not striking
+        and np.all(near)
+        and float(np.max(np.linalg.norm(cv1[best], axis=1))) < float(drv.settings.rest_velocity)
+    ):
         e = _np(_rope_direction(tj, y, drv.sc, drv.c))
         v_A = _np(y.tip_velocity)
         P_tip = m0 * (float(e @ v_A) + s_dot)  # tip alone: e·v_A+ = dl/dt = -ds/dt, load at rest
         work = P_tip * s_dot
-        y1 = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work), y,
-                         (jnp.zeros(3), jnp.zeros(3), jnp.asarray(v_A - (P_tip / m0) * e),
-                          y.hoist_work + work))
-    elif tip_alone or (not striking and np.all(near) and float(np.max(np.linalg.norm(cv1[best] - cv, axis=1)))
-                       < float(drv.settings.rest_velocity)):
+        y1 = eqx.tree_at(
+            lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work),
+            y,
+            (jnp.zeros(3), jnp.zeros(3), jnp.asarray(v_A - (P_tip / m0) * e), y.hoist_work + work),
+        )
+    elif tip_alone or (
+        not striking
+        and np.all(near)
+        and float(np.max(np.linalg.norm(cv1[best] - cv, axis=1))) < float(drv.settings.rest_velocity)
+    ):
         # The same for a load sliding flat on the ground: a jerk that would change its corner velocities by
         # less than rest_velocity leaves them unchanged (the ground takes the load's share) and jerks the
         # tip alone, to d|AB|/dt = dl/dt (an inextensible rope over a sliding load chattered at ~3 kHz:
@@ -263,8 +329,11 @@ def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=
         _, rate_error, _ = map(float, _rope_state(tj, y, drv.sc, drv.c))
         P_tip = m0 * rate_error  # e·(v_A+ - v_B) = -ds/dt
         work = P_tip * s_dot
-        y1 = eqx.tree_at(lambda s: (s.tip_velocity, s.hoist_work), y,
-                         (jnp.asarray(_np(y.tip_velocity) - (P_tip / m0) * e), y.hoist_work + work))
+        y1 = eqx.tree_at(
+            lambda s: (s.tip_velocity, s.hoist_work),
+            y,
+            (jnp.asarray(_np(y.tip_velocity) - (P_tip / m0) * e), y.hoist_work + work),
+        )
         if not tip_alone:
             drv.notes.append("jerk on the tip alone")
     loss = work - (ke(y1) - ke(y))

@@ -55,8 +55,11 @@ class PhaseRecord:
     merged: int = 0
 
     def __str__(self) -> str:
-        modes = "rest" if self.rest else " ".join(f"{c}:{m}" for c, m in zip(rigid.CORNERS, self.contact,
-                                                                            strict=True))
+        modes = (
+            "rest"
+            if self.rest
+            else " ".join(f"{c}:{m}" for c, m in zip(rigid.CORNERS, self.contact, strict=True))
+        )
         if self.rope != "elastic":
             modes += f"  rope:{self.rope}"
         choice = f"  [{self.choice}]" if self.choice else ""
@@ -121,8 +124,11 @@ def _merge(previous: PhaseRecord, short: PhaseRecord) -> PhaseRecord:
     the short configuration in between: "rest:tip => D:stick E:free F:stick H:free (4.1e-09 s) ->
     normal:D,normal:F". The short phase is still solved and its impacts and losses are booked as usual;
     only the log (and `RigidTrajectory.phase_index`) merge it."""
-    between = "rest" if short.rest else " ".join(f"{c}:{m}" for c, m in zip(rigid.CORNERS, short.contact,
-                                                                            strict=True))
+    between = (
+        "rest"
+        if short.rest
+        else " ".join(f"{c}:{m}" for c, m in zip(rigid.CORNERS, short.contact, strict=True))
+    )
     n = previous.merged + 1
     first = previous.end if n == 1 else previous.end.split(" => ")[0]
     dt = short.t_end - short.t_start

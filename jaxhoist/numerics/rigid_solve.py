@@ -66,8 +66,16 @@ from .rigid_driver import _DEFAULT_TOL, _Driver
 from .rigid_impacts import _rope_jerk
 from .rigid_records import PhaseRecord, RigidContactError, RigidTrajectory, _fmt, _merge
 
-__all__ = ["ROPE_MODELS", "ChatterRule", "PhaseRecord", "RigidContactError", "RigidTrajectory",
-           "simulate_rigid", "OUTPUT_CHUNK", "coulomb_pattern"]
+__all__ = [
+    "ROPE_MODELS",
+    "ChatterRule",
+    "PhaseRecord",
+    "RigidContactError",
+    "RigidTrajectory",
+    "simulate_rigid",
+    "OUTPUT_CHUNK",
+    "coulomb_pattern",
+]
 
 
 #: The persistent-contact rule after impacts (docs/rigid-model.md); False only to compare without it.
@@ -77,11 +85,22 @@ PERSISTENT_CONTACT = True
 ROPE_MODELS = ("elastic", "inextensible")
 
 
-def simulate_rigid(scenario: Scenario, t1: float | None = None, *, ts=None, n_save: int = 501,
-                   restitution: float = 0.0, rtol: float = 1e-8, atol: float = 1e-9, max_steps: int = 200_000,
-                   max_phases: int = 2000, settings: rigid.Settings | None = None,
-                   verbose: bool = False, rope: str = "elastic",
-                   chatter: ChatterRule | None = ChatterRule()) -> RigidTrajectory:
+def simulate_rigid(
+    scenario: Scenario,
+    t1: float | None = None,
+    *,
+    ts=None,
+    n_save: int = 501,
+    restitution: float = 0.0,
+    rtol: float = 1e-8,
+    atol: float = 1e-9,
+    max_steps: int = 200_000,
+    max_phases: int = 2000,
+    settings: rigid.Settings | None = None,
+    verbose: bool = False,
+    rope: str = "elastic",
+    chatter: ChatterRule | None = ChatterRule(),
+) -> RigidTrajectory:
     """Simulate a lift with the rigid-body-on-rigid-ground model (paper §2) from rest at t = 0 to `t1`.
 
     Not differentiable and not vmappable (the phase sequence is decided on the host).
@@ -151,8 +170,16 @@ class _Run:
     """The phase loop of one `simulate_rigid` call: the saved samples, the phase log and the booked impact
     losses, filled phase by phase (`step`), and the trajectory assembled from them (`result`)."""
 
-    def __init__(self, drv: _Driver, ts: np.ndarray, t1: float, max_phases: int, max_steps: int,
-                 chatter: ChatterRule | None, verbose):
+    def __init__(
+        self,
+        drv: _Driver,
+        ts: np.ndarray,
+        t1: float,
+        max_phases: int,
+        max_steps: int,
+        chatter: ChatterRule | None,
+        verbose,
+    ):
         self.drv, self.ts, self.t1 = drv, ts, t1
         self.max_phases, self.max_steps, self.chatter, self.verbose = max_phases, max_steps, chatter, verbose
         n_t = ts.size
@@ -161,7 +188,7 @@ class _Run:
         self.saved_phase = np.zeros(n_t, dtype=np.int64)
         self.saved_impact = np.zeros(n_t)
         self.records: list[PhaseRecord] = []
-        self.phases: list[Phase] = []   # one per phase solve (the outputs are evaluated with these)
+        self.phases: list[Phase] = []  # one per phase solve (the outputs are evaluated with these)
         self.record_of: list[int] = []  # per phase solve, its record in `records` (several when merged)
         self.impact_total = 0.0
         self.impact_events: list[tuple[float, float]] = []  # (time [s], loss [J]) of impacts and jerks
@@ -206,7 +233,8 @@ class _Run:
             raise RigidContactError(
                 f"more than max_phases = {self.max_phases} phases before t = {t:.9g} s (a Zeno sequence of "
                 f"events? raise max_phases, or Settings.rest_velocity to let rocking settle). "
-                f"Last phases:\n" + "\n".join(str(r) for r in self.records[-8:]))
+                f"Last phases:\n" + "\n".join(str(r) for r in self.records[-8:])
+            )
         y, loss = drv.project(t, y, phase)
         self.impact_total += loss
         phase = drv.with_offsets(t, y, phase)
@@ -230,8 +258,9 @@ class _Run:
             print(self.records[-1], f"[{drv.accepted} steps so far]", flush=True)
         self.t, self.y, self.phase, self.choice = t_end, y_end, new, drv.take_notes()
         rule = self.chatter
-        why = rule and (rule.detect(self.impact_events, t_end)
-                        or rule.detect_switching(self.switch_events, t_end))
+        why = rule and (
+            rule.detect(self.impact_events, t_end) or rule.detect_switching(self.switch_events, t_end)
+        )
         if why:
             # A sustained cycle of impacts: pass it with a compliant phase, then choose again.
             return self.compliant(t_end, y_end, new, why)
@@ -244,8 +273,9 @@ class _Run:
         ts, filled = self.ts, self.filled
         sys_np = jax.tree_util.tree_map(np.asarray, sys_)  # index on the host, not one dispatch per sample
         if self.saved_states is None:
-            self.saved_states = jax.tree_util.tree_map(lambda x: np.zeros((ts.size,) + x.shape[1:], x.dtype),
-                                                       sys_np)
+            self.saved_states = jax.tree_util.tree_map(
+                lambda x: np.zeros((ts.size,) + x.shape[1:], x.dtype), sys_np
+            )
         ks = np.nonzero((ts >= t) & (ts <= t_end) & ~filled)[0]
         if ks.size:
             jax.tree_util.tree_map(lambda dst, src: dst.__setitem__(ks, src[ks]), self.saved_states, sys_np)
@@ -273,11 +303,14 @@ class _Run:
             self.y, self.phase, self.choice = y, phase, choice
             return True
         if self.chatter is None or bool(phase.rest):
-            raise RigidContactError(f"the phase starting at t = {t:.9g} s failed: {result} "
-                                    f"(raise max_steps = {self.max_steps} or loosen rtol/atol)")
+            raise RigidContactError(
+                f"the phase starting at t = {t:.9g} s failed: {result} "
+                f"(raise max_steps = {self.max_steps} or loosen rtol/atol)"
+            )
         if self.saved_states is None:
             self.saved_states = jax.tree_util.tree_map(
-                lambda x: np.zeros((self.ts.size,) + np.shape(x), np.asarray(x).dtype), y)
+                lambda x: np.zeros((self.ts.size,) + np.shape(x), np.asarray(x).dtype), y
+            )
         return self.compliant(t, y, phase, f"{_fmt(_np(phase.contact))} stalled at max_steps twice")
 
     def after_event(self, t, t_end, y_end, phase, g_start, modes, rope_name):
@@ -297,8 +330,9 @@ class _Run:
         corners, cv, _ = drv.kin(t_end, y_end)
         striking = [k for k in fired if k < 4 and contact[k] == FREE and not bool(phase.rest)]
         hard = [i for i in striking if cv[i, 2] < -drv.tol["v"] * drv.V]
-        record = dict(t_start=t, t_end=t_end, contact=modes, rest=bool(phase.rest), rope=rope_name,
-                      choice=self.choice)
+        record = dict(
+            t_start=t, t_end=t_end, contact=modes, rest=bool(phase.rest), rope=rope_name, choice=self.choice
+        )
         if 11 in fired:
             # The slack inextensible rope reaches its length: a jerk if it would stretch, then a new phase.
             _, rate_error, _ = map(float, _rope_state(jnp.asarray(t_end), y_end, drv.sc, drv.c))
@@ -347,8 +381,9 @@ class _Run:
         near = corners1[:, 2] < drv.tol["z"] * drv.L
         if np.max(np.linalg.norm(cv1[near], axis=1)) < rest_velocity:
             if np.all(near):
-                y_end = eqx.tree_at(lambda s: (s.velocity, s.angular_velocity), y_end,
-                                    (jnp.zeros(3), jnp.zeros(3)))
+                y_end = eqx.tree_at(
+                    lambda s: (s.velocity, s.angular_velocity), y_end, (jnp.zeros(3), jnp.zeros(3))
+                )
                 self.impact_total += ke1
             else:
                 y_end, loss = drv._project(t_end, y_end, np.zeros(4, dtype=bool), near)
@@ -365,8 +400,10 @@ class _Run:
                 project = drv._project_taut if taut_now else drv._project
                 y_end, loss = project(t_end, y_end, np.zeros(4, dtype=bool), near)
                 self.impact_total += loss
-                end += (f" persistent contact ({','.join(lifted)} held, "
-                        f"|v_n| <= {np.max(np.abs(cv1[near, 2])):.2g} m/s)")
+                end += (
+                    f" persistent contact ({','.join(lifted)} held, "
+                    f"|v_n| <= {np.max(np.abs(cv1[near, 2])):.2g} m/s)"
+                )
         return y_end, end
 
     def compliant(self, t0: float, y0: State, phase0: Phase, why: str) -> bool:
@@ -380,23 +417,41 @@ class _Run:
         self.phases.append(phase0)  # a placeholder: these samples' outputs are the compliant model's
         ks = ep.user_index
         if ks.size:
-            jax.tree_util.tree_map(lambda dst, src: dst.__setitem__(ks, src), self.saved_states,
-                                   ep.user_states)
+            jax.tree_util.tree_map(
+                lambda dst, src: dst.__setitem__(ks, src), self.saved_states, ep.user_states
+            )
             self.saved_phase[ks] = idx
             self.saved_impact[ks] = self.impact_total
             self.filled[ks] = True
             self.compliant_mask[ks] = True
         self.impact_total += ep.handback_loss
         loaded = "".join(c for c, on in zip(rigid.CORNERS, ep.loaded, strict=True) if on) or "none"
-        end = "t1" if ep.t_end >= self.t1 else (
-            f"compliant phase ended: loaded {loaded} steady for {ep.steady * 1e3:.3g} ms; "
-            f"hand-back {ep.handback_loss:.4g} J")
-        how = (f"compliant phase: {why}; foundation k = {chatter.stiffness:g} N/m, critically damped, "
-               f"ε = {chatter.regularisation_velocity:g} m/s"
-               + (f", rope {chatter.rope_stiffness:g} N/m" if drv.inextensible else ""))
+        end = (
+            "t1"
+            if ep.t_end >= self.t1
+            else (
+                f"compliant phase ended: loaded {loaded} steady for {ep.steady * 1e3:.3g} ms; "
+                f"hand-back {ep.handback_loss:.4g} J"
+            )
+        )
+        how = (
+            f"compliant phase: {why}; foundation k = {chatter.stiffness:g} N/m, critically damped, "
+            f"ε = {chatter.regularisation_velocity:g} m/s"
+            + (f", rope {chatter.rope_stiffness:g} N/m" if drv.inextensible else "")
+        )
         modes = tuple("spring" if on else "free" for on in ep.loaded)
-        self.log(PhaseRecord(t0, ep.t_end, modes, False, end, ep.y_before_handback,
-                             "compliant" if drv.inextensible else "elastic", how))
+        self.log(
+            PhaseRecord(
+                t0,
+                ep.t_end,
+                modes,
+                False,
+                end,
+                ep.y_before_handback,
+                "compliant" if drv.inextensible else "elastic",
+                how,
+            )
+        )
         self.impact_events.clear()
         self.switch_events.clear()
         if self.verbose:
@@ -415,22 +470,36 @@ class _Run:
         for k in np.nonzero(~self.filled)[0]:  # cannot happen unless ts extends past the last phase
             raise RigidContactError(f"saved time {ts[k]} s was not reached")
         states = jax.tree_util.tree_map(jnp.asarray, saved_states)
-        out = _chunked_outputs(ts, saved_states, self.saved_phase, self.phases, drv.sc, c, settings,
-                               drv.inextensible)
+        out = _chunked_outputs(
+            ts, saved_states, self.saved_phase, self.phases, drv.sc, c, settings, drv.inextensible
+        )
         if np.any(self.compliant_mask):
             out = _with_compliant_outputs(out, ts, saved_states, self.compliant_mask, drv, self.chatter)
         euler = out.euler.at[:, :2].set(jnp.unwrap(out.euler[:, :2], axis=0))
         return RigidTrajectory(
-            ts=jnp.asarray(ts), position=states.position, velocity=states.velocity, euler=euler,
-            angular_velocity=states.angular_velocity, corners=out.corners, normal_forces=out.normal,
-            friction_forces=out.friction, ground_reaction=jnp.sum(out.normal, axis=-1),
-            rope_tension=out.rope_tension, tip_position=states.tip_position, energy=out.energy,
-            hoist_work=states.hoist_work, damping_loss=states.damping_loss,
-            friction_work=states.friction_work, impact_loss=jnp.asarray(self.saved_impact), states=states,
-            status=jnp.asarray(SolveStatus.OK, jnp.int32), num_accepted_steps=jnp.asarray(drv.accepted),
+            ts=jnp.asarray(ts),
+            position=states.position,
+            velocity=states.velocity,
+            euler=euler,
+            angular_velocity=states.angular_velocity,
+            corners=out.corners,
+            normal_forces=out.normal,
+            friction_forces=out.friction,
+            ground_reaction=jnp.sum(out.normal, axis=-1),
+            rope_tension=out.rope_tension,
+            tip_position=states.tip_position,
+            energy=out.energy,
+            hoist_work=states.hoist_work,
+            damping_loss=states.damping_loss,
+            friction_work=states.friction_work,
+            impact_loss=jnp.asarray(self.saved_impact),
+            states=states,
+            status=jnp.asarray(SolveStatus.OK, jnp.int32),
+            num_accepted_steps=jnp.asarray(drv.accepted),
             num_rejected_steps=jnp.asarray(drv.rejected),
             phase_index=jnp.asarray(np.asarray(self.record_of, dtype=np.int64)[self.saved_phase]),
-            phases=tuple(self.records))
+            phases=tuple(self.records),
+        )
 
 
 def _with_compliant_outputs(out, ts, states, mask, drv, rule):
@@ -446,10 +515,18 @@ def _with_compliant_outputs(out, ts, states, mask, drv, rule):
         a[k] = np.asarray(b)
         return jnp.asarray(a)
 
-    return eqx.tree_at(lambda o: (o.corners, o.normal, o.friction, o.rope_tension, o.energy, o.euler), out,
-                       (put(out.corners, el["corners"]), put(out.normal, el["normal"]),
-                        put(out.friction, el["friction"]), put(out.rope_tension, el["rope_tension"]),
-                        jax.tree_util.tree_map(put, out.energy, el["energy"]), put(out.euler, el["euler"])))
+    return eqx.tree_at(
+        lambda o: (o.corners, o.normal, o.friction, o.rope_tension, o.energy, o.euler),
+        out,
+        (
+            put(out.corners, el["corners"]),
+            put(out.normal, el["normal"]),
+            put(out.friction, el["friction"]),
+            put(out.rope_tension, el["rope_tension"]),
+            jax.tree_util.tree_map(put, out.energy, el["energy"]),
+            put(out.euler, el["euler"]),
+        ),
+    )
 
 
 def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[int], ts):
@@ -472,8 +549,18 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
             hint[i] = cv[i, :2] / speed[i]
         for i in grown:
             start[i] = False
-        return rigid.make_phase(contact, rest=False, slip_hint=hint, starting=start,
-                                free_on_ground=_np(phase.free_on_ground), rope=int(phase.rope)), y_e, 0.0
+        return (
+            rigid.make_phase(
+                contact,
+                rest=False,
+                slip_hint=hint,
+                starting=start,
+                free_on_ground=_np(phase.free_on_ground),
+                rope=int(phase.rope),
+            ),
+            y_e,
+            0.0,
+        )
     where = f"after {','.join(rigid.GUARD_NAMES[k] for k in fired)}"
     # A slip that died out: choose at the event itself (the corner is now resting).
     if any(speed[i] < 1.5 * drv.v_stop for i in tangential):

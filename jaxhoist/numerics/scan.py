@@ -30,7 +30,8 @@ def __getattr__(name: str):
     if name not in _MOVED:
         raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
     warnings.warn(
-        f"jaxhoist.numerics.scan.{name} moved to {_MOVED[name]}.{name} (issue 11)", DeprecationWarning,
+        f"jaxhoist.numerics.scan.{name} moved to {_MOVED[name]}.{name} (issue 11)",
+        DeprecationWarning,
         stacklevel=2,
     )
     return getattr(importlib.import_module(_MOVED[name]), name)

@@ -263,8 +263,14 @@ def simulate(
             kw = {k: v for k, v in solver_kw.items() if k in ("rtol", "atol", "max_steps")}
             options = SolverOptions(diffrax.Tsit5(), **kw)  # for its default tolerances 1e-6, 1e-8
         return simulate_rigid(
-            scenario, t1, ts=ts, n_save=n_save, rtol=options.rtol, atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in; ts given
-            max_steps=options.max_steps, rope=model.rope.name,
+            scenario,
+            t1,
+            ts=ts,
+            n_save=n_save,
+            rtol=options.rtol,
+            atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in; ts given
+            max_steps=options.max_steps,
+            rope=model.rope.name,
         )
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")

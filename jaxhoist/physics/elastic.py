@@ -128,15 +128,17 @@ def snapshot(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Snapshot:
     # Corners and the foundation, eqs. (3.1)-(3.3).
     corners = kinematics.points_world(y.position, R, c.corners_rel)
     corner_vel = kinematics.points_velocity(y.velocity, R, omega, c.corners_rel)
-    N_i, ground_loss = forces.ground_normal(-corners[:, 2], -corner_vel[:, 2], fnd.stiffness, fnd.damping,
-                                            fnd.damping_onset)
+    N_i, ground_loss = forces.ground_normal(
+        -corners[:, 2], -corner_vel[:, 2], fnd.stiffness, fnd.damping, fnd.damping_onset
+    )
     T_h = fnd.friction.force(fnd.friction_coefficient, N_i, corner_vel[:, :2], y.friction_state)
     T_i = jnp.concatenate([T_h, jnp.zeros((4, 1))], axis=1)
 
     B, e, stretch, s_dot, S, rope_loss = rope_pull(t, y, R, scenario, c)
 
-    _, boom_loss = forces.boom_force(y.tip_position - c.tip_rest, y.tip_velocity, scenario.boom.stiffness,
-                                     scenario.boom.damping)
+    _, boom_loss = forces.boom_force(
+        y.tip_position - c.tip_rest, y.tip_velocity, scenario.boom.stiffness, scenario.boom.damping
+    )
     return Snapshot(
         rotation=R,
         corners=corners,
@@ -174,8 +176,7 @@ def vector_field(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> State
     F_rope = snap.rope_tension * snap.rope_direction
     force = _sum_corners(F_corner) + F_rope - load.mass * g * z_hat
     # Moments about C in body axes: ρ x (Rᵀ F).
-    moment = (_sum_corners(jnp.cross(c.corners_rel, F_corner @ R))
-              + jnp.cross(c.attachment_rel, R.T @ F_rope))
+    moment = _sum_corners(jnp.cross(c.corners_rel, F_corner @ R)) + jnp.cross(c.attachment_rel, R.T @ F_rope)
     omega_dot = c.inertia_inv @ (moment - jnp.cross(omega, c.inertia @ omega))
 
     # Boom tip, eq. (2.13).
@@ -190,8 +191,10 @@ def vector_field(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> State
         tip_position=y.tip_velocity,
         tip_velocity=tip_acc,
         friction_state=scenario.foundation.friction.state_rate(
-            snap.corner_velocity[:, :2], y.friction_state,
-            forces.onset_ramp(-snap.corners[:, 2], scenario.foundation.damping_onset)),
+            snap.corner_velocity[:, :2],
+            y.friction_state,
+            forces.onset_ramp(-snap.corners[:, 2], scenario.foundation.damping_onset),
+        ),
         hoist_work=snap.hoist_power,
         damping_loss=snap.damping_rate,
         friction_work=snap.friction_rate,

@@ -44,7 +44,8 @@ def energy(y: State, snap: Snapshot, scenario: Scenario, c: Constants) -> Energy
     stretch = jnp.maximum(snap.stretch, 0.0)
     dx = y.tip_position - c.tip_rest
     return Energy(
-        kinetic=0.5 * load.mass * jnp.sum(y.velocity**2) + 0.5 * w @ c.inertia @ w
+        kinetic=0.5 * load.mass * jnp.sum(y.velocity**2)
+        + 0.5 * w @ c.inertia @ w
         + 0.5 * boom.tip_mass * jnp.sum(y.tip_velocity**2),
         potential=g * (load.mass * y.position[2] + boom.tip_mass * y.tip_position[2]),
         ground_spring=0.5 * scenario.foundation.stiffness * jnp.sum(p**2),
@@ -55,6 +56,9 @@ def energy(y: State, snap: Snapshot, scenario: Scenario, c: Constants) -> Energy
 
 def balance_residual(e0: Energy, e1: Energy, y1: State, y0: State) -> Scalar:
     """[E(t1) - E(t0)] - [ΔW_hoist - ΔD_damping - ΔW_friction] [J]; zero up to solver error."""
-    supplied = ((y1.hoist_work - y0.hoist_work) - (y1.damping_loss - y0.damping_loss)
-                - (y1.friction_work - y0.friction_work))
+    supplied = (
+        (y1.hoist_work - y0.hoist_work)
+        - (y1.damping_loss - y0.damping_loss)
+        - (y1.friction_work - y0.friction_work)
+    )
     return (e1.mechanical - e0.mechanical) - supplied

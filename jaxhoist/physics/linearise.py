@@ -144,10 +144,12 @@ class Linearisation(eqx.Module):
         q = self.quaternion
         xi = _quat_xi(q)
         a = self.rope_direction
-        r_V, r_X = _bar((
-            jnp.concatenate([r.velocity, r.angular_velocity, r.tip_velocity]),
-            jnp.concatenate([r.position, 2.0 * _mv(xi.T, r.quaternion) / _dot(q, q), r.tip_position]),
-        ))
+        r_V, r_X = _bar(
+            (
+                jnp.concatenate([r.velocity, r.angular_velocity, r.tip_velocity]),
+                jnp.concatenate([r.position, 2.0 * _mv(xi.T, r.quaternion) / _dot(q, q), r.tip_position]),
+            )
+        )
         K_rX = jnp.concatenate([_mv(self.body_stiffness, r_X[:6]), -self.tip_stiffness * r_X[6:]])
         K_rX = K_rX - self.rope_stiffness * a * _dot(a, r_X)
         M_rV = jnp.concatenate([_mv(self.body_mass, r_V[:6]), self.tip_mass * r_V[6:]])

@@ -23,8 +23,11 @@ ROPE_NAMES = {ROPE_ELASTIC: "elastic", ROPE_TAUT: "taut", ROPE_SLACK: "slack"}
 #: Guards: 0-3 normal/touch-down per corner, 4-7 stick/slide per corner, 8 rest tip/lift, 9 rest slip,
 #: 10 the inextensible rope's tension (taut), 11 its length reaching l(t) (slack).
 N_GUARDS = 12
-GUARD_NAMES = tuple([f"normal:{c}" for c in CORNERS] + [f"tangential:{c}" for c in CORNERS]
-                    + ["rest:tip", "rest:slip", "rope:slack", "rope:taut"])
+GUARD_NAMES = tuple(
+    [f"normal:{c}" for c in CORNERS]
+    + [f"tangential:{c}" for c in CORNERS]
+    + ["rest:tip", "rest:slip", "rope:slack", "rope:taut"]
+)
 
 
 class Phase(eqx.Module):
@@ -57,8 +60,15 @@ class Phase(eqx.Module):
     rope: Int[Array, ""]
 
 
-def make_phase(contact, rest=False, slip_hint=None, guard_offset=None, starting=None,
-               free_on_ground=None, rope=ROPE_ELASTIC) -> Phase:
+def make_phase(
+    contact,
+    rest=False,
+    slip_hint=None,
+    guard_offset=None,
+    starting=None,
+    free_on_ground=None,
+    rope=ROPE_ELASTIC,
+) -> Phase:
     """Build a `Phase` from Python values (host side)."""
     return Phase(
         contact=jnp.asarray(contact, dtype=jnp.int32),
@@ -67,8 +77,9 @@ def make_phase(contact, rest=False, slip_hint=None, guard_offset=None, starting=
         slip_hint=jnp.zeros((4, 2)) if slip_hint is None else jnp.asarray(slip_hint, dtype=jnp.float64),
         guard_offset=jnp.zeros(N_GUARDS) if guard_offset is None else jnp.asarray(guard_offset, jnp.float64),
         starting=jnp.zeros(4, dtype=bool) if starting is None else jnp.asarray(starting, dtype=bool),
-        free_on_ground=(jnp.zeros(4, dtype=bool) if free_on_ground is None
-                        else jnp.asarray(free_on_ground, dtype=bool)),
+        free_on_ground=(
+            jnp.zeros(4, dtype=bool) if free_on_ground is None else jnp.asarray(free_on_ground, dtype=bool)
+        ),
     )
 
 
@@ -95,8 +106,9 @@ class Settings(eqx.Module):
     stop_velocity: Scalar
     rest_velocity: Scalar
 
-    def __init__(self, baumgarte=20.0, slip_velocity=1e-6, rcond=1e-9, stop_velocity=1e-4,
-                 rest_velocity=1e-3):
+    def __init__(
+        self, baumgarte=20.0, slip_velocity=1e-6, rcond=1e-9, stop_velocity=1e-4, rest_velocity=1e-3
+    ):
         self.baumgarte = jnp.asarray(baumgarte, dtype=jnp.float64)
         self.slip_velocity = jnp.asarray(slip_velocity, dtype=jnp.float64)
         self.rcond = jnp.asarray(rcond, dtype=jnp.float64)
@@ -132,10 +144,18 @@ def initial_state(scenario: Scenario) -> tuple[State, Constants]:
     l0 = jnp.sqrt(jnp.sum((scenario.boom.tip_position - B) ** 2)) + scenario.rope.slack
     c = constants(scenario, l0)
     zero = jnp.zeros(())
-    y0 = State(position=position, velocity=jnp.zeros(3), quaternion=jnp.array([1.0, 0.0, 0.0, 0.0]),
-               angular_velocity=jnp.zeros(3), tip_position=scenario.boom.tip_position,
-               tip_velocity=jnp.zeros(3), friction_state=jnp.zeros((4, 0)), hoist_work=zero,
-               damping_loss=zero, friction_work=zero)
+    y0 = State(
+        position=position,
+        velocity=jnp.zeros(3),
+        quaternion=jnp.array([1.0, 0.0, 0.0, 0.0]),
+        angular_velocity=jnp.zeros(3),
+        tip_position=scenario.boom.tip_position,
+        tip_velocity=jnp.zeros(3),
+        friction_state=jnp.zeros((4, 0)),
+        hoist_work=zero,
+        damping_loss=zero,
+        friction_work=zero,
+    )
     return y0, c
 
 
@@ -192,25 +212,44 @@ def loads(t: Scalar, y: State, scenario: Scenario, c: Constants, inextensible: b
     corners = kinematics.points_world(y.position, R, c.corners_rel)
     corner_vel = y.velocity + jnp.cross(omega, c.corners_rel) @ R.T  # v_C + R (ω × ρ_i), cf. (2.17)
     jac = jax.vmap(lambda rho: jnp.concatenate([jnp.eye(3), -R @ kinematics.skew(rho)], axis=1))(
-        c.corners_rel)
+        c.corners_rel
+    )
     bias = jnp.cross(omega, jnp.cross(omega, c.corners_rel)) @ R.T
 
     # Rope (2.14) with l(t) = l0 - s(t): the elastic model's rope, shared.
     B, e, stretch, s_dot, S, rope_loss = rope_pull(t, y, R, scenario, c)
-    F_boom, boom_loss = forces.boom_force(y.tip_position - c.tip_rest, y.tip_velocity, boom.stiffness,
-                                          boom.damping)
+    F_boom, boom_loss = forces.boom_force(
+        y.tip_position - c.tip_rest, y.tip_velocity, boom.stiffness, boom.damping
+    )
 
     F_rope = S * e
     z_hat = jnp.array([0.0, 0.0, 1.0])
     force = F_rope - load.mass * scenario.gravity * z_hat
     moment = jnp.cross(c.attachment_rel, R.T @ F_rope) - jnp.cross(omega, c.inertia @ omega)
     zero = jnp.zeros_like(stretch)
-    ld = Loads(rotation=R, corners=corners, corner_velocity=corner_vel, jacobians=jac, bias=bias,
-               generalised_force=jnp.concatenate([force, moment]), rope_point=B, rope_tension=S,
-               rope_direction=e, stretch=stretch, hoist_rate=s_dot, rope_loss=rope_loss,
-               rope_spring=0.5 * scenario.rope.stiffness * jnp.maximum(stretch, 0.0) ** 2, boom_force=F_boom,
-               boom_loss=boom_loss, rope_generalised=jnp.zeros(6), rope_jacobian=jnp.zeros((3, 6)),
-               rope_bias=jnp.zeros(3), rope_rate_error=zero, rope_curvature=zero, hoist_accel=zero)
+    ld = Loads(
+        rotation=R,
+        corners=corners,
+        corner_velocity=corner_vel,
+        jacobians=jac,
+        bias=bias,
+        generalised_force=jnp.concatenate([force, moment]),
+        rope_point=B,
+        rope_tension=S,
+        rope_direction=e,
+        stretch=stretch,
+        hoist_rate=s_dot,
+        rope_loss=rope_loss,
+        rope_spring=0.5 * scenario.rope.stiffness * jnp.maximum(stretch, 0.0) ** 2,
+        boom_force=F_boom,
+        boom_loss=boom_loss,
+        rope_generalised=jnp.zeros(6),
+        rope_jacobian=jnp.zeros((3, 6)),
+        rope_bias=jnp.zeros(3),
+        rope_rate_error=zero,
+        rope_curvature=zero,
+        hoist_accel=zero,
+    )
     return inextensible_loads(t, y, ld, scenario, c) if inextensible else ld
 
 
@@ -226,23 +265,45 @@ def inextensible_loads(t: Scalar, y: State, ld: Loads, scenario: Scenario, c: Co
     L = forces.safe_norm(y.tip_position - ld.rope_point)
     L_dot = jnp.dot(v_rel, e)
     return eqx.tree_at(
-        lambda x: (x.generalised_force, x.rope_tension, x.rope_loss, x.rope_spring, x.rope_generalised,
-                   x.rope_jacobian, x.rope_bias, x.rope_rate_error, x.rope_curvature, x.hoist_accel),
+        lambda x: (
+            x.generalised_force,
+            x.rope_tension,
+            x.rope_loss,
+            x.rope_spring,
+            x.rope_generalised,
+            x.rope_jacobian,
+            x.rope_bias,
+            x.rope_rate_error,
+            x.rope_curvature,
+            x.hoist_accel,
+        ),
         ld,
-        (jnp.concatenate([force, moment]), zero, zero, zero, jnp.concatenate([e, jnp.cross(rho_B, R.T @ e)]),
-         jnp.concatenate([jnp.eye(3), -R @ kinematics.skew(rho_B)], axis=1),
-         R @ jnp.cross(omega, jnp.cross(omega, rho_B)), L_dot + ld.hoist_rate,
-         (jnp.sum(v_rel**2) - L_dot**2) / jnp.maximum(L, 1e-12),
-         jax.jvp(scenario.hoist.rate, (t,), (jnp.ones_like(t),))[1]))
+        (
+            jnp.concatenate([force, moment]),
+            zero,
+            zero,
+            zero,
+            jnp.concatenate([e, jnp.cross(rho_B, R.T @ e)]),
+            jnp.concatenate([jnp.eye(3), -R @ kinematics.skew(rho_B)], axis=1),
+            R @ jnp.cross(omega, jnp.cross(omega, rho_B)),
+            L_dot + ld.hoist_rate,
+            (jnp.sum(v_rel**2) - L_dot**2) / jnp.maximum(L, 1e-12),
+            jax.jvp(scenario.hoist.rate, (t,), (jnp.ones_like(t),))[1],
+        ),
+    )
 
 
 def with_tension(ld: Loads, S: Scalar, taut) -> Loads:
     """`ld` with the inextensible rope's constraint tension S [N] applied where `taut` (else unchanged,
     exactly: `ld` of a taut rope carries S = 0)."""
-    return eqx.tree_at(lambda x: (x.rope_tension, x.generalised_force), ld,
-                       (jnp.where(taut, S, ld.rope_tension),
-                        jnp.where(taut, ld.generalised_force + S * ld.rope_generalised,
-                                  ld.generalised_force)))
+    return eqx.tree_at(
+        lambda x: (x.rope_tension, x.generalised_force),
+        ld,
+        (
+            jnp.where(taut, S, ld.rope_tension),
+            jnp.where(taut, ld.generalised_force + S * ld.rope_generalised, ld.generalised_force),
+        ),
+    )
 
 
 def rope_accel_target(ld: Loads, settings: Settings) -> Scalar:
@@ -256,7 +317,8 @@ def _tip_free_accel(ld: Loads, scenario: Scenario) -> Vec3:
     """Boom-tip acceleration (2.13) without the rope force (inextensible rope: S = 0 in `ld`)."""
     g = scenario.gravity
     return (ld.boom_force - ld.rope_tension * ld.rope_direction) / scenario.boom.tip_mass - g * jnp.array(
-        [0.0, 0.0, 1.0])
+        [0.0, 0.0, 1.0]
+    )
 
 
 def rest_rope_tension(ld: Loads, scenario: Scenario, settings: Settings) -> Scalar:
@@ -264,8 +326,9 @@ def rest_rope_tension(ld: Loads, scenario: Scenario, settings: Settings) -> Scal
     the tip's motion along the rope, e·a_A + curvature = target with m_0 a_A = boom force - S e - m_0 g."""
     e = ld.rope_direction
     m0 = scenario.boom.tip_mass
-    return m0 * (jnp.dot(e, _tip_free_accel(ld, scenario)) + ld.rope_curvature
-                 - rope_accel_target(ld, settings))
+    return m0 * (
+        jnp.dot(e, _tip_free_accel(ld, scenario)) + ld.rope_curvature - rope_accel_target(ld, settings)
+    )
 
 
 def _mass_inverse(scenario: Scenario, c: Constants) -> Float[Array, "6 6"]:
@@ -287,8 +350,15 @@ def _maps(contact: Int[Array, "4"], tdir: Float[Array, "4 2"], mu: Scalar):
     """Per corner: the force map P_i (world force = P_i λ_i) and the constrained-row selector S_i (3x3)."""
     stick = contact == STICK
     slide = contact == SLIDE
-    P_slide = jnp.zeros((4, 3, 3)).at[:, 2, 2].set(1.0).at[:, 0, 2].set(-mu * tdir[:, 0]).at[:, 1, 2].set(
-        -mu * tdir[:, 1])
+    P_slide = (
+        jnp.zeros((4, 3, 3))
+        .at[:, 2, 2]
+        .set(1.0)
+        .at[:, 0, 2]
+        .set(-mu * tdir[:, 0])
+        .at[:, 1, 2]
+        .set(-mu * tdir[:, 1])
+    )
     eye = jnp.broadcast_to(jnp.eye(3), (4, 3, 3))
     P = jnp.where(stick[:, None, None], eye, jnp.where(slide[:, None, None], P_slide, 0.0))
     s_rows = jnp.where(stick[:, None], 1.0, jnp.where(slide[:, None], jnp.array([0.0, 0.0, 1.0]), 0.0))
@@ -298,7 +368,7 @@ def _maps(contact: Int[Array, "4"], tdir: Float[Array, "4 2"], mu: Scalar):
 def _block_diag(blocks: Float[Array, "4 3 3"]) -> Float[Array, "12 12"]:
     out = jnp.zeros((12, 12))
     for i in range(4):
-        out = out.at[3 * i:3 * i + 3, 3 * i:3 * i + 3].set(blocks[i])
+        out = out.at[3 * i : 3 * i + 3, 3 * i : 3 * i + 3].set(blocks[i])
     return out
 
 
@@ -344,8 +414,9 @@ def solve_rope_contact_system(jacobians, Minv, P, s_rows, target, g_rope, m0, rh
     A_cs = s * (Bbig @ Minv @ g_rope)
     A_sc = g_rope @ Minv @ Bbig.T @ PB
     A_ss = g_rope @ Minv @ g_rope + 1.0 / m0
-    A = jnp.concatenate([jnp.concatenate([A_cc, A_cs[:, None]], axis=1),
-                         jnp.concatenate([A_sc, A_ss[None]])[None, :]], axis=0)
+    A = jnp.concatenate(
+        [jnp.concatenate([A_cc, A_cs[:, None]], axis=1), jnp.concatenate([A_sc, A_ss[None]])[None, :]], axis=0
+    )
     rhs = jnp.concatenate([s * target.reshape(12), jnp.reshape(rhs_rope, (1,))])
     four = jnp.all(s_rows[:, 2] > 0)
     w_row = jnp.zeros(13).at[jnp.array([2, 5, 8, 11])].set(jnp.asarray(statics._W)) * four
@@ -378,8 +449,9 @@ class ContactMatrices(eqx.Module):
     rope_rhs: Scalar | None = None
 
 
-def contact_matrices(t: Scalar, y: State, scenario: Scenario, c: Constants,
-                     settings: Settings, rope: int = ROPE_ELASTIC) -> ContactMatrices:
+def contact_matrices(
+    t: Scalar, y: State, scenario: Scenario, c: Constants, settings: Settings, rope: int = ROPE_ELASTIC
+) -> ContactMatrices:
     """The contact problem at (t, y) for the rope mode `rope` (a Python int: it sets the shapes)."""
     ld = loads(t, y, scenario, c, inextensible=rope != ROPE_ELASTIC)
     m = scenario.load.mass
@@ -388,8 +460,15 @@ def contact_matrices(t: Scalar, y: State, scenario: Scenario, c: Constants,
     beta = settings.baumgarte
     target = -2.0 * beta * ld.corner_velocity - beta**2 * ld.corners[:, 2:3] * jnp.array([0.0, 0.0, 1.0])
     if rope != ROPE_TAUT:
-        return ContactMatrices(mass=M, force=ld.generalised_force, jacobians=ld.jacobians, bias=ld.bias,
-                               corner_velocity=ld.corner_velocity, corners=ld.corners, target=target)
+        return ContactMatrices(
+            mass=M,
+            force=ld.generalised_force,
+            jacobians=ld.jacobians,
+            bias=ld.bias,
+            corner_velocity=ld.corner_velocity,
+            corners=ld.corners,
+            target=target,
+        )
     m0 = scenario.boom.tip_mass
     e = ld.rope_direction
     M9 = jnp.zeros((9, 9)).at[:6, :6].set(M).at[6:, 6:].set(m0 * jnp.eye(3))
@@ -398,6 +477,14 @@ def contact_matrices(t: Scalar, y: State, scenario: Scenario, c: Constants,
     # d²|AB|/dt² = e·(a_A - J_B u̇ - bias_B) + curvature = target.
     row = jnp.concatenate([-e @ ld.rope_jacobian, e])
     rhs = rope_accel_target(ld, settings) - ld.rope_curvature + jnp.dot(e, ld.rope_bias)
-    return ContactMatrices(mass=M9, force=f9, jacobians=jac9, bias=ld.bias,
-                           corner_velocity=ld.corner_velocity, corners=ld.corners, target=target,
-                           rope_row=row, rope_rhs=rhs)
+    return ContactMatrices(
+        mass=M9,
+        force=f9,
+        jacobians=jac9,
+        bias=ld.bias,
+        corner_velocity=ld.corner_velocity,
+        corners=ld.corners,
+        target=target,
+        rope_row=row,
+        rope_rhs=rhs,
+    )

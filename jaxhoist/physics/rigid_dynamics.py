@@ -78,8 +78,9 @@ def _rest_loads(ld: Loads, scenario: Scenario, phase: Phase, settings: Settings)
     return with_tension(ld, rest_rope_tension(ld, scenario, settings), taut)
 
 
-def _rest_contact_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
-                       settings: Settings) -> Contact:
+def _rest_contact_rope(
+    ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings
+) -> Contact:
     return _rest_contact(_rest_loads(ld, scenario, phase, settings), scenario, c, phase, settings)
 
 
@@ -88,14 +89,21 @@ def _rest_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, set
     S_body = ld.rotation.T @ (ld.rope_tension * ld.rope_direction)
     st = statics.rest_statics_loads(scenario, S_body)
     F = jnp.concatenate([rest_friction(ld, c, scenario), st[:, None]], axis=1)
-    return Contact(accel=jnp.zeros(6), force=F, corner_accel=jnp.zeros((4, 3)),
-                   slip_direction=jnp.zeros((4, 2)), loads=ld)
+    return Contact(
+        accel=jnp.zeros(6),
+        force=F,
+        corner_accel=jnp.zeros((4, 3)),
+        slip_direction=jnp.zeros((4, 2)),
+        loads=ld,
+    )
 
 
-def _motion_contact_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
-                         settings: Settings) -> Contact:
-    return jax.lax.cond(phase.rope == ROPE_TAUT, _motion_contact_taut, _motion_contact_free, ld, scenario, c,
-                        phase, settings)
+def _motion_contact_rope(
+    ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings
+) -> Contact:
+    return jax.lax.cond(
+        phase.rope == ROPE_TAUT, _motion_contact_taut, _motion_contact_free, ld, scenario, c, phase, settings
+    )
 
 
 def _contact_problem(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
@@ -119,30 +127,53 @@ def _contact_from_multipliers(ld: Loads, Minv, tdir, P, lam) -> Contact:
     return Contact(accel=accel, force=F, corner_accel=corner_accel, slip_direction=tdir, loads=ld)
 
 
-def _motion_contact_free(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
-                         settings: Settings) -> Contact:
+def _motion_contact_free(
+    ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings
+) -> Contact:
     Minv, tdir, P, s_rows, target = _contact_problem(ld, scenario, c, phase, settings)
     lam = solve_contact_system(ld.jacobians, Minv, P, s_rows, target, scenario.load.mass, settings.rcond)
     return _contact_from_multipliers(ld, Minv, tdir, P, lam)
 
 
-def _motion_contact_taut(ld: Loads, scenario: Scenario, c: Constants, phase: Phase,
-                         settings: Settings) -> Contact:
+def _motion_contact_taut(
+    ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings
+) -> Contact:
     """The moving load with a taut inextensible rope: unknowns λ (12) and the tension S, from "constrained
     corner accelerations vanish" (Baumgarte-stabilised) and d²|AB|/dt² = `rope_accel_target`, with the
     boom tip's acceleration (2.13) m_0 a_A = boom force - S e - m_0 g."""
     Minv, tdir, P, s_rows, target = _contact_problem(ld, scenario, c, phase, settings)
     e = ld.rope_direction
     a_B_free = ld.rope_jacobian @ (Minv @ ld.generalised_force) + ld.rope_bias
-    rhs_s = (jnp.dot(e, _tip_free_accel(ld, scenario)) - jnp.dot(e, a_B_free) + ld.rope_curvature
-             - rope_accel_target(ld, settings))
-    lam, S = solve_rope_contact_system(ld.jacobians, Minv, P, s_rows, target, ld.rope_generalised,
-                                       scenario.boom.tip_mass, rhs_s, scenario.load.mass, settings.rcond)
+    rhs_s = (
+        jnp.dot(e, _tip_free_accel(ld, scenario))
+        - jnp.dot(e, a_B_free)
+        + ld.rope_curvature
+        - rope_accel_target(ld, settings)
+    )
+    lam, S = solve_rope_contact_system(
+        ld.jacobians,
+        Minv,
+        P,
+        s_rows,
+        target,
+        ld.rope_generalised,
+        scenario.boom.tip_mass,
+        rhs_s,
+        scenario.load.mass,
+        settings.rcond,
+    )
     return _contact_from_multipliers(with_tension(ld, S, True), Minv, tdir, P, lam)
 
 
-def contact_dynamics(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
-                     settings: Settings, inextensible: bool = False) -> Contact:
+def contact_dynamics(
+    t: Scalar,
+    y: State,
+    scenario: Scenario,
+    c: Constants,
+    phase: Phase,
+    settings: Settings,
+    inextensible: bool = False,
+) -> Contact:
     """Contact forces and accelerations of the load in the contact configuration `phase`. With
     `inextensible` (a Python bool: the rope model, fixed for a whole solve) the rope is the constraint
     (2.15), taut or slack by `phase.rope`, and a taut rope's tension is solved together with the contact
@@ -159,8 +190,9 @@ def _contact_elastic(t, y, ld, scenario, c, phase, settings) -> Contact:
 
 def _contact_rope(t, y, ld, scenario, c, phase, settings) -> Contact:
     ld = inextensible_loads(t, y, ld, scenario, c)
-    return jax.lax.cond(phase.rest, _rest_contact_rope, _motion_contact_rope, ld, scenario, c, phase,
-                        settings)
+    return jax.lax.cond(
+        phase.rest, _rest_contact_rope, _motion_contact_rope, ld, scenario, c, phase, settings
+    )
 
 
 def _unpack(args):
@@ -177,14 +209,23 @@ def vector_field(t: Scalar, y: State, args) -> State:
     ct = contact_dynamics(t, y, scenario, c, phase, settings, inextensible)
     ld = ct.loads
     moving = jnp.logical_not(phase.rest)  # a resting load is held fixed: only the boom tip moves
-    body = dict(position=jnp.where(moving, y.velocity, 0.0), velocity=ct.accel[:3],
-                quaternion=jnp.where(moving, kinematics.quat_rate(y.quaternion, y.angular_velocity), 0.0),
-                angular_velocity=ct.accel[3:],
-                friction_work=jnp.where(moving, -jnp.sum(ct.force[:, :2] * ld.corner_velocity[:, :2]), 0.0))
+    body = dict(
+        position=jnp.where(moving, y.velocity, 0.0),
+        velocity=ct.accel[:3],
+        quaternion=jnp.where(moving, kinematics.quat_rate(y.quaternion, y.angular_velocity), 0.0),
+        angular_velocity=ct.accel[3:],
+        friction_work=jnp.where(moving, -jnp.sum(ct.force[:, :2] * ld.corner_velocity[:, :2]), 0.0),
+    )
     F_rope = ld.rope_tension * ld.rope_direction
     tip_acc = (ld.boom_force - F_rope) / boom.tip_mass - g * jnp.array([0.0, 0.0, 1.0])
-    return State(tip_position=y.tip_velocity, tip_velocity=tip_acc, friction_state=y.friction_state,
-                 hoist_work=ld.rope_tension * ld.hoist_rate, damping_loss=ld.rope_loss + ld.boom_loss, **body)
+    return State(
+        tip_position=y.tip_velocity,
+        tip_velocity=tip_acc,
+        friction_state=y.friction_state,
+        hoist_work=ld.rope_tension * ld.hoist_rate,
+        damping_loss=ld.rope_loss + ld.boom_loss,
+        **body,
+    )
 
 
 # ------------------------------------------------------------------------------------------ guards
@@ -199,15 +240,23 @@ def rest_conditions(ld: Loads, scenario: Scenario, c: Constants):
     return jnp.minimum(st.margins[0], st.margins[3]), st.friction_utilisation
 
 
-def raw_guards(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase,
-               settings: Settings, inextensible: bool = False) -> Float[Array, "12"]:
+def raw_guards(
+    t: Scalar,
+    y: State,
+    scenario: Scenario,
+    c: Constants,
+    phase: Phase,
+    settings: Settings,
+    inextensible: bool = False,
+) -> Float[Array, "12"]:
     """The guards of `phase` without offsets, dimensionless (forces / G, heights / L, speeds / V); the
     phase is valid while all are > 0. Guards that do not apply (to a corner's mode, or to rest, or to the
     rope model and mode) are +1. `inextensible`: the rope model (see `contact_dynamics`)."""
     ld = loads(t, y, scenario, c, inextensible=inextensible)
     if inextensible:
-        return jax.lax.cond(phase.rest, _rest_guards_rope, _motion_guards_rope, ld, scenario, c, phase,
-                            settings)
+        return jax.lax.cond(
+            phase.rest, _rest_guards_rope, _motion_guards_rope, ld, scenario, c, phase, settings
+        )
     g = jax.lax.cond(phase.rest, _rest_guards, _motion_guards, ld, scenario, c, phase, settings)
     return jnp.concatenate([g, jnp.ones(2)])
 
@@ -259,8 +308,9 @@ def _motion_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, se
     # re-anchored (bookkeeping events: nothing changes physically; a corner near the instantaneous centre of
     # rotation may creep back and forth through zero slip without events). An ordinary slide ends when
     # its speed falls to v_stop.
-    g_start = jnp.minimum(jnp.sum(vh * phase.slip_hint, axis=1) + 0.05 * v_stop,
-                          2.0 * v_stop - speed) / sc.velocity
+    g_start = (
+        jnp.minimum(jnp.sum(vh * phase.slip_hint, axis=1) + 0.05 * v_stop, 2.0 * v_stop - speed) / sc.velocity
+    )
     g_slide = jnp.where(phase.starting, g_start, (speed - v_stop) / sc.velocity)
     g_tan = jnp.where(contact == STICK, (mu * N - T) / sc.force, jnp.where(contact == SLIDE, g_slide, 1.0))
     return jnp.concatenate([g_normal, g_tan, jnp.ones(2)])
@@ -275,8 +325,15 @@ def event_condition(t, y, args, **kwargs) -> Scalar:
 # ------------------------------------------------------------------------------------------ impacts
 
 
-def impulse_response(y: State, scenario: Scenario, c: Constants, modes: Int[Array, "4"],
-                     slip_dirs: Float[Array, "4 2"], normal_target: PerCorner, rcond) -> tuple:
+def impulse_response(
+    y: State,
+    scenario: Scenario,
+    c: Constants,
+    modes: Int[Array, "4"],
+    slip_dirs: Float[Array, "4 2"],
+    normal_target: PerCorner,
+    rcond,
+) -> tuple:
     """Velocity jump of an impact with the ground: minimum-norm impulses P_i at the corners in `modes`
     (`STICK`: all three post-impact velocity components prescribed, tangential ones 0; `SLIDE`: normal only,
     with a tangential impulse -μ P_n t̂_i along `slip_dirs`; `FREE`: no impulse), such that the post-impact
@@ -288,7 +345,8 @@ def impulse_response(y: State, scenario: Scenario, c: Constants, modes: Int[Arra
     R = kinematics.quat_to_matrix(y.quaternion)
     Minv = _mass_inverse(scenario, c)
     jac = jax.vmap(lambda rho: jnp.concatenate([jnp.eye(3), -R @ kinematics.skew(rho)], axis=1))(
-        c.corners_rel)
+        c.corners_rel
+    )
     u = jnp.concatenate([y.velocity, y.angular_velocity])
     v = jnp.einsum("kij,j->ki", jac, u)
     P, s_rows = _maps(modes, slip_dirs, scenario.foundation.friction_coefficient)
@@ -300,8 +358,16 @@ def impulse_response(y: State, scenario: Scenario, c: Constants, modes: Int[Arra
     return u1[:3], u1[3:], imp, jnp.einsum("kij,j->ki", jac, u1)
 
 
-def rope_impulse_response(t: Scalar, y: State, scenario: Scenario, c: Constants, modes: Int[Array, "4"],
-                          slip_dirs: Float[Array, "4 2"], normal_target: PerCorner, rcond) -> tuple:
+def rope_impulse_response(
+    t: Scalar,
+    y: State,
+    scenario: Scenario,
+    c: Constants,
+    modes: Int[Array, "4"],
+    slip_dirs: Float[Array, "4 2"],
+    normal_target: PerCorner,
+    rcond,
+) -> tuple:
     """The jerk of the inextensible rope: a plastic impulse P >= 0 along the rope that sets the rate
     d|AB|/dt to the hoist's dl/dt = -ds/dt, shared by the boom tip (-P e) and the load (+P e at B), with
     the corners in `modes` taking impulses as in `impulse_response` (post-jerk normal velocity
@@ -318,8 +384,18 @@ def rope_impulse_response(t: Scalar, y: State, scenario: Scenario, c: Constants,
     P, s_rows = _maps(modes, slip_dirs, scenario.foundation.friction_coefficient)
     m0 = scenario.boom.tip_mass
     target = jnp.concatenate([jnp.zeros((4, 2)), normal_target[:, None]], axis=1)
-    lam, P_rope = solve_rope_contact_system(ld.jacobians, Minv, P, s_rows, target - v, ld.rope_generalised,
-                                            m0, ld.rope_rate_error, scenario.load.mass, rcond)
+    lam, P_rope = solve_rope_contact_system(
+        ld.jacobians,
+        Minv,
+        P,
+        s_rows,
+        target - v,
+        ld.rope_generalised,
+        m0,
+        ld.rope_rate_error,
+        scenario.load.mass,
+        rcond,
+    )
     imp = jnp.einsum("kij,kj->ki", P, lam.reshape(4, 3))
     u1 = u + Minv @ (jnp.einsum("kij,ki->j", ld.jacobians, imp) + P_rope * ld.rope_generalised)
     tip1 = y.tip_velocity - P_rope * ld.rope_direction / m0
@@ -359,10 +435,22 @@ class Output(eqx.Module):
     euler: Float[Array, "3"]
 
 
-def output(t: Scalar, y: State, scenario: Scenario, c: Constants, phase: Phase, settings: Settings,
-           inextensible: bool = False) -> Output:
+def output(
+    t: Scalar,
+    y: State,
+    scenario: Scenario,
+    c: Constants,
+    phase: Phase,
+    settings: Settings,
+    inextensible: bool = False,
+) -> Output:
     ct = contact_dynamics(t, y, scenario, c, phase, settings, inextensible)
     ld = ct.loads
-    return Output(corners=ld.corners, normal=ct.force[:, 2],
-                  friction=ct.force.at[:, 2].set(0.0), rope_tension=ld.rope_tension,
-                  energy=energy(y, ld, scenario, c), euler=kinematics.matrix_to_euler(ld.rotation))
+    return Output(
+        corners=ld.corners,
+        normal=ct.force[:, 2],
+        friction=ct.force.at[:, 2].set(0.0),
+        rope_tension=ld.rope_tension,
+        energy=energy(y, ld, scenario, c),
+        euler=kinematics.matrix_to_euler(ld.rotation),
+    )

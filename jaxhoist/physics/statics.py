@@ -104,9 +104,15 @@ def _twist_ratio(u, force_h, moment, points, loads, mu, length):
     return num / jnp.maximum(den, 1e-300)
 
 
-def friction_utilisation(force_h: Float[Array, "2"], moment: Scalar, points: Float[Array, "4 2"],
-                         loads: PerCorner, mu: Scalar, length: Scalar | float = 1.0,
-                         newton_iterations: int = 25):
+def friction_utilisation(
+    force_h: Float[Array, "2"],
+    moment: Scalar,
+    points: Float[Array, "4 2"],
+    loads: PerCorner,
+    mu: Scalar,
+    length: Scalar | float = 1.0,
+    newton_iterations: int = 25,
+):
     """Exact friction utilisation ρ* of four point contacts with loads N_i >= 0, and the onset twist.
 
     The friction forces T_i (|T_i| <= μ N_i) must balance a horizontal load: force `force_h` = F [N] and
@@ -176,8 +182,9 @@ def friction_utilisation(force_h: Float[Array, "2"], moment: Scalar, points: Flo
 def rest_statics_loads(scenario: Scenario, rope_force: Vec3) -> PerCorner:
     """Only the nonnegative corner loads of `rest_statics` [N] (cheap: no friction utilisation)."""
     load = scenario.load
-    N_i = linear_corner_loads(load.size, load.mass_centre, load.mass * scenario.gravity, rope_force,
-                              scenario.rope.attachment)
+    N_i = linear_corner_loads(
+        load.size, load.mass_centre, load.mass * scenario.gravity, rope_force, scenario.rope.attachment
+    )
     return nonnegative_corner_loads(N_i)[0]
 
 
@@ -223,8 +230,9 @@ def _geometry(scenario: Scenario, attachment, mass_centre):
     return load.size, B, C, load.mass * scenario.gravity
 
 
-def rest_statics(scenario: Scenario, rope_force: Vec3, *, attachment: Vec3 | None = None,
-                 mass_centre: Vec3 | None = None) -> RestStatics:
+def rest_statics(
+    scenario: Scenario, rope_force: Vec3, *, attachment: Vec3 | None = None, mass_centre: Vec3 | None = None
+) -> RestStatics:
     """Statics of the flat, unrotated load under the rope force `rope_force` S [N] at B (paper 2.3-2.9).
 
     Pure JAX (jit/vmap/grad-friendly). `attachment` B and `mass_centre` C default to the scenario's [m].
@@ -249,19 +257,31 @@ def rest_statics(scenario: Scenario, rope_force: Vec3, *, attachment: Vec3 | Non
     xy = kinematics.bottom_corners(size)[:, :2]
     limit = jnp.max(jnp.abs(Tv[0] * (xy[:, 1] - yR) - Tv[1] * (xy[:, 0] - xR)))
     nn, _ = nonnegative_corner_loads(N_i)
-    rho, _ = friction_utilisation(S[:2], B[0] * S[1] - B[1] * S[0], xy, jnp.maximum(nn, 0.0), mu,
-                                  0.5 * (a + b))
+    rho, _ = friction_utilisation(
+        S[:2], B[0] * S[1] - B[1] * S[0], xy, jnp.maximum(nn, 0.0), mu, 0.5 * (a + b)
+    )
     L = 0.5 * (a + b)
-    margins = jnp.stack([
-        N / G,
-        (mu * N - T) / G,
-        (limit - jnp.abs(M_T)) / (G * L),
-        jnp.minimum(jnp.minimum(xR, a - xR), jnp.minimum(yR, b - yR)) / L,
-    ])
+    margins = jnp.stack(
+        [
+            N / G,
+            (mu * N - T) / G,
+            (limit - jnp.abs(M_T)) / (G * L),
+            jnp.minimum(jnp.minimum(xR, a - xR), jnp.minimum(yR, b - yR)) / L,
+        ]
+    )
     margins = jnp.where(N > 0, margins, jnp.where(jnp.arange(4) == 0, margins, -jnp.inf))
-    return RestStatics(corner_loads=N_i, nonnegative_loads=nn, normal=N, reaction_point=jnp.stack([xR, yR]),
-                       friction_vector=Tv, friction=T, friction_moment=M_T, twist_limit=limit,
-                       friction_utilisation=rho, margins=margins)
+    return RestStatics(
+        corner_loads=N_i,
+        nonnegative_loads=nn,
+        normal=N,
+        reaction_point=jnp.stack([xR, yR]),
+        friction_vector=Tv,
+        friction=T,
+        friction_moment=M_T,
+        twist_limit=limit,
+        friction_utilisation=rho,
+        margins=margins,
+    )
 
 
 #: `rest_statics` compiled once per scenario structure (for repeated host-side calls).
@@ -295,7 +315,7 @@ def lift_threshold(scenario: Scenario, direction, *, attachment=None, mass_centr
 def slide_threshold(scenario: Scenario, direction, *, attachment=None, mass_centre=None) -> float:
     """|S| [N] at which T = μN for a pull along unit e: T = s h, N = G - s e_z, h = |(e_x, e_y)|, so
 
-        s = μ G / (h + μ e_z)   (inf if h + μ e_z <= 0 or h = 0, i.e. a vertical pull never slides).
+    s = μ G / (h + μ e_z)   (inf if h + μ e_z <= 0 or h = 0, i.e. a vertical pull never slides).
     """
     e = _unit(direction)
     _, _, _, G, mu = _host(scenario, attachment, mass_centre)
@@ -304,8 +324,9 @@ def slide_threshold(scenario: Scenario, direction, *, attachment=None, mass_cent
     return mu * G / d if (h > 0 and d > 0) else math.inf
 
 
-def tip_threshold(scenario: Scenario, direction, *, attachment=None, mass_centre=None,
-                  corner_tol: float = 1e-9) -> tuple[float, str, tuple[str, ...]]:
+def tip_threshold(
+    scenario: Scenario, direction, *, attachment=None, mass_centre=None, corner_tol: float = 1e-9
+) -> tuple[float, str, tuple[str, ...]]:
     """|S| [N] at which R leaves the rectangle, for a pull along unit e, in closed form.
 
     N x_R = G x_C + s (z_B e_x - x_B e_z) and N = G - s e_z, so x_R = 0 at s = -G x_C / (z_B e_x - x_B e_z)
@@ -401,8 +422,9 @@ def slip_threshold(scenario: Scenario, direction, *, attachment=None, mass_centr
     return _first_root(margin, s_lift)
 
 
-def thresholds(scenario: Scenario, direction, *, attachment=None, mass_centre=None,
-               include_slip: bool = True) -> dict[str, float]:
+def thresholds(
+    scenario: Scenario, direction, *, attachment=None, mass_centre=None, include_slip: bool = True
+) -> dict[str, float]:
     """Rope-force magnitudes |S| [N] at which each condition first fails for a pull along `direction`.
 
     **Returns** a dict with keys "lift", "slide", "twist", "tip" (and "slip", the exact friction limit, if
@@ -424,16 +446,18 @@ def thresholds(scenario: Scenario, direction, *, attachment=None, mass_centre=No
     return out
 
 
-def first_failure(scenario: Scenario, rope_force, *, attachment=None, mass_centre=None,
-                  include_slip: bool = False) -> tuple[str | None, float]:
+def first_failure(
+    scenario: Scenario, rope_force, *, attachment=None, mass_centre=None, include_slip: bool = False
+) -> tuple[str | None, float]:
     """Which condition of (2.9) fails first as the pull grows along the direction of `rope_force` S.
 
     **Returns** `(name, |S|)` with name one of "lift", "slide", "twist", "tip-edge", "tip-corner" (or "slip"
     if `include_slip`), or `(None, inf)` if none fails. The name is about the ray, not about whether
     `rope_force` itself already violates it; compare |S| with the returned magnitude for that.
     """
-    th = thresholds(scenario, rope_force, attachment=attachment, mass_centre=mass_centre,
-                    include_slip=include_slip)
+    th = thresholds(
+        scenario, rope_force, attachment=attachment, mass_centre=mass_centre, include_slip=include_slip
+    )
     names = ["lift", "slide", "twist", "tip"] + (["slip"] if include_slip else [])
     best = min(names, key=lambda n: th[n])
     if not math.isfinite(th[best]):
