@@ -450,11 +450,11 @@ def save_animation(
     path = Path(path).with_suffix("." + fmt)
     path.parent.mkdir(parents=True, exist_ok=True)
     writer = (
-        PillowWriter(fps=fps)
+        PillowWriter(fps=fps)  # pyright: ignore[reportArgumentType]  # matplotlib's stubs say int; a float fps works
         if fmt == "gif"
         else FFMpegWriter(
-            fps=fps,
-            codec="libx264",  # pyright: ignore[reportArgumentType]  # matplotlib's stubs say int; a float fps works
+            fps=fps,  # pyright: ignore[reportArgumentType]  # as above
+            codec="libx264",
             extra_args=["-pix_fmt", "yuv420p"],
         )
     )

@@ -264,11 +264,11 @@ def simulate(
             options = SolverOptions(diffrax.Tsit5(), **kw)  # for its default tolerances 1e-6, 1e-8
         return simulate_rigid(
             scenario,
-            t1,
+            t1,  # pyright: ignore[reportArgumentType]  # a float or None here (checked above)
             ts=ts,
             n_save=n_save,
-            rtol=options.rtol,
-            atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in; ts given
+            rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
+            atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
             max_steps=options.max_steps,
             rope=model.rope.name,
         )
