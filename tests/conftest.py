@@ -118,3 +118,20 @@ def centred42(paper42) -> jh.Scenario:
             "hoist.speed": 0.0,
         }
     )
+
+
+@pytest.fixture(autouse=True, scope="module")
+def _release_compiled_code():
+    """After each test module, drop the compiled executables that the package and JAX keep for the process's
+    life. Each executable holds memory maps of its machine code; the whole suite in one process reached the
+    kernel's limit (vm.max_map_count = 65 530; about 24 000 maps a third of the way through) and XLA's next
+    compile died with a segmentation fault (tests/test_statics.py, after ~250 tests). Within a module the
+    compiled functions are still shared."""
+    yield
+    from jaxhoist.apps import bifurcation
+    from jaxhoist.numerics import batch, compile_cache
+
+    compile_cache._CACHE.clear()
+    bifurcation._COMPILED.clear()
+    batch.chunk_fn.cache_clear()
+    jax.clear_caches()
