@@ -60,7 +60,7 @@ if STRICT_PROMOTION:
     for _mod in (jaxhoist.numerics.rigid_solve, jaxhoist.numerics.solve, jh):
         _mod.simulate_rigid = _rigid
 
-PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2")
+PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2", "paper-4.3")
 
 # Every simulate() in the physics tests saves this many times, so one compiled core serves them all
 # (ts is an array argument: its values may change, its length may not).

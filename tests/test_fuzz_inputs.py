@@ -16,7 +16,7 @@ import jaxhoist as jh
 from jaxhoist._errors import MAX_MESSAGE_CHARS
 from jaxhoist.apps import cli, simulate_cli
 
-PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2")
+PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2", "paper-4.3")
 FUZZ = settings(
     max_examples=60, derandomize=True, deadline=None, suppress_health_check=[HealthCheck.too_slow]
 )

@@ -19,7 +19,7 @@ import jaxhoist as jh
 import jaxhoist.numerics.solve as solve_mod
 from jaxhoist.physics.params import get_leaf, leaf_getter
 
-PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2")
+PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2", "paper-4.3")
 FEW = settings(max_examples=25, derandomize=True, deadline=None)
 
 # Numeric fields that must be > 0 or >= 0 (negative is invalid), as "table.field" of the scenario file.

@@ -9,6 +9,7 @@ import sys
 import time
 from pathlib import Path
 
+from ..io.scenario import preset_names
 from .animate_cli import _animate
 from .cli_common import _ATOL_HELP, _RTOL_HELP, PROG, _enable_x64
 from .progress_bars import StepTimer, _bar, _LineSink, _percent_to_bar, _phase_to_bar
@@ -227,7 +228,7 @@ def configure_simulate(subparsers) -> None:
     p.add_argument(
         "scenario",
         metavar="SCENARIO",
-        help="a preset name (paper-2.3, paper-4.1, paper-4.2) or a path to a TOML scenario file",
+        help=f"a preset name ({', '.join(preset_names())}) or a path to a TOML scenario file",
     )
     p.add_argument(
         "--t1", type=number_arg, default=None, metavar="T", help="end time [s] (default: the scenario's t1)"

@@ -33,6 +33,10 @@ from .paths import replace_leaves, unit
 # --------------------------------------------------------------------------------------------- load
 
 
+def _check_load_size(size) -> None:
+    _check("load.size", size, unit="m", shape=(3,), low=0.0, low_open=True, symbol="a, b, c")
+
+
 class Load(eqx.Module):
     """The lifted load: a rigid box a×b×c with an eccentric mass centre (paper §2, Fig. 1).
 
@@ -56,6 +60,8 @@ class Load(eqx.Module):
         if (mass is None) == (density is None):
             raise ScenarioError("load: give exactly one of `mass` [kg] or `density` [kg/m^3]")
         if density is not None:
+            # the size first: a bad size must be reported as such, not as the implausible mass it gives
+            _check_load_size(size)
             _check("load.density", _f64(density), unit="kg/m^3", low=0.0, low_open=True, symbol="ρ")
             mass = _f64(density) * size[0] * size[1] * size[2]
             m = _concrete(mass)
@@ -80,7 +86,7 @@ class Load(eqx.Module):
         return j_g + m * (jnp.dot(d, d) * jnp.eye(3) - jnp.outer(d, d))
 
     def check(self) -> None:
-        _check("load.size", self.size, unit="m", shape=(3,), low=0.0, low_open=True, symbol="a, b, c")
+        _check_load_size(self.size)
         _check("load.mass", self.mass, unit="kg", low=0.0, low_open=True, symbol="m")
         _check("load.mass_centre", self.mass_centre, unit="m", shape=(3,), symbol="ξ_C, η_C, ζ_C")
         s, c = _concrete(self.size), _concrete(self.mass_centre)
