@@ -138,9 +138,9 @@ class Grid(AbstractSweep):
 
 
 class Points(AbstractSweep):
-    """Equally long value lists zipped together, member i = (values[p][i] for each p): `Points({"load.mass":
-    masses, "rope.stiffness": stiffnesses})` (one data axis). **Raises** `ScenarioError` for a bad path or
-    values, or lists of different lengths."""
+    """Equally long value lists zipped together, member k taking the k-th value of every list:
+    `Points({"load.mass": masses, "rope.stiffness": stiffnesses})` (one data axis). **Raises**
+    `ScenarioError` for a bad path or values, or lists of different lengths."""
 
     mode: ClassVar[str] = "points"
 
