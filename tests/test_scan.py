@@ -736,3 +736,19 @@ def test_sweep_objects_count_members_and_refuse_bad_input(box):
         with pytest.raises(jh.ScenarioError, match=re.escape(match)) as err:
             make()
         assert "\n" not in str(err.value)
+
+
+def test_callers_not_yet_migrated_convert_silently():
+    """`apps/bifurcation.py` still passes `scan` the earlier keywords (`_deprecated.NOT_YET_MIGRATED`): its
+    calls are converted without a warning; the same call from elsewhere warns."""
+    import warnings
+
+    from jaxhoist.apps.scan_layout import convert_legacy
+
+    call = 'out = convert_legacy("scan", {"lanes": 4}, None, None, False, None, 3)'
+    for module, warns in (("jaxhoist.apps.bifurcation", False), ("user_code", True)):
+        ns = {"__name__": module, "convert_legacy": convert_legacy}
+        with warnings.catch_warnings(record=True) as rec:
+            warnings.simplefilter("always")
+            exec(call, ns)
+        assert len(rec) == int(warns) and ns["out"][2] == jh.BatchOptions(lanes=4)
