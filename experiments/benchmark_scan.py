@@ -210,11 +210,10 @@ def main(argv=None):
         sc,
         {MU: mus[idx]},
         t1,
-        solver=diffrax.Tsit5(),
-        rtol=args.ref_rtol,
-        atol=1e-2 * args.ref_rtol,
-        lanes=8,
-        max_steps=5_000_000,
+        options=jh.SolverOptions(
+            diffrax.Tsit5(), rtol=args.ref_rtol, atol=1e-2 * args.ref_rtol, max_steps=5_000_000
+        ),
+        batch=jh.BatchOptions(lanes=8),
         **obs,
     )
     ref_wall = time.perf_counter() - t0
@@ -352,11 +351,10 @@ def main(argv=None):
             sc2,
             mus,
             t1,
-            solver=diffrax.Bosh3(),
-            dt0=1.5e-3,
-            fixed_step=True,
-            lanes=256,
-            max_steps=10**7,
+            options=jh.SolverOptions(
+                diffrax.Bosh3(), diffrax.ConstantStepSize(), dt0=1.5e-3, max_steps=10**7
+            ),
+            batch=jh.BatchOptions(lanes=256),
             **obs,
         )
         rec["expert_eps_1e-2_bosh3_fixed"] = x

@@ -106,12 +106,11 @@ def _ift(sc, mu_star):
                 pts[p].append(base[p] + (off if p == q else 0.0))
     r = jh.scan(
         sc,
-        {p: np.array(v) for p, v in pts.items()},
+        jh.Points({p: np.array(v) for p, v in pts.items()}),
         25.0,
-        mode="points",
         n_save=2501,
         observables=[OBS],
-        sort=False,
+        batch=jh.BatchOptions(sort=False),
     )
     if not np.all(r.ok):
         raise SystemExit(f"IFT solves failed: {r.failures()[:2]}")

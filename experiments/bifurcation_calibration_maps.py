@@ -92,14 +92,13 @@ def run(which, out, base):
                 for k, v in zip(pts, (m, x, e, z, fa, fb), strict=True):
                     pts[k].append(v)
         return jh.scan(
-            base, {k: np.array(v) for k, v in pts.items()}, 25.0, mode="points", out_dir=out / which, **KW
+            base, jh.Points({k: np.array(v) for k, v in pts.items()}), 25.0, out_dir=out / which, **KW
         )
     if which == "xi-ramp":
         return jh.scan(
             base,
-            {MU: np.linspace(0.30, 0.45, 151), f"{C}[0]": np.linspace(1.0, 1.25, 21)},
+            jh.Grid({MU: np.linspace(0.30, 0.45, 151), f"{C}[0]": np.linspace(1.0, 1.25, 21)}),
             25.0,
-            mode="grid",
             out_dir=out / which,
             **KW,
         )
@@ -107,9 +106,8 @@ def run(which, out, base):
         sc = set_param(set_param(base, f"{C}[1]", 3.18), f"{C}[2]", 0.83)
         return jh.scan(
             sc,
-            {MU: np.linspace(0.345, 0.38, 71), f"{C}[0]": np.linspace(1.05, 1.30, 26)},
+            jh.Grid({MU: np.linspace(0.345, 0.38, 71), f"{C}[0]": np.linspace(1.05, 1.30, 26)}),
             25.0,
-            mode="grid",
             out_dir=out / which,
             **KW,
         )
@@ -128,7 +126,7 @@ def run(which, out, base):
             f"{A}[0]": np.repeat(np.array(FIXTURES)[f, 0], m),
             f"{A}[1]": np.repeat(np.array(FIXTURES)[f, 1], m),
         }
-        return jh.scan(base, pts, 25.0, mode="points", out_dir=out / which, **KW)
+        return jh.scan(base, jh.Points(pts), 25.0, out_dir=out / which, **KW)
     raise SystemExit(f"unknown map {which!r}")
 
 

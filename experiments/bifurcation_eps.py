@@ -300,7 +300,8 @@ def main(argv=None):
     t1, tol = args.t1, args.tol
     n_save = int(round(t1 / args.dt_save)) + 1
     ts = np.linspace(0.0, t1, n_save)
-    kw = dict(ts=ts, rtol=args.rtol, atol=args.atol, max_steps=400_000)
+    kw = dict(ts=ts, rtol=args.rtol, atol=args.atol, max_steps=400_000)  # locate_bifurcation's keywords
+    scan_kw = dict(ts=ts, options=jh.SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=400_000))
     base = jh.load_scenario("paper-4.2")
     bristle = jh.BristleFriction(deflection=delta_list[0], breakaway_ratio=0.5, relaxation_time=0.01)
     sc_b = _with_law(base, bristle)
@@ -338,7 +339,7 @@ def main(argv=None):
             (f"bristle delta={delta_list[0]:g}", sc_b),
         ]:
             t0 = time.perf_counter()
-            r = scan(sc, {MU: mus}, observables={"g": MARGIN, "t_detach": "detachment_times[1]"}, **kw)
+            r = scan(sc, {MU: mus}, observables={"g": MARGIN, "t_detach": "detachment_times[1]"}, **scan_kw)
             g = np.asarray(r["g"])
             coarse[label] = {
                 "mu": mus.tolist(),
@@ -382,11 +383,10 @@ def main(argv=None):
     pts_mu = [m for r in ok for m in r["bracket"]]
     chk = scan(
         base,
-        {EPS: pts_eps, MU: pts_mu},
-        mode="points",
+        jh.Points({EPS: pts_eps, MU: pts_mu}),
         observables={"g": MARGIN, "t_min": T_MARGIN, "t_detach": "detachment_times"},
-        sort=False,
-        **kw,
+        batch=jh.BatchOptions(sort=False),
+        **scan_kw,
     )
     for k, r in enumerate(ok):
         r["check"] = {
@@ -464,7 +464,13 @@ def main(argv=None):
     ref_eps = rec["preset_eps"] if any(r["eps"] == rec["preset_eps"] for r in ok) else ok[-1]["eps"]
     ref = next(r for r in ok if r["eps"] == ref_eps)
     mus_h = ref["mu_star"] + np.array([-0.01, -0.002, 0.0, 0.002, 0.01])
-    hist = scan(set_param(base, EPS, ref_eps), {MU: mus_h}, observables={"f": F_E}, sort=False, **kw)
+    hist = scan(
+        set_param(base, EPS, ref_eps),
+        {MU: mus_h},
+        observables={"f": F_E},
+        batch=jh.BatchOptions(sort=False),
+        **scan_kw,
+    )
     fig, ax = plt.subplots(figsize=(7, 4))
     for k, m in enumerate(mus_h):
         ax.plot(ts, 1e3 * hist["f"][k], lw=1.0, label=f"μ = μ* {m - ref['mu_star']:+.3f}")

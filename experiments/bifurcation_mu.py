@@ -68,6 +68,12 @@ LABELS = {
 }
 
 
+def _scan_kw(kw: dict, lanes: int | None, sort: bool = True) -> dict:
+    """`scan`'s objects for the solver keywords `kw` (n_save, rtol, atol) that the locator takes."""
+    options = jh.SolverOptions(rtol=kw["rtol"], atol=kw["atol"])
+    return dict(n_save=kw["n_save"], options=options, batch=jh.BatchOptions(lanes=lanes, sort=sort))
+
+
 def _plot_observables(sc, mus, res, jumps, located, ramp, out, t1):
     """Every observable against μ; in each panel the μ* located in a grid cell where that observable had a
     candidate jump (one cell may hold the jumps of several observables, located once: the lift-off-time jump
@@ -195,10 +201,9 @@ def main(argv=None):
         {MU: mus},
         t1,
         observables=OBSERVABLES,
-        lanes=args.lanes,
         out_dir=out / f"scan-s{n_save}",
         progress=True,
-        **solve_kw,
+        **_scan_kw(solve_kw, args.lanes),
     )
     rec["scan"] = {
         "wall_s": time.perf_counter() - t0,
@@ -332,8 +337,7 @@ def main(argv=None):
             {MU: np.linspace(b.value - half, b.value + half, 32)},
             t1,
             observables=[name],
-            lanes=16,
-            **refine_kw,
+            **_scan_kw(refine_kw, 16),
         )
         fig, ax = plt.subplots(figsize=(7, 4))
         ax.plot(zoom.coords[MU], zoom[name] * scale, "o-", ms=3)
@@ -353,9 +357,7 @@ def main(argv=None):
             t1,
             observables=["final_psi"],
             histories=("position", "euler"),
-            lanes=4,
-            sort=False,
-            **solve_kw,
+            **_scan_kw(solve_kw, 4, sort=False),
         )
         ts = hist.ts
         fig, axes = plt.subplots(5, 1, figsize=(8, 11), sharex=True)

@@ -47,7 +47,7 @@ def histories(sc, mus, t1, n_save):
         {MU: np.asarray(mus)},
         t1,
         n_save=n_save,
-        sort=False,
+        batch=jh.BatchOptions(sort=False),
         observables=["liftoff_time", "last_contact_time", "final_position", "final_euler"],
         histories=["position", "euler"],
     )

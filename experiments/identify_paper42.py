@@ -25,6 +25,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+import diffrax  # noqa: E402
 import numpy as np  # noqa: E402
 import scipy.optimize  # noqa: E402
 
@@ -71,7 +72,7 @@ def main(argv=None):
     t = np.round(np.arange(0.0, t1 + 1e-9, 0.02), 10)  # 50 Hz
     truth = {k: float(jh.physics.params.get_leaf(truth_sc, PATHS[k])) for k in PARAMS}
     start = {k: truth[k] * PERTURB[k] for k in PARAMS}
-    solver = dict(rtol=args.rtol, atol=args.atol, max_steps=1_000_000)
+    solver = jh.SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol, max_steps=1_000_000)
 
     w = time.perf_counter()
     meas = synthetic_measurement(
@@ -81,7 +82,7 @@ def main(argv=None):
         noise={"position": 0.005, "rope_tension": "1%"},
         seed=args.seed,
         source="paper-4.2 synthetic",
-        **solver,
+        options=solver,
     )
     t_synth = time.perf_counter() - w
     csv = write_measurement(
@@ -98,13 +99,15 @@ def main(argv=None):
     )
 
     # ---- jaxhoist: LM with forward-mode sensitivities (reads the CSV back: units and noise from the JSON)
-    res = identify(truth_sc, csv, PARAMS, start=start, t1=t1, max_iterations=200, **solver)
+    res = identify(
+        truth_sc, csv, PARAMS, start=start, t1=t1, options=solver, fit=jh.FitOptions(max_iterations=200)
+    )
     print(res.summary(), flush=True)
     est = dict(zip(PARAMS, res.values, strict=True))
     se = dict(zip(PARAMS, res.std_errors, strict=True))
 
     # ---- scipy: the same whitened residuals, 2-point finite differences in z = log(θ/θ_start)
-    fn, theta0 = residual_function(truth_sc, csv, PARAMS, start=start, t1=t1, **solver)
+    fn, theta0 = residual_function(truth_sc, csv, PARAMS, start=start, t1=t1, options=solver)
     fn(theta0)  # compile the forward solve outside the timing
     sp = None
     if not args.no_scipy:

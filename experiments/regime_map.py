@@ -117,12 +117,12 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     res = jh.scan(
         sc,
-        {MU: mus, VL: speeds},
-        mode="grid",
+        jh.Grid({MU: mus, VL: speeds}),
         observables={"g": MARGIN, "t_detach_E": "detachment_times[E]"},
         out_dir=out / "scan",
         progress=True,
-        **kw,
+        ts=kw["ts"],
+        options=jh.SolverOptions(rtol=kw["rtol"], atol=kw["atol"], max_steps=kw["max_steps"]),
     )
     g = np.asarray(res["g"])  # (n_mu, n_v)
     np.savez(

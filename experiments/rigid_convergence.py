@@ -245,7 +245,7 @@ def main(argv=None) -> int:
     print("damping ratios for h = sqrt(k m): " + ", ".join(f"{n}: {z:.3g}" for n, z in _named(zetas)))
 
     t0 = time.perf_counter()
-    rig = simulate_rigid(sc0, t1, ts=ts, max_steps=1_000_000)
+    rig = simulate_rigid(sc0, t1, ts=ts, options=jaxhoist.RigidOptions(max_steps=1_000_000))
     rig_wall = time.perf_counter() - t0
     r_rig = np.asarray(rig.position)
     t_lift_rig = rigid_liftoff(rig)

@@ -29,13 +29,19 @@ CASES = (
 )
 
 
+def _model(rope: str) -> jaxhoist.RigidGround:
+    """The rigid model with the rope named "elastic" (2.14) or "inextensible" (2.15)."""
+    ropes = {"elastic": jaxhoist.ElasticRope(), "inextensible": jaxhoist.InextensibleRope()}
+    return jaxhoist.RigidGround(rope=ropes[rope])
+
+
 def run() -> dict:
     out = {}
     for preset, mu, t1, rope in CASES:
         sc = jaxhoist.load_scenario(preset)
         if mu is not None:
             sc = sc.replace(**{"foundation.friction_coefficient": mu})
-        tr = simulate_rigid(sc, t1, n_save=2001, rope=rope)
+        tr = simulate_rigid(sc, t1, n_save=2001, model=_model(rope))
         key = f"{preset}_{mu}_{rope}"
         out[key + "/position"] = np.asarray(tr.position)
         out[key + "/velocity"] = np.asarray(tr.velocity)

@@ -59,6 +59,12 @@ CLOSE = 1e-6  # a run closes when max |energy residual| <= CLOSE x hoist work (t
 CLOSE_IMPACT = 2.5e-3  # ... or <= CLOSE_IMPACT x impact losses (paper-2.3 before issue 15: 0.027 J / 11 J)
 
 
+def _model(rope: str) -> jaxhoist.RigidGround:
+    """The rigid model with the rope named "elastic" (2.14) or "inextensible" (2.15)."""
+    ropes = {"elastic": jaxhoist.ElasticRope(), "inextensible": jaxhoist.InextensibleRope()}
+    return jaxhoist.RigidGround(rope=ropes[rope])
+
+
 def closes(r: dict) -> bool:
     """The energy balance of run record `r` closes to today's tolerance (see the module docstring)."""
     return r["residual_J"] <= max(CLOSE * r["hoist_work_J"], CLOSE_IMPACT * r["impact_loss_J"])
@@ -124,7 +130,7 @@ def one_run(r: dict) -> dict:
     t0 = time.perf_counter()
     out = dict(r, t1=t1)
     try:
-        tr = simulate_rigid(sc, t1, n_save=N_SAVE, rope=r["rope"])
+        tr = simulate_rigid(sc, t1, n_save=N_SAVE, model=_model(r["rope"]))
         resid = float(np.max(np.abs(np.asarray(tr.energy_residual()))))
         hoist = float(np.asarray(tr.hoist_work)[-1])
         choices = [p.choice for p in tr.phases if p.choice]

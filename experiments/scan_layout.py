@@ -44,13 +44,13 @@ def main(argv=None) -> int:
             n_save=31,
             observables=["final_position", "final_euler"],
             histories=("position",),
-            lanes=a.lanes,
-            solver=solver,
+            options=jh.SolverOptions(solver),
         )
         runs = {}
         for n_dev, chunk in ((1, None), (2, None), (4, None), (2, 2 * a.lanes)):
             t = time.perf_counter()
-            r = jh.scan(sc, {MU: mus}, a.t1, devices=jax.devices()[:n_dev], chunk_size=chunk, **kw)
+            batch = jh.BatchOptions(lanes=a.lanes, devices=jax.devices()[:n_dev], chunk_size=chunk)
+            r = jh.scan(sc, {MU: mus}, a.t1, batch=batch, **kw)
             tm = r.attrs["timings_s"]
             runs[(n_dev, chunk)] = r
             print(

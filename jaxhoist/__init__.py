@@ -14,8 +14,13 @@ from .apps.classify import ChangeClass as ChangeClass
 from .apps.classify import classify_change as classify_change
 from .apps.classify import classify_samples as classify_samples
 from .apps.identify import identify as identify
+from .apps.identify_options import FitOptions as FitOptions
+from .apps.scan import BatchOptions as BatchOptions
+from .apps.scan import Grid as Grid
+from .apps.scan import Points as Points
 from .apps.scan import ScanResult as ScanResult
 from .apps.scan import ScanStatus as ScanStatus
+from .apps.scan import Sweep as Sweep
 from .apps.scan import scan as scan
 from .io.scenario import load_scenario as load_scenario
 from .io.scenario import scenario_from_dict as scenario_from_dict
@@ -25,6 +30,8 @@ from .numerics.options import ElasticRope as ElasticRope
 from .numerics.options import InextensibleRope as InextensibleRope
 from .numerics.options import RigidGround as RigidGround
 from .numerics.options import SolverOptions as SolverOptions
+from .numerics.rigid_compliant import ChatterRule as ChatterRule
+from .numerics.rigid_options import RigidOptions as RigidOptions
 from .numerics.rigid_solve import RigidContactError as RigidContactError
 from .numerics.rigid_solve import RigidTrajectory as RigidTrajectory
 from .numerics.rigid_solve import simulate_rigid as simulate_rigid

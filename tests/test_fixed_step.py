@@ -86,11 +86,9 @@ def test_scan_sensitivities_match_differences_of_the_same_steps(sc):
         T1,
         observables=["final_x"],
         n_save=2,
-        solver=diffrax.Bosh3(),
-        dt0=DT,
-        fixed_step=True,
+        options=jh.SolverOptions(diffrax.Bosh3(), diffrax.ConstantStepSize(), dt0=DT),
         derivatives=True,
-        lanes=4,
+        batch=jh.BatchOptions(lanes=4),
     )
     assert np.all(res.ok) and np.all(res.num_accepted_steps == round(T1 / DT))
     x, dx = res["final_x"], res["d_final_x"][:, 0]
@@ -101,4 +99,9 @@ def test_scan_sensitivities_match_differences_of_the_same_steps(sc):
 
 def test_too_many_steps_refused_before_compiling(sc):
     with pytest.raises(jh.ScenarioError, match="max_steps"):
-        scan(sc, {MU: [0.3]}, T1, solver=diffrax.Bosh3(), dt0=DT, fixed_step=True, max_steps=100)
+        scan(
+            sc,
+            {MU: [0.3]},
+            T1,
+            options=jh.SolverOptions(diffrax.Bosh3(), diffrax.ConstantStepSize(), dt0=DT, max_steps=100),
+        )

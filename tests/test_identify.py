@@ -8,6 +8,7 @@ differentiable, see docs/identification.md). The tests change data values only, 
 import json
 import math
 
+import diffrax
 import jax
 
 jax.config.update("jax_enable_x64", True)
@@ -54,7 +55,12 @@ def _noisy(clean, seed):
 
 def test_mu_recovered_noise_free(scenario, clean):
     res = identify(
-        scenario, clean, ["mu"], start={"mu": 0.3}, noise={"position": SIGMA}, lm_rtol=1e-10, lm_atol=1e-10
+        scenario,
+        clean,
+        ["mu"],
+        start={"mu": 0.3},
+        noise={"position": SIGMA},
+        fit=jh.FitOptions(lm_rtol=1e-10, lm_atol=1e-10),
     )
     assert res.converged
     assert res.solve_status == jh.SolveStatus.OK
@@ -374,3 +380,40 @@ def test_plot_fit_shows_angles_in_degrees():
     np.testing.assert_allclose(axes[0].lines[0].get_ydata(), np.degrees(0.1 * t))
     np.testing.assert_allclose(axes[1].lines[1].get_ydata(), np.degrees(0.2 + 1e-3))
     np.testing.assert_allclose(axes[2].lines[0].get_ydata(), 1.0 + t)
+
+
+def test_earlier_keywords_warn_and_give_the_same_fit(scenario, clean):
+    """Issue 11: `rtol`, `atol`, `max_steps` moved into `options`, the fit settings into `FitOptions`; the
+    earlier keywords still work, with one `DeprecationWarning` at the caller's line, and give the same fit
+    bit for bit (the same compiled core)."""
+    kw = dict(start={"mu": 0.3}, noise={"position": SIGMA})
+    new = identify(
+        scenario,
+        clean,
+        ["mu"],
+        options=jh.SolverOptions(diffrax.Tsit5(), rtol=1e-6),  # the default: the compiled core is shared
+        fit=jh.FitOptions(lm_rtol=1e-10, lm_atol=1e-10, condition_limit=1e10),
+        **kw,
+    )
+    with pytest.warns(DeprecationWarning, match=r"lm_rtol -> fit=FitOptions\(lm_rtol=...\)") as rec:
+        old = identify(
+            scenario, clean, ["mu"], rtol=1e-6, lm_rtol=1e-10, lm_atol=1e-10, condition_limit=1e10, **kw
+        )
+    assert len(rec) == 1 and rec[0].filename == __file__
+    assert "rtol -> options=SolverOptions(diffrax.Tsit5(), rtol=...)" in str(rec[0].message)
+    np.testing.assert_array_equal(old.values, new.values)
+    np.testing.assert_array_equal(old.std_errors, new.std_errors)
+    assert old.cost == new.cost and old.iterations == new.iterations
+
+
+def test_fit_and_solver_options_checked_before_compiling(scenario, clean, no_compile):
+    with pytest.raises(jh.ScenarioError, match="n_starts must be >= 1, got 0"):
+        jh.FitOptions(n_starts=0)
+    with pytest.raises(jh.ScenarioError, match="lm_atol must be a positive number"):
+        jh.FitOptions(lm_atol=-1.0)
+    with pytest.raises(jh.ScenarioError, match="Rosenbrock-W solver"):
+        identify(scenario, clean, ["mu"], options=jh.SolverOptions())
+    with pytest.raises(jh.ScenarioError, match="either fit or n_starts"):
+        identify(scenario, clean, ["mu"], fit=jh.FitOptions(), n_starts=2)
+    with pytest.raises(TypeError, match="unexpected keyword argument.*n_start"):
+        identify(scenario, clean, ["mu"], n_start=2)

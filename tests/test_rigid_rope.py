@@ -19,6 +19,8 @@ from jaxhoist.numerics.rigid_solve import simulate_rigid
 
 N_SAVE = 61
 T1 = 1.5
+#: The rigid model with the inextensible rope (2.15).
+INEXTENSIBLE = jh.RigidGround(rope=jh.InextensibleRope())
 M, M0, G = 1000.0, 10.0, 9.81  # load and boom-tip masses [kg], gravity [m/s²]
 K_Z, C_Z = 1e6, 2e3  # boom stiffness [N/m] and damping [N s/m] in Z (X, Y: 1e9 N/m, rigid)
 V = 0.1  # hoist speed [m/s]
@@ -58,7 +60,7 @@ def _hand_tension(sc: jh.Scenario):
 @pytest.fixture(scope="module")
 def ramped_lift():
     sc = _scenario()
-    return sc, simulate_rigid(sc, T1, n_save=N_SAVE, rope="inextensible")
+    return sc, simulate_rigid(sc, T1, n_save=N_SAVE, model=INEXTENSIBLE)
 
 
 def test_inextensible_lift_off_matches_the_hand_derivation(ramped_lift):
@@ -122,7 +124,7 @@ def jerk_runs():
         ("settle", _scenario(ramp=0.0)),
         ("slack", _scenario(ramp=0.0, speed=V_JERK, slack=0.005)),
     ]:
-        runs[key] = simulate_rigid(sc, T1, n_save=N_SAVE, rope="inextensible")
+        runs[key] = simulate_rigid(sc, T1, n_save=N_SAVE, model=INEXTENSIBLE)
     return runs
 
 
@@ -253,7 +255,7 @@ def test_no_phase_shorter_than_a_microsecond():
         name="rigid-test",
         t1=T1,
     )
-    tr = simulate_rigid(sc, T1, n_save=N_SAVE, rope="inextensible")
+    tr = simulate_rigid(sc, T1, n_save=N_SAVE, model=INEXTENSIBLE)
     ph = tr.phases
     assert min(p.t_end - p.t_start for p in ph) >= 1e-6
     lift = [k for k, p in enumerate(ph) if p.rest and "rest:tip" in p.end]

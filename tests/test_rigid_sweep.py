@@ -98,7 +98,7 @@ def test_chatter_rule_detects_dense_non_decaying_impacts_only():
     assert rule.detect_switching([0.1 * k for k in range(60)], 5.9) == ""  # spread over 6 s
     # Bad settings: one clear line naming the field.
     with pytest.raises(jh.ScenarioError, match="ChatterRule.stiffness"):
-        simulate_rigid(jh.load_scenario("paper-2.3"), 0.1, chatter=ChatterRule(stiffness=-1.0))
+        jh.RigidOptions(chatter=ChatterRule(stiffness=-1.0))
 
 
 def test_compliant_phase_passes_a_rocking_train_and_hands_back_at_rest():
@@ -121,7 +121,7 @@ def test_compliant_phase_passes_a_rocking_train_and_hands_back_at_rest():
         t1=1.5,
     )
     rule = ChatterRule(window=1.0, min_impacts=1, decay=0.0)
-    tr = simulate_rigid(sc, 1.5, n_save=61, chatter=rule)
+    tr = simulate_rigid(sc, 1.5, n_save=61, options=jh.RigidOptions(chatter=rule))
     ph = tr.phases
     comp = [k for k, p in enumerate(ph) if p.choice.startswith("compliant phase")]
     assert len(comp) == 1, tr.phase_log()

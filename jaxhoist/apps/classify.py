@@ -37,6 +37,8 @@ from typing import Any
 import numpy as np
 
 from .._errors import ScenarioError
+from ..numerics.options import SolverOptions
+from .scan_layout import BatchOptions
 
 FINAL_STATE = ("final_x", "final_y", "final_phi", "final_theta", "final_psi")
 EVENT_TIMES = ("liftoff_time", "last_contact_time")
@@ -310,6 +312,8 @@ def classify_change(
     n_window: int = 41,
     t1: float | None = None,
     n_save: int = 2501,
+    options: SolverOptions | None = None,
+    batch: BatchOptions | None = None,
     **scan_kw,
 ) -> ChangeClass:
     """Classify a located change by solving around it.
@@ -321,12 +325,16 @@ def classify_change(
     - `half_window`: the window p* ± `half_window` sampled with `n_window` uniform points besides the two
       bracket ends (points inside the bracket are dropped; default: 100 bracket widths, at least 1 % of
       |p*|).
-    - `t1`, `n_save` and further keyword arguments (`solver`, `rtol`, ...) go to `scan`; save every ~10 ms
-      (the default 2501 over 25 s) so event times and counts are read reliably.
+    - `t1` [s], `n_save`, `options` (`SolverOptions`), `batch` (`BatchOptions`; the members are always
+      solved in the order given) and further keyword arguments go to `scan`; save every ~10 ms (the
+      default 2501 over 25 s) so event times and counts are read reliably. The earlier solver and layout
+      keywords (`solver`, `rtol`, `atol`, `dt0`, `max_steps`, `fixed_step`, `lanes`, ...) still work, with
+      a `DeprecationWarning`.
 
     **Returns** a `ChangeClass` (`classify_samples` on the solves).
     """
-    from ..numerics.scan import scan
+    from .scan import Sweep, scan
+    from .scan_layout import LEGACY_KW, convert_legacy
 
     if change is not None:
         param = change.param if param is None else param
@@ -342,7 +350,20 @@ def classify_change(
         half_window = max(100 * (hi - lo), 0.01 * abs(mid), 1e-6)
     xs = np.linspace(mid - half_window, mid + half_window, n_window)
     xs = np.unique(np.concatenate([xs[(xs < lo) | (xs > hi)], [lo, hi]]))  # the bracket's ends are neighbours
-    res = scan(scenario, {param: xs}, t1, n_save=n_save, observables=list(OBSERVABLES), sort=False, **scan_kw)
+    legacy = {k: scan_kw.pop(k) for k in list(scan_kw) if k in LEGACY_KW}
+    derivatives = bool(scan_kw.get("derivatives", False))
+    _, options, batch = convert_legacy("classify_change", legacy, options, batch, derivatives)
+    batch = dataclasses.replace(BatchOptions() if batch is None else batch, sort=False)
+    res = scan(
+        scenario,
+        Sweep(param, xs),
+        t1,
+        n_save=n_save,
+        observables=list(OBSERVABLES),
+        options=options,
+        batch=batch,
+        **scan_kw,
+    )
     if not np.all(res.ok):
         raise ScenarioError(f"classify_change: solves failed: {res.failures()[:2]}")
     samples = {k: np.asarray(res[k]) for k in OBSERVABLES}

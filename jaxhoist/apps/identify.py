@@ -2,7 +2,7 @@
 
     import jaxhoist as jh
     from jaxhoist.apps.identify import identify
-    res = identify("paper-4.2", "lift.csv", ["mu", "k", "rope.stiffness"])
+    res = identify("paper-4.2", "lift.csv", ["mu", "k", "rope.stiffness"], fit=jh.FitOptions(n_starts=3))
     print(res.summary())          # estimates, standard errors, correlations, identifiability
     res.estimates["foundation.friction_coefficient"]
 
@@ -54,6 +54,7 @@ from ..numerics.solve import simulate
 from ..physics.params import Scenario
 from ..physics.paths import param_unit
 from .identify_core import _REPORTER, _compiled_core, _Config, _FitReporter, _model
+from .identify_options import FitOptions, convert_legacy, fit_solver_options
 from .identify_params import ALIASES as ALIASES
 from .identify_params import SYMBOLS as SYMBOLS
 from .identify_params import _build_params as _build_params
@@ -97,10 +98,8 @@ def _setup(
     start=None,
     bounds=None,
     t1=None,
-    rtol=None,
-    atol=None,
-    max_steps=200_000,
-    max_iterations=100,
+    options: SolverOptions,
+    max_iterations: int = 100,
 ) -> _Problem:
     """Check every input on the host and build the static structure and the arrays of the problem."""
     if isinstance(scenario, str | Path):
@@ -122,11 +121,6 @@ def _setup(
     measurement.check_span(t1)
     plist, theta0 = _build_params(scenario, params, start or {}, bounds or {})
     sig, noise_known, warnings = _sigmas(measurement, noise, weights)
-    if int(max_iterations) < 1:
-        raise ScenarioError(f"max_iterations must be >= 1, got {max_iterations}")
-    # Tsit5: the fit integrates the state with its parameter tangents as one augmented system (below), which
-    # the Rosenbrock-W solver's structured linearisation does not cover.
-    options = SolverOptions(diffrax.Tsit5(), rtol=rtol, atol=atol, max_steps=max_steps, adjoint="forward")
     names = measurement.names
     n_res = len(names) * measurement.t.size
     if n_res <= theta0.size:
@@ -155,16 +149,22 @@ def _model_jit(cfg: _Config, z, args):
     return _model(cfg, z, args)
 
 
-def residual_function(scenario, measurement, params, **kwargs):
+_DATA_KW = ("signals", "noise", "weights", "start", "bounds", "t1")
+
+
+def residual_function(scenario, measurement, params, *, options: SolverOptions | None = None, **kwargs):
     """The whitened residual vector of `identify`'s problem as a plain numpy function of θ (flat, in the
     order of `IdentificationResult.names`), for comparisons with other optimisers (e.g. scipy with finite
-    differences). Takes the same keyword arguments as `identify` (signals, noise, weights, start, bounds, t1,
-    rtol, atol, max_steps). A failed solve gives non-finite residuals.
+    differences). Takes `identify`'s `signals`, `noise`, `weights`, `start`, `bounds`, `t1` and `options`
+    (the earlier `rtol`, `atol`, `max_steps` still work, with a `DeprecationWarning`). A failed solve gives
+    non-finite residuals.
 
     **Returns** `(fn, theta0)`: `fn(theta) -> r` (n_residuals,) and the start θ0.
     """
     require_x64()
-    prob = _setup(scenario, measurement, params, **kwargs)
+    data_kw = {k: kwargs.pop(k) for k in _DATA_KW if k in kwargs}
+    options, _ = convert_legacy("residual_function", kwargs, options, None, allow_fit=False)
+    prob = _setup(scenario, measurement, params, options=fit_solver_options(options), **data_kw)
     reverse = prob.cfg.options.replace(adjoint=diffrax.RecursiveCheckpointAdjoint())
     cfg = dataclasses.replace(prob.cfg, options=reverse)
 
@@ -187,19 +187,11 @@ def identify(
     weights: Mapping[str, float] | None = None,
     start: Mapping[str, Any] | None = None,
     bounds: Mapping[str, tuple[float, float]] | None = None,
-    n_starts: int = 1,
-    start_spread: float = 0.3,
-    seed: int = 0,
     t1: float | None = None,
-    rtol: float | None = None,
-    atol: float | None = None,
-    max_steps: int = 200_000,
-    lm_rtol: float = 1e-4,
-    lm_atol: float = 1e-6,
-    max_iterations: int = 100,
-    max_relative_se: float = 0.5,
-    condition_limit: float = 1e12,
+    options: SolverOptions | None = None,
+    fit: FitOptions | None = None,
     progress: Callable[[dict], None] | None = None,
+    **deprecated,
 ) -> IdentificationResult:
     """Fit scenario leaves to measured time series by weighted nonlinear least squares.
 
@@ -214,18 +206,16 @@ def identify(
     - `weights`: signal or group -> residual weight [1/unit] for signals without a known noise level.
       Signals with neither are scaled by their spread. Unless every fitted signal has a noise level, the
       covariance uses the residual variance estimate RSS/(n - p).
-    - `start`: parameter -> start value (default: the scenario's value). `bounds`: parameter -> (low, high);
-      bounded parameters are fitted through a scaled logit; positive leaves (stiffness, damping, μ, mass,
-      ...) through a log; `load.mass_centre` is bounded by the box by default.
-    - `n_starts`, `start_spread`, `seed`: extra starts drawn around `start` (relative spread: θ·(1+s)^U(-1,1)
-      for positive leaves); the lowest cost wins, all are reported in `result.starts`.
+    - `start`: parameter -> start value [SI unit of the leaf] (default: the scenario's value). `bounds`:
+      parameter -> (low, high) [SI]; bounded parameters are fitted through a scaled logit; positive leaves
+      (stiffness, damping, μ, mass, ...) through a log; `load.mass_centre` is bounded by the box by default.
     - `t1`: end of the simulated span [s] (default `scenario.t1`); every sample time must lie in [0, t1].
       The solver runs only to the last sample time.
-    - `rtol`, `atol`, `max_steps`: ODE solver settings (see `SolverOptions`).
-    - `lm_rtol`, `lm_atol`, `max_iterations`: Levenberg-Marquardt termination (Cauchy test on the fit
-      variables z and the whitened residuals) and step budget.
-    - `max_relative_se`, `condition_limit`: identifiability thresholds (relative standard error; condition
-      number of JᵀJ in relative units).
+    - `options`: `SolverOptions` of the simulations (tolerances, step budget); default
+      `SolverOptions(diffrax.Tsit5())` (rtol 1e-6, atol 1e-8). Forward mode is always used; the
+      Rosenbrock-W solver is refused (the state is integrated with its sensitivities as one system).
+    - `fit`: `FitOptions` (extra random starts, Levenberg-Marquardt termination and step budget,
+      identifiability thresholds); default `FitOptions()`.
     - `progress`: called on the host (through `jax.debug.callback` from the compiled fit) after every
       Levenberg-Marquardt evaluation, accepted or rejected, with a dict: `start` (0-based) and `n_starts`,
       `iteration` (1, 2, ... within the start), `cost` (0.5 Σ r² of the whitened residuals there),
@@ -233,6 +223,10 @@ def identify(
       such steps), `step` (|Δz| from the best point so far, in the fit variables z: log θ for positive
       leaves), `solve_ok`, `solver_steps` (of that simulation) and `elapsed` [s] since the call. Default
       None: silent.
+    - `**deprecated`: the earlier keywords `rtol`, `atol`, `max_steps` (now `options`) and `n_starts`,
+      `start_spread`, `seed`, `lm_rtol`, `lm_atol`, `max_iterations`, `max_relative_se`,
+      `condition_limit` (now `fit`) still work, converted to the same objects, with a
+      `DeprecationWarning`.
 
     **Returns** an `IdentificationResult` (`summary()` prints a table).
 
@@ -241,6 +235,10 @@ def identify(
     """
     require_x64()
     wall0 = time.perf_counter()
+    options, fit = convert_legacy("identify", deprecated, options, fit)
+    fit = FitOptions() if fit is None else fit
+    if not isinstance(fit, FitOptions):
+        raise ScenarioError(f"fit must be a jaxhoist.FitOptions, got {type(fit).__name__}")
     # ---- host side: every input is checked before anything is compiled
     prob = _setup(
         scenario,
@@ -252,24 +250,17 @@ def identify(
         start=start,
         bounds=bounds,
         t1=t1,
-        rtol=rtol,
-        atol=atol,
-        max_steps=max_steps,
-        max_iterations=max_iterations,
+        options=fit_solver_options(options),
+        max_iterations=fit.max_iterations,
     )
-    if int(n_starts) < 1:
-        raise ScenarioError(f"n_starts must be >= 1, got {n_starts}")
-    if not (np.isfinite(start_spread) and start_spread >= 0):
-        raise ScenarioError(f"start_spread must be >= 0, got {start_spread}")
-    for nm, v in (("lm_rtol", lm_rtol), ("lm_atol", lm_atol)):
-        if not (np.isfinite(v) and v > 0):
-            raise ScenarioError(f"{nm} must be a positive number, got {v}")
     scenario, plist, theta0, cfg, args = prob.scenario, prob.params, prob.theta0, prob.cfg, prob.args
     # Each start is checked as a scenario before compiling (e.g. a mass centre outside the box).
-    starts = [theta0] + _random_starts(plist, theta0, int(n_starts) - 1, float(start_spread), int(seed))
+    starts = [theta0] + _random_starts(
+        plist, theta0, int(fit.n_starts) - 1, float(fit.start_spread), int(fit.seed)
+    )
     for th in starts:
         apply_params(scenario, _unflatten(plist, th)).check()
-    lm_tol = jnp.asarray([lm_rtol, lm_atol], dtype=jnp.float64)
+    lm_tol = jnp.asarray([fit.lm_rtol, fit.lm_atol], dtype=jnp.float64)
 
     # ---- the compiled core, once per start
     c0 = time.perf_counter()
@@ -287,8 +278,8 @@ def identify(
         runs,
         outs[best],
         best,
-        max_relative_se=max_relative_se,
-        condition_limit=condition_limit,
+        max_relative_se=fit.max_relative_se,
+        condition_limit=fit.condition_limit,
         timings=(wall0, compile_time),
     )
 
@@ -433,17 +424,24 @@ def synthetic_measurement(
     *,
     noise: Mapping[str, Any] | None = None,
     seed: int = 0,
-    rtol: float | None = None,
-    atol: float | None = None,
-    max_steps: int = 200_000,
+    options: SolverOptions | None = None,
     source: str = "synthetic",
+    **deprecated,
 ) -> Measurement:
     """Simulate `scenario`, sample `signals` (names or groups) at times `t` [s] and add Gaussian noise.
 
     - `noise`: signal or group -> standard deviation [SI unit] or "x%" of the true signal's RMS value;
       signals not named are noise-free. The noise levels are stored in the returned `Measurement`.
+    - `seed`: of `numpy.random.default_rng`; `source`: a label stored in the `Measurement`.
+    - `options`: `SolverOptions` of the simulation; default `SolverOptions(diffrax.Tsit5())`, the solver
+      of `identify`'s model, so that a fit to noise-free data recovers the parameters to the solver's
+      accuracy. The earlier `rtol`, `atol`, `max_steps` still work, with a `DeprecationWarning`.
     """
     require_x64()
+    options, _ = convert_legacy(
+        "synthetic_measurement", deprecated, options, None, allow_fit=False, forward=False
+    )
+    options = SolverOptions(diffrax.Tsit5()) if options is None else options
     t = np.asarray(t, dtype=np.float64)
     names: list[str] = []
     check_signal_names(signals, "synthetic_measurement: signals", groups=True)
@@ -452,11 +450,7 @@ def synthetic_measurement(
     Measurement(t, {n: np.zeros_like(t) for n in names})  # validates the times
     drop = bool(t[0] > 0)
     ts = np.concatenate([[0.0], t]) if drop else t
-    # the solver identify's model uses (Tsit5, its default tolerances), so a fit to noise-free data recovers
-    # the parameters to the solver's accuracy
-    traj = simulate(
-        scenario, ts=jnp.asarray(ts), solver=diffrax.Tsit5(), rtol=rtol, atol=atol, max_steps=max_steps
-    )
+    traj = simulate(scenario, ts=jnp.asarray(ts), options=options)
     clean = {}
     for n in names:
         spec = SIGNALS[n]

@@ -8,6 +8,7 @@ import json
 import sys
 from pathlib import Path
 
+import diffrax
 import jax
 import numpy as np
 
@@ -16,7 +17,9 @@ from ..io.measurement import (
     read_measurement,
 )
 from ..io.scenario import apply_overrides, load_scenario
+from ..numerics.options import SolverOptions
 from .identify import identify
+from .identify_options import FitOptions
 from .identify_params import ALIASES
 from .identify_result import plot_fit
 
@@ -138,11 +141,9 @@ def run(args: argparse.Namespace) -> int:
             signals=signals,
             noise=noise or None,
             start=start,
-            n_starts=args.starts,
             t1=args.t1,
-            rtol=args.rtol,
-            atol=args.atol,
-            max_iterations=args.max_iterations,
+            options=SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol),
+            fit=FitOptions(n_starts=args.starts, max_iterations=args.max_iterations),
             progress=bar,
         )
     finally:

@@ -3,7 +3,7 @@ sharded computation per chunk, with per-member status, resumable chunk files and
 
     import jaxhoist as jh
     sc = jh.load_scenario("paper-4.2")
-    res = jh.scan(sc, {"foundation.friction_coefficient": np.linspace(0.1, 0.6, 4000)}, 25.0,
+    res = jh.scan(sc, jh.Sweep("foundation.friction_coefficient", np.linspace(0.1, 0.6, 4000)), 25.0,
                   observables=["final_psi", "liftoff_time"], out_dir="out/mu-scan", progress=True)
     res["final_psi"], res.status, res.coords["foundation.friction_coefficient"]
 
@@ -28,9 +28,10 @@ How the work is laid out (and why results do not depend on the chunk size or the
   k mod process_count = process_index on its own local devices and writes them to `out_dir`, which must
   be a folder all processes share; then each reads the others' chunks and assembles the same result
   (process 0 writes `scan.npz`). No collective communication is needed.
-- with `fixed_step=True` every member takes the same constant steps (`numerics.fixed_step`, a lean
-  Runge-Kutta loop for diffrax's explicit tableaus): nothing waits in lock step, so groups can be wide
-  (hundreds of lanes), which spreads the fixed cost of each loop iteration over many members.
+- with constant steps (`SolverOptions(solver, diffrax.ConstantStepSize(), dt0=...)`) every member takes
+  the same steps (`numerics.fixed_step`, a lean Runge-Kutta loop for diffrax's explicit tableaus): nothing
+  waits in lock step, so groups can be wide (hundreds of lanes), which spreads the fixed cost of each loop
+  iteration over many members.
 
 (`lanes` is a numerical setting, like the tolerances: XLA may round differently in a vmap of another
 width, so changing it can move results by about the solver tolerance.)
@@ -50,7 +51,6 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
-import diffrax
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -67,89 +67,79 @@ from ..numerics.batch import (
     chunk_fn,
     describe_devices,
     flatten_out,
-    hist_shape,
 )
 from ..numerics.options import SolverOptions
 from ..numerics.solve import saved_times
 from ..physics.params import Scenario
 from ..physics.paths import check_path, param_unit
 from . import progress as progress_mod
-from . import sweep as sweep_mod
+from . import scan_layout as layout
 from .progress import Progress
+from .scan_layout import BatchOptions, convert_legacy, scan_solver_options
 from .scan_result import ScanResult
+from .sweep import AbstractSweep, Grid, Points, Sweep, as_sweep
 
-__all__ = ["Progress", "ScanResult", "ScanStatus", "scan"]
+__all__ = ["BatchOptions", "Grid", "Points", "Progress", "ScanResult", "ScanStatus", "Sweep", "scan"]
 
 
 def scan(
     scenario: Scenario,
-    params: Mapping[str, Any],
+    sweep: AbstractSweep | Mapping[str, Any] | None = None,
     t1: float | None = None,
     *,
-    mode: str | None = None,
     observables=None,
-    histories: Sequence[str] = (),
+    options: SolverOptions | None = None,
     ts=None,
     n_save: int = 201,
-    solver: diffrax.AbstractSolver | None = None,
-    rtol: float | None = None,
-    atol: float | None = None,
-    dt0: float | None = None,
-    max_steps: int = 200_000,
-    fixed_step: bool = False,
-    lanes: int | None = None,
-    chunk_size: int | None = None,
-    max_memory: float = 1e9,
-    devices: Sequence | None = None,
-    sort: bool = True,
+    histories: Sequence[str] = (),
     derivatives: bool = False,
+    batch: BatchOptions | None = None,
     out_dir: str | Path | None = None,
     resume: bool = True,
     progress: bool | Callable[[Progress], None] | None = None,
-    wait_timeout: float = 24 * 3600.0,
+    **deprecated,
 ) -> ScanResult:
     """Solve `scenario` for many values of some of its float leaves and evaluate observables of each solve.
 
     **Arguments**
     - `scenario`: the base `Scenario`.
-    - `params`: parameter path -> values. A path is a dotted field name, with `[i]` for one component of a
-      vector leaf: `"foundation.friction_coefficient"`, `"hoist.speed"`, `"load.mass_centre[0]"`. Values are
+    - `sweep`: the members: `Sweep(path, values)` (one parameter), `Grid({path: values, ...})` (every
+      combination: one data axis per parameter) or `Points({path: values, ...})` (equally long lists
+      zipped together: one data axis); a plain mapping `{path: values}` is a `Sweep` for one parameter and
+      a `Grid` for several. A path is a dotted field name, with `[i]` for one component of a vector leaf:
+      `"foundation.friction_coefficient"`, `"hoist.speed"`, `"load.mass_centre[0]"`. Values are
       array-like or a string `"start:stop:num"` / `"v1,v2,..."`; units are those of the field (SI).
     - `t1`: end time [s] (default `scenario.t1`); `ts`: saved times [s] starting at 0 (default `n_save`
       equally spaced times; observables such as event times are interpolated on this grid).
-    - `mode`: "sweep" (one parameter, the default), "grid" (every combination: one data axis per
-      parameter) or "points" (equally long lists zipped together: one data axis).
     - `observables`: names of built-in observables (`jaxhoist.numerics.observables`), callables
       `fn(traj[, scenario])`, `Observable`s, or a dict name -> any of these.
+    - `options`: `SolverOptions` (solver, step-size controller, dt0, step budget: one for every member);
+      default `SolverOptions()` (Rosenbrock-W), or `SolverOptions(diffrax.Tsit5())` with `derivatives`.
+      Constant steps (`SolverOptions(solver, diffrax.ConstantStepSize(), dt0=...)`) with an explicit
+      Runge-Kutta solver (e.g. `diffrax.Bosh3()`) run the lean loop of `numerics.fixed_step` (same numbers
+      as diffrax's `ConstantStepSize` to round-off when the saved times are multiples of `dt0`; other
+      solvers use diffrax's); every member takes the same steps. Check the accuracy against an adaptive
+      solve (`experiments/benchmark_scan.py` does; see docs/performance.md).
     - `histories`: `Trajectory` fields to keep at every saved time, e.g. `("position", "euler")`.
-    - `solver`, `rtol`, `atol`, `dt0`, `max_steps`: as in `simulate` (one budget for every member).
-    - `fixed_step`: constant steps of at most `dt0` (no error control) with an explicit Runge-Kutta
-      `solver` (e.g. `diffrax.Bosh3()`), integrated by the lean loop of `numerics.fixed_step` (same numbers
-      as diffrax's `ConstantStepSize` to round-off when the saved times are multiples of `dt0`); other
-      solvers fall back to diffrax's `ConstantStepSize`. Every member takes the same steps. Check the
-      accuracy against an adaptive solve (`experiments/benchmark_scan.py` does; see docs/performance.md).
-    - `lanes`: members solved together in one vmapped, lock-step solve (a numerical setting: results
-      are independent of the chunk size and devices, not of `lanes`); capped at the number of members.
-      Default 16 (adaptive steps: lock-step waste grows with the width) or 256 with `fixed_step`.
-    - `chunk_size`: members per compiled call (rounded up to whole groups on every device); default: up
-      to 8 groups per device, fewer if the saved histories would exceed `max_memory` bytes.
-    - `devices`: the JAX devices of this process to shard over (default all of `jax.local_devices()`).
-    - Several processes: after `jax.distributed.initialize(...)` on every host, call `scan` with the same
-      arguments in each process and an `out_dir` on a shared file system; the chunks are shared out
-      between the processes, and every process returns the whole result. `wait_timeout` [s] bounds how
-      long a process waits for another's chunk file.
-    - `sort`: solve members in order of their parameter values (cuts lock-step waste; no effect on results
-      beyond the grouping).
     - `derivatives`: also compute forward-mode sensitivities of every observable with respect to the swept
       parameters (`jax.jacfwd`, through `diffrax.ForwardMode` or the fixed-step loop), stored as `d_<name>`
-      with a last axis over the parameters. The default solver is then `diffrax.Tsit5()` (rtol 1e-6):
-      through the Rosenbrock-W solver sensitivities are not reliable yet at high friction. Cost for one
-      parameter, measured in `experiments/benchmark_scan.py`: 1.3-2x a plain scan with adaptive steps,
-      3.1-3.8x with fixed steps (docs/performance.md).
+      with a last axis over the parameters [unit of the observable per unit of the parameter]. Through the
+      Rosenbrock-W solver sensitivities are not reliable yet at high friction, hence the Tsit5 default.
+      Cost for one parameter, measured in `experiments/benchmark_scan.py`: 1.3-2x a plain scan with
+      adaptive steps, 3.1-3.8x with fixed steps (docs/performance.md).
+    - `batch`: `BatchOptions` (lanes, chunk size, memory cap [B], devices, sort order, wait for other
+      processes [s]); default `BatchOptions()`.
     - `out_dir`: write each finished chunk there (`chunk_#####.npz` + `manifest.json`) and the final
       `scan.npz` + `scan.json` and the same dataset as netCDF, `scan.nc`; with `resume=True` an
       interrupted scan continues from the chunks on disk.
+    - Several processes: after `jax.distributed.initialize(...)` on every host, call `scan` with the same
+      arguments in each process and an `out_dir` on a shared file system; the chunks are shared out
+      between the processes, and every process returns the whole result.
     - `progress`: True to print a line per chunk on stderr, or a callable receiving a `Progress`.
+    - `**deprecated`: the earlier keywords `params` (now `sweep`), `mode` (now the sweep's type), `solver`,
+      `rtol`, `atol`, `dt0`, `max_steps`, `fixed_step` (now `options`) and `lanes`, `chunk_size`,
+      `max_memory`, `devices`, `sort`, `wait_timeout` (now `batch`) still work, converted to the same
+      objects (the same results bit for bit), with a `DeprecationWarning`.
 
     **Returns** a `ScanResult`.
 
@@ -157,24 +147,64 @@ def scan(
     invalid value is marked `INVALID_PARAMETER` instead, unless every member is invalid.
     """
     require_x64()
+    renamed = {}
+    if "params" in deprecated:
+        if sweep is not None:
+            raise TypeError("scan() got both sweep and params (its earlier name)")
+        sweep, renamed = deprecated.pop("params"), {"params": "sweep"}
+    if sweep is None:
+        raise TypeError("scan() missing the sweep: Sweep(path, values), Grid({...}) or Points({...})")
+    mode, options, batch = convert_legacy("scan", deprecated, options, batch, derivatives, renamed)
+    return _scan(
+        scenario,
+        as_sweep(sweep, mode),
+        t1,
+        observables=observables,
+        options=scan_solver_options(options, derivatives),
+        ts=ts,
+        n_save=n_save,
+        histories=histories,
+        derivatives=bool(derivatives),
+        batch=BatchOptions() if batch is None else batch,
+        out_dir=out_dir,
+        resume=resume,
+        progress=progress,
+    )
+
+
+def _scan(
+    scenario: Scenario,
+    sweep: AbstractSweep,
+    t1,
+    *,
+    observables,
+    options: SolverOptions,
+    ts,
+    n_save: int,
+    histories,
+    derivatives: bool,
+    batch: BatchOptions,
+    out_dir,
+    resume: bool,
+    progress,
+) -> ScanResult:
+    """`scan` with every choice an object (the sweep, the solver options with forward mode if
+    `derivatives`, the batch options): the entry point for the package's own callers."""
     wall0 = time.perf_counter()
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
+    if not isinstance(batch, BatchOptions):
+        raise ScenarioError(f"batch must be a jaxhoist.BatchOptions, got {type(batch).__name__}")
     scenario.check()
-    mode, coords, shape, members = sweep_mod.members(params, mode)
+    coords, shape, members = dict(sweep.values), sweep.shape, sweep.members()
     paths = tuple(coords)
     for p in paths:
         check_path(scenario, p)
     obs, histories = _observables(observables, histories)
-    options = _solver_options(solver, rtol, atol, dt0, max_steps, fixed_step, derivatives)
     t1, ts = saved_times(scenario, t1, ts, n_save)
     _check_fixed_steps(options, ts)
     ts = jnp.asarray(ts, dtype=jnp.float64)
-    if lanes is None:
-        lanes = 256 if fixed_step else 16
-    if int(lanes) < 1:
-        raise ScenarioError(f"lanes must be >= 1, got {lanes}")
-    devs = tuple(jax.local_devices() if devices is None else devices)
+    devs = tuple(jax.local_devices() if batch.devices is None else batch.devices)
     n_proc, proc = jax.process_count(), jax.process_index()
     if n_proc > 1 and out_dir is None:
         raise ScenarioError(
@@ -182,9 +212,9 @@ def scan(
             f"out_dir, a folder on a file system that all of them share"
         )
     n = members.shape[0]
-    lanes = int(min(int(lanes), 1 << max(0, math.ceil(math.log2(n)))))
-    invalid, order, solve_rows = _order(scenario, paths, members, sort)
-    chunk = _chunk_size(n, lanes, len(devs), len(ts), histories, chunk_size, max_memory)
+    lanes = batch.lanes_for(options, n)
+    invalid, order, solve_rows = layout.order(scenario, paths, members, batch.sort)
+    chunk = layout.chunk_size(n, lanes, len(devs), len(ts), histories, batch)
     spec = BatchSpec(
         paths=paths,
         observables=obs,
@@ -192,13 +222,19 @@ def scan(
         options=options,
         lanes=lanes,
         devices=devs,
-        derivatives=bool(derivatives),
+        derivatives=derivatives,
     )
-    fp = _fingerprint(scenario, spec, members, ts, sort)
+    fp = _fingerprint(scenario, spec, members, ts, batch.sort)
     store, done_chunks = None, {}
     if out_dir is not None:
-        store = ScanStore(out_dir, fp, proc=proc, n_proc=n_proc, wait_timeout=wait_timeout)
-        header = {"n_members": n, "params": list(paths), "mode": mode, "t1": float(ts[-1]), "lanes": lanes}
+        store = ScanStore(out_dir, fp, proc=proc, n_proc=n_proc, wait_timeout=batch.wait_timeout)
+        header = {
+            "n_members": n,
+            "params": list(paths),
+            "mode": sweep.mode,
+            "t1": float(ts[-1]),
+            "lanes": lanes,
+        }
         chunk, done_chunks = store.open(order, chunk, header, resume)
     run = _Run(spec, scenario, ts, solve_rows, order, chunk, store, done_chunks, wall0)
     flat, timings = run.chunks(progress_mod.resolve(progress))
@@ -208,7 +244,7 @@ def scan(
         flat,
         order,
         invalid,
-        mode=mode,
+        mode=sweep.mode,
         coords=coords,
         shape=shape,
         ts=ts,
@@ -221,7 +257,7 @@ def scan(
             "chunk_size": chunk,
             "devices": [str(d) for d in devs],
             "chunk_devices": {str(k): run.chunk_devices[k] for k in sorted(run.chunk_devices)},
-            "sorted": bool(sort),
+            "sorted": bool(batch.sort),
             "timings_s": {**timings, "total": round(time.perf_counter() - wall0, 4)},
             "fingerprint": fp,
         },
@@ -231,23 +267,6 @@ def scan(
         result.save(store.out / "scan")
         result.to_netcdf(store.out / "scan.nc")
     return result
-
-
-def _solver_options(solver, rtol, atol, dt0, max_steps, fixed_step, derivatives) -> SolverOptions:
-    """The scan's `SolverOptions`: forward-mode derivatives if asked, with Tsit5 unless a solver is given."""
-    if derivatives and solver is None:
-        # Tsit5: forward-mode sensitivities through the default Rosenbrock-W solver are not reliable yet at
-        # high friction (they grow without bound over 25 s of paper-4.2 at mu >= 0.5; docs/performance.md)
-        solver = diffrax.Tsit5()
-    return SolverOptions(
-        solver=solver,
-        rtol=rtol,
-        atol=atol,
-        dt0=dt0,
-        max_steps=max_steps,
-        adjoint="forward" if derivatives else "reverse",
-        fixed_step=bool(fixed_step),
-    )
 
 
 def _check_fixed_steps(options: SolverOptions, ts) -> None:
@@ -275,40 +294,6 @@ def _observables(observables, histories) -> tuple[tuple, tuple[str, ...]]:
                 f"history {h!r} is not a Trajectory output; choose from {sorted(HISTORY_UNITS)}"
             )
     return tuple(obs), histories
-
-
-def _order(scenario, paths, members, sort):
-    """Host-side validation and the solve order. **Returns** `(invalid {i: message}, order, rows to solve)`:
-    invalid members are marked, and solved with a valid neighbour's values."""
-    n = members.shape[0]
-    invalid = sweep_mod.validate_members(scenario, paths, members)
-    if len(invalid) == n:
-        raise ScenarioError(f"every member of the scan is invalid; the first: {invalid[0]}")
-    order = np.lexsort(members.T[::-1]) if sort else np.arange(n)
-    solve_rows = members.copy()
-    if invalid:
-        valid_sorted = [i for i in order if i not in invalid]
-        pos = {int(i): k for k, i in enumerate(order)}
-        vpos = np.array([pos[int(i)] for i in valid_sorted])
-        for i in invalid:
-            nearest = valid_sorted[int(np.argmin(np.abs(vpos - pos[i])))]
-            solve_rows[i] = members[nearest]
-    return invalid, order, solve_rows
-
-
-def _chunk_size(n, lanes, n_dev, n_t, histories, chunk_size, max_memory) -> int:
-    """Members per chunk: whole groups of `lanes` on every device (see the module docstring)."""
-    n_groups = math.ceil(n / lanes)
-    hist_bytes = 8 * n_t * sum(int(np.prod(hist_shape(h))) for h in histories)
-    if chunk_size is None:
-        per_dev = max(1, min(8, math.ceil(n_groups / n_dev)))
-        mem_groups = max(1, int(max_memory // max(1, (hist_bytes + 4096) * lanes * n_dev)))
-        per_dev = min(per_dev, mem_groups)
-    else:
-        if int(chunk_size) < 1:
-            raise ScenarioError(f"chunk_size must be >= 1, got {chunk_size}")
-        per_dev = max(1, math.ceil(int(chunk_size) / (lanes * n_dev)))
-    return per_dev * lanes * n_dev
 
 
 def _settings(spec: BatchSpec, sort: bool) -> tuple:

@@ -11,8 +11,11 @@ import numpy as np
 
 from .._errors import ScenarioError
 from ..io.validate import check_out_dir, parse_values
+from ..numerics.options import SolverOptions
 from ..numerics.rosenbrock import RosenbrockW
 from .scan import scan
+from .scan_layout import BatchOptions
+from .sweep import as_sweep
 
 _CLI_SOLVERS = {
     "rosenbrock-w": RosenbrockW,
@@ -52,7 +55,7 @@ def configure_parser(subparsers) -> None:
         "--mode",
         choices=("sweep", "grid", "points"),
         default=None,
-        help="several parameters: grid (every combination) or points (zipped)",
+        help="several parameters: grid (every combination, the default) or points (zipped)",
     )
     p.add_argument(
         "--observable",
@@ -125,22 +128,23 @@ def run_cli(args) -> int:
     scenario, _ = apply_overrides(load_scenario(args.scenario), args.set)
     params = {p: parse_values(v, "--values") for p, v in zip(args.param, args.values, strict=True)}
     out = check_out_dir(Path(args.out) if args.out else Path("out") / f"scan-{scenario.name}", "--out")
-    res = scan(
-        scenario,
-        params,
-        args.t1,
-        mode=args.mode,
-        observables=args.observable,
-        histories=args.history,
-        n_save=args.n_save,
+    options = SolverOptions(
+        _CLI_SOLVERS[args.solver](),
         rtol=args.rtol,
         atol=args.atol,
-        max_steps=args.max_steps,
-        solver=_CLI_SOLVERS[args.solver](),
         dt0=args.fixed_step,
+        max_steps=args.max_steps,
         fixed_step=args.fixed_step is not None,
-        lanes=args.lanes,
-        chunk_size=args.chunk_size,
+    )
+    res = scan(
+        scenario,
+        as_sweep(params, args.mode),
+        args.t1,
+        observables=args.observable,
+        options=options,
+        histories=args.history,
+        n_save=args.n_save,
+        batch=BatchOptions(lanes=args.lanes, chunk_size=args.chunk_size),
         out_dir=out,
         resume=not args.no_resume,
         progress=not args.quiet,

@@ -132,6 +132,8 @@ def run_simulate(args: argparse.Namespace) -> int:
     )
 
     if args.model == "rigid":
+        from ..numerics.options import as_model
+        from ..numerics.rigid_options import RigidOptions
         from ..numerics.rigid_solve import simulate_rigid
 
         label = "solving with the rigid-ground model (each phase compiles on first use)"
@@ -153,10 +155,12 @@ def run_simulate(args: argparse.Namespace) -> int:
                     scenario,
                     t1,
                     ts=np.asarray(ts),
-                    rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
-                    atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
-                    max_steps=args.max_steps,
-                    rope=args.rope,
+                    model=as_model("rigid", args.rope),  # pyright: ignore[reportArgumentType]  # "rigid": a RigidGround
+                    options=RigidOptions(
+                        rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
+                        atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
+                        max_steps=args.max_steps,
+                    ),
                     verbose=not args.quiet,  # the phase log, one line per phase: drives the bar
                 )
             bar.n = bar.total  # the phase ending at t1 is not logged

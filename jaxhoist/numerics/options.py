@@ -207,9 +207,20 @@ class RigidGround(AbstractModel):
     flight, impacts); solved by the host-side phase driver `simulate_rigid` (not differentiable).
 
     - `rope`: `ElasticRope()` (2.14, default) or `InextensibleRope()` (2.15).
+    - `restitution`: Newton's coefficient e [-] of corner impacts, in [0, 1] (0, the default: plastic).
+
+    **Raises** `ScenarioError` for a restitution outside [0, 1].
     """
 
     rope: AbstractRope = ElasticRope()
+    restitution: float = 0.0
+
+    def __check_init__(self):
+        if not isinstance(self.rope, AbstractRope):
+            raise ScenarioError(f"rope must be ElasticRope() or InextensibleRope(), got {self.rope!r}")
+        e = float(self.restitution)
+        if not (0.0 <= e <= 1.0):
+            raise ScenarioError(f"restitution (e) must be in [0, 1], got {self.restitution}")
 
 
 def as_model(model, rope=None) -> AbstractModel:
@@ -235,7 +246,7 @@ def as_model(model, rope=None) -> AbstractModel:
         raise ScenarioError(f"model must be ElasticFoundation() or RigidGround(...), got {model!r}")
     if rope is not None:
         if isinstance(model, RigidGround):
-            model = RigidGround(rope=rope)
+            model = RigidGround(rope=rope, restitution=model.restitution)
         elif not isinstance(rope, ElasticRope):
             raise ScenarioError(
                 f"rope={rope.name!r} is available with model='rigid' only (the elastic-foundation model of "

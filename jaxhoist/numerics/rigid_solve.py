@@ -50,6 +50,7 @@ from ..physics import rigid
 from ..physics.elastic import Constants, State
 from ..physics.params import Scenario
 from ..physics.rigid import FREE, SLIDE, STICK, Phase
+from .options import InextensibleRope, RigidGround
 from .rigid_compiled import (
     OUTPUT_CHUNK,
     _chunked_outputs,
@@ -64,6 +65,7 @@ from .rigid_compliant import ChatterRule, compliant_scenario, elastic_outputs, r
 from .rigid_coulomb import coulomb_pattern
 from .rigid_driver import _DEFAULT_TOL, _Driver
 from .rigid_impacts import _rope_jerk
+from .rigid_options import RigidOptions, convert_legacy
 from .rigid_records import PhaseRecord, RigidContactError, RigidTrajectory, _fmt, _merge
 
 __all__ = [
@@ -71,6 +73,7 @@ __all__ = [
     "ChatterRule",
     "PhaseRecord",
     "RigidContactError",
+    "RigidOptions",
     "RigidTrajectory",
     "simulate_rigid",
     "OUTPUT_CHUNK",
@@ -91,15 +94,10 @@ def simulate_rigid(
     *,
     ts=None,
     n_save: int = 501,
-    restitution: float = 0.0,
-    rtol: float = 1e-8,
-    atol: float = 1e-9,
-    max_steps: int = 200_000,
-    max_phases: int = 2000,
-    settings: rigid.Settings | None = None,
-    verbose: bool = False,
-    rope: str = "elastic",
-    chatter: ChatterRule | None = ChatterRule(),
+    model: RigidGround | None = None,
+    options: RigidOptions | None = None,
+    verbose: bool | str = False,
+    **deprecated,
 ) -> RigidTrajectory:
     """Simulate a lift with the rigid-body-on-rigid-ground model (paper §2) from rest at t = 0 to `t1`.
 
@@ -108,22 +106,23 @@ def simulate_rigid(
     **Arguments**
     - `scenario`: a `Scenario`; the foundation's stiffness, damping and friction law are not used (the
       ground is rigid, friction is exact Coulomb with μ = `foundation.friction_coefficient`).
-    - `t1`: end time [s] (default `scenario.t1`); `ts` saved times (start 0, end t1), default `n_save` even.
-    - `restitution`: Newton's coefficient e [-] of corner impacts (0: plastic).
-    - `rtol`, `atol`, `max_steps`: Tsit5 settings of each phase; `max_phases`: guard against Zeno
-      sequences (counts phase solves, merged sub-microsecond ones included).
-    - `settings`: `physics.rigid.Settings` (Baumgarte β, slip blend velocity, pseudo-inverse cut-off).
+    - `t1`: end time [s] (default `scenario.t1`); `ts` saved times [s] (start 0, end t1), default `n_save`
+      even.
+    - `model`: `RigidGround(rope=..., restitution=...)` (default `RigidGround()`): `restitution` is Newton's
+      coefficient e [-] of corner impacts (0: plastic); `rope` is `ElasticRope()` (the rope law (2.14),
+      default) or `InextensibleRope()` (the constraint (2.15) with the boom-tip motion (2.13): |AB| = l(t)
+      while taut, tension S >= 0 solved with the contact forces; the rope goes slack when S reaches 0 and
+      snaps taut again with a plastic jerk when |AB| reaches l(t); `rope.stiffness`, `rope.damping` and
+      `rope.damping_onset` are not used). A hoist whose speed jumps at t = 0 (`ConstantSpeedHoist`,
+      `RampedHoist` with ramp_time 0) jerks the taut rope at the start: the jerk's loss is booked in
+      `impact_loss` (see docs/rigid-model.md, "Inextensible rope (2.15)"); `RampedHoist(v, ramp_time > 0)`
+      starts without one.
+    - `options`: `RigidOptions` (phase tolerances and step budget, `max_phases`, contact `settings`, the
+      `chatter` rule); default `RigidOptions()`.
     - `verbose`: print each phase as it ends.
-    - `rope`: "elastic" (the rope law (2.14), default) or "inextensible" (the constraint (2.15) with the
-      boom-tip motion (2.13): |AB| = l(t) while taut, tension S >= 0 solved with the contact forces; the
-      rope goes slack when S reaches 0 and snaps taut again with a plastic jerk when |AB| reaches l(t);
-      `rope.stiffness`, `rope.damping` and `rope.damping_onset` are not used). A hoist whose speed jumps
-      at t = 0 (`ConstantSpeedHoist`, `RampedHoist` with ramp_time 0) jerks the taut rope at the start:
-      the jerk's loss is booked in `impact_loss` (see docs/rigid-model.md, "Inextensible rope (2.15)");
-      `RampedHoist(v, ramp_time > 0)` starts without one.
-    - `chatter`: a `ChatterRule`: when a sustained cycle of impacts (or a phase that stalls twice) is passed
-      by a compliant phase (`numerics.rigid_compliant`; recorded in the phase log); None: never (such a
-      run ends at `max_phases`, or raises at the second stall).
+    - `**deprecated`: the earlier keywords `restitution`, `rope` (now `model`) and `rtol`, `atol`,
+      `max_steps`, `max_phases`, `settings`, `chatter` (now `options`) still work, with a
+      `DeprecationWarning`.
 
     **Returns** a `RigidTrajectory` (with the phase log in `.phases`).
 
@@ -131,17 +130,14 @@ def simulate_rigid(
     contact situations and solver failures.
     """
     require_x64()
-    if rope not in ROPE_MODELS:
-        raise ScenarioError(f"rope must be one of {', '.join(map(repr, ROPE_MODELS))}, got {rope!r}")
+    model, options = convert_legacy(deprecated, model, options)
+    if not isinstance(model, RigidGround):
+        raise ScenarioError(f"model must be RigidGround(...), got {type(model).__name__}")
+    if not isinstance(options, RigidOptions):
+        raise ScenarioError(f"options must be RigidOptions(...), got {type(options).__name__}")
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()
-    if chatter is not None and not isinstance(chatter, ChatterRule):
-        raise ScenarioError(f"chatter must be a ChatterRule or None, got {type(chatter).__name__}")
-    if chatter is not None:
-        chatter.check()
-    if not (0.0 <= restitution <= 1.0):
-        raise ScenarioError(f"restitution (e) must be in [0, 1], got {restitution}")
     if t1 is None:
         t1 = scenario.t1 if ts is None else float(np.asarray(ts)[-1])
     t1 = float(t1)
@@ -152,14 +148,16 @@ def simulate_rigid(
     ts = np.asarray(ts, dtype=np.float64)
     if ts.ndim != 1 or ts.size < 2 or ts[0] != 0.0 or np.any(np.diff(ts) <= 0) or abs(ts[-1] - t1) > 1e-12:
         raise ScenarioError("ts must be a 1-D, strictly increasing array from 0 to t1 [s]")
-    settings = rigid.Settings() if settings is None else settings
-    options = _Options(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps), event_atol=1e-10)
+    settings = rigid.Settings() if options.settings is None else options.settings
+    phase_options = _Options(
+        rtol=float(options.rtol), atol=float(options.atol), max_steps=int(options.max_steps), event_atol=1e-10
+    )
     y0, c = rigid.initial_state(scenario)
-    drv = _Driver(scenario, c, settings, options, restitution, dict(_DEFAULT_TOL))
+    drv = _Driver(scenario, c, settings, phase_options, float(model.restitution), dict(_DEFAULT_TOL))
     drv.debug = verbose == "debug"
-    drv.inextensible = rope == "inextensible"
+    drv.inextensible = isinstance(model.rope, InextensibleRope)
 
-    run = _Run(drv, ts, t1, max_phases, max_steps, chatter, verbose)
+    run = _Run(drv, ts, t1, int(options.max_phases), int(options.max_steps), options.chatter, verbose)
     run.start(y0)
     while run.step():
         pass

@@ -18,6 +18,7 @@ from ..physics.energy import Energy
 from ..physics.equilibrium import initial_state
 from ..physics.params import Scenario
 from .options import AbstractModel, ElasticFoundation, RigidGround, SolverOptions, as_model
+from .rigid_options import RigidOptions
 from .rigid_solve import RigidTrajectory, simulate_rigid
 
 
@@ -262,15 +263,18 @@ def simulate(
                 raise ScenarioError("model='rigid' takes only t1, ts, n_save, rtol, atol, max_steps and rope")
             kw = {k: v for k, v in solver_kw.items() if k in ("rtol", "atol", "max_steps")}
             options = SolverOptions(diffrax.Tsit5(), **kw)  # for its default tolerances 1e-6, 1e-8
+        rigid_options = RigidOptions(
+            rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
+            atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
+            max_steps=options.max_steps,
+        )
         return simulate_rigid(
             scenario,
             t1,  # pyright: ignore[reportArgumentType]  # a float or None here (checked above)
             ts=ts,
             n_save=n_save,
-            rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
-            atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
-            max_steps=options.max_steps,
-            rope=model.rope.name,
+            model=model,
+            options=rigid_options,
         )
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")

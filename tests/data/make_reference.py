@@ -73,7 +73,9 @@ def scan() -> dict[str, np.ndarray]:
         observables=list(SCAN_OBSERVABLES),
         n_save=N_SAVE,
         derivatives=True,
-        devices=jax.devices()[:1],  # one device: valid while the multi-device path changes
+        batch=jh.BatchOptions(
+            devices=jax.devices()[:1]
+        ),  # one device: valid while the multi-device path changes
     )
     out = {f"scan/{k}": np.asarray(v) for k, v in res.data.items()}
     out["scan/status"] = np.asarray(res.status)

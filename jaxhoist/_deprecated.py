@@ -1,0 +1,47 @@
+"""The one warning for arguments that moved (issue 11): the earlier keywords keep working, converted to the
+new objects exactly, with one `DeprecationWarning` per call that names the new spelling."""
+
+from __future__ import annotations
+
+import sys
+import warnings
+
+#: Modules of this package that still pass the earlier keywords and are migrated separately; their calls
+#: are converted without a warning (users of those modules' functions should not see one). Remove an entry
+#: once its module passes the new objects; under pytest's `filterwarnings = error` a missed call then fails.
+NOT_YET_MIGRATED = ("jaxhoist.apps.bifurcation",)
+
+
+#: Modules whose frames wrap a function without being its caller (run-time type checking under pytest).
+_WRAPPERS = ("jaxtyping", "beartype")
+
+
+def _caller(frame, stacklevel: int):
+    """The frame `stacklevel` calls up from `frame` (`warn_moved`'s: 1) counting only frames outside
+    `_WRAPPERS`, and its level counting every frame (what `warnings.warn` counts)."""
+    level, real = 1, 1
+    while real < stacklevel and frame.f_back is not None:
+        frame, level = frame.f_back, level + 1
+        if not frame.f_globals.get("__name__", "").startswith(_WRAPPERS):
+            real += 1
+    return frame, level
+
+
+def warn_moved(function: str, moved: dict[str, str], stacklevel: int = 3) -> None:
+    """Warn once that `function` was called with the earlier keywords `moved` (old name -> new spelling).
+
+    `stacklevel` counts as in `warnings.warn` from this function's frame, not counting wrappers such as
+    jaxtyping's run-time checks: 3 points at the code that called `function` when `function` calls this
+    directly. A call from a module in `NOT_YET_MIGRATED` is converted silently.
+    """
+    if not moved:
+        return
+    frame, level = _caller(sys._getframe(0), stacklevel)
+    if frame.f_globals.get("__name__", "").startswith(NOT_YET_MIGRATED):
+        return
+    spelled = "; ".join(f"{old} -> {new}" for old, new in moved.items())
+    warnings.warn(
+        f"{function}(): these arguments moved (issue 11) and will be removed: {spelled}",
+        DeprecationWarning,
+        stacklevel=level,
+    )
