@@ -54,13 +54,13 @@ def _trap(*args, **kwargs):
 def _install_traps():
     import jaxhoist.apps.scan as scan_mod
     import jaxhoist.numerics.solve as solve_mod
-    from jaxhoist.apps import bifurcation, simulate_cli
+    from jaxhoist.apps import bifurcation_cli, simulate_cli
 
     simulate_cli._compiled_solve = _trap
     solve_mod._solve_jit = _trap
     scan_mod._fingerprint = _trap  # scan(): called after every host-side check, before compiling
     for name in ("scan", "locate_bifurcation", "trace_boundary"):
-        setattr(bifurcation, name, _trap)
+        setattr(bifurcation_cli, name, _trap)
     import jaxhoist.numerics.rigid_solve as rigid
 
     rigid.simulate_rigid = _trap

@@ -35,6 +35,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+import diffrax  # noqa: E402
 import equinox as eqx  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -47,7 +48,7 @@ XI = "load.mass_centre[0]"
 EPS = "foundation.friction.regularisation_velocity"
 OBS = "final_theta"
 LEVEL = float(np.radians(15.0))
-KW = dict(t1=25.0, n_save=2501, method="bisection", level=LEVEL)
+KW = dict(t1=25.0, n_save=2501, level=LEVEL)
 MU_PAPER = 0.3635
 
 
@@ -65,7 +66,8 @@ def _row(b):
 
 def _trace(sc, along, values, bracket, tol):
     t = time.perf_counter()
-    bd = jh.trace_boundary(sc, MU, bracket, along, values, OBS, tol=tol, initial_half_width=1e-3, **KW)
+    search = jh.SearchOptions(jh.Bisection(), tol, initial_half_width=1e-3)
+    bd = jh.trace_boundary(sc, MU, bracket, along, values, OBS, search=search, **KW)
     rows = [
         dict(q=float(q), mu_star=float(v), width=float(w))
         for q, v, w in zip(bd.along_values, bd.values, bd.widths, strict=True)
@@ -144,14 +146,16 @@ def main(argv=None) -> int:
         rec.update(json.loads((out / "calibration.json").read_text()))
     sc = jh.load_scenario("paper-4.3")
 
+    search = jh.SearchOptions(jh.Bisection(), args.tol)
+
     def save():
         (out / "calibration.json").write_text(json.dumps(json_safe(rec), indent=1))
 
     if "fit" not in skip and "mu_star" not in rec:  # 1. ξ_C* at μ = 0.3635, then μ* at the preset
-        b = jh.locate_bifurcation(set_param(sc, MU, MU_PAPER), XI, OBS, (1.15, 1.17), tol=args.tol, **KW)
+        b = jh.locate_bifurcation(set_param(sc, MU, MU_PAPER), XI, OBS, (1.15, 1.17), search=search, **KW)
         print("xi_C* at mu = 0.3635:", b.summary(), flush=True)
         rec["xi_fit"] = _row(b)
-        b = jh.locate_bifurcation(sc, MU, OBS, (0.362, 0.365), tol=args.tol, **KW)
+        b = jh.locate_bifurcation(sc, MU, OBS, (0.362, 0.365), search=search, **KW)
         print("mu* at paper-4.3:", b.summary(), flush=True)
         rec["mu_star"] = _row(b)
         save()
@@ -183,7 +187,8 @@ def main(argv=None) -> int:
         for name, s, b0 in laws:
             if rec["eps"].get(name):
                 continue
-            b = jh.locate_bifurcation(s, MU, OBS, b0, tol=args.tol, max_steps=2_000_000, **KW)
+            options = jh.SolverOptions(diffrax.Tsit5(), max_steps=2_000_000)
+            b = jh.locate_bifurcation(s, MU, OBS, b0, search=search, options=options, **KW)
             print(f"{name}:", b.summary(), flush=True)
             rec["eps"][name] = _row(b)
             save()

@@ -56,6 +56,7 @@ import jax.numpy as jnp  # noqa: E402
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
+import diffrax  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -300,8 +301,13 @@ def main(argv=None):
     t1, tol = args.t1, args.tol
     n_save = int(round(t1 / args.dt_save)) + 1
     ts = np.linspace(0.0, t1, n_save)
-    kw = dict(ts=ts, rtol=args.rtol, atol=args.atol, max_steps=400_000)  # locate_bifurcation's keywords
     scan_kw = dict(ts=ts, options=jh.SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=400_000))
+
+    def locator_kw(ts=ts, rtol=args.rtol, atol=args.atol) -> dict:
+        """The locator's settings: `args.method` to `tol`; Tsit5 at the scans' tolerances."""
+        options = jh.SolverOptions(diffrax.Tsit5(), rtol=rtol, atol=atol, max_steps=400_000)
+        return dict(ts=ts, search=jh.SearchOptions(args.method, tol), options=options)
+
     base = jh.load_scenario("paper-4.2")
     bristle = jh.BristleFriction(deflection=delta_list[0], breakaway_ratio=0.5, relaxation_time=0.01)
     sc_b = _with_law(base, bristle)
@@ -358,9 +364,7 @@ def main(argv=None):
 
     # 2. μ*(ε) by continuation along ε
     t0 = time.perf_counter()
-    tr = trace_boundary(
-        base, MU, bracket, EPS, eps_list, MARGIN, level=0.0, tol=tol, method=args.method, **kw
-    )
+    tr = trace_boundary(base, MU, bracket, EPS, eps_list, MARGIN, level=0.0, **locator_kw())
     rows = [{"eps": r["along_value"], "mu_star": r["value"], **r} for r in tr.rows()]
     for r in rows:
         extra = (
@@ -416,9 +420,7 @@ def main(argv=None):
         delta_list,
         MARGIN,
         level=0.0,
-        tol=tol,
-        method=args.method,
-        **kw,
+        **locator_kw(),
     )
     brows = [
         {
@@ -444,10 +446,10 @@ def main(argv=None):
         br = (ref["mu_star"] - 20 * tol, ref["mu_star"] + 20 * tol)
         acc = {}
         for label, kk in [
-            ("rtol 1e-10, atol 1e-12", dict(kw, rtol=1e-10, atol=1e-12)),
-            (f"saved every {args.dt_save / 2:g} s", dict(kw, ts=np.linspace(0.0, t1, 2 * n_save - 1))),
+            ("rtol 1e-10, atol 1e-12", locator_kw(rtol=1e-10, atol=1e-12)),
+            (f"saved every {args.dt_save / 2:g} s", locator_kw(ts=np.linspace(0.0, t1, 2 * n_save - 1))),
         ]:
-            b = locate_bifurcation(sc, MU, MARGIN, br, level=0.0, tol=tol, method=args.method, **kk)
+            b = locate_bifurcation(sc, MU, MARGIN, br, level=0.0, **kk)
             acc[label] = {
                 "mu_star": b.value,
                 "minus_reference": b.value - ref["mu_star"],

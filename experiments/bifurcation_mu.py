@@ -36,6 +36,7 @@ jax.config.update("jax_enable_x64", True)
 import matplotlib  # noqa: E402
 
 matplotlib.use("Agg")
+import diffrax  # noqa: E402
 import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
@@ -175,6 +176,9 @@ def main(argv=None):
     out.mkdir(parents=True, exist_ok=True)
     sc = jh.load_scenario("paper-4.2")
     solve_kw = dict(n_save=n_save, rtol=args.rtol, atol=args.atol)
+    locator_options = jh.SolverOptions(
+        diffrax.Tsit5(), rtol=args.rtol, atol=args.atol
+    )  # the locator's solver
     rec: dict = {
         "scenario": sc.name,
         "n": n,
@@ -263,12 +267,10 @@ def main(argv=None):
                 MU,
                 j.observable,
                 (j.lo, j.hi),
-                tol=tol,
-                method=args.method,
-                points_per_round=16,
-                lanes=16,
+                search=jh.SearchOptions(args.method, tol),  # multisection: 16 points per round, 16 lanes
+                options=locator_options,
                 t1=t1,
-                **refine_kw,
+                n_save=refine_n_save,
             )
         except BifurcationError as e:
             print(f"  {j.observable} jump at μ in [{j.lo:.6f}, {j.hi:.6f}]: not refined ({e})", flush=True)
@@ -289,7 +291,14 @@ def main(argv=None):
     psi = np.asarray(res["final_psi"])
     steep = int(np.nanargmax(np.abs(np.diff(psi))))
     ramp = locate_bifurcation(
-        sc, MU, "final_psi", (mus[steep], mus[steep + 1]), tol=tol, method=args.method, t1=t1, **refine_kw
+        sc,
+        MU,
+        "final_psi",
+        (mus[steep], mus[steep + 1]),
+        search=jh.SearchOptions(args.method, tol),
+        options=locator_options,
+        t1=t1,
+        n_save=refine_n_save,
     )
     slope = np.abs(np.diff(psi)) / np.diff(mus)
     big = slope > 0.5 * slope[steep]
@@ -404,11 +413,10 @@ def main(argv=None):
             "hoist.speed",
             speeds,
             b0.observable,
-            tol=tol,
-            method="bisection",
-            initial_half_width=max(10 * tol, 0.002),
+            search=jh.SearchOptions(jh.Bisection(), tol, initial_half_width=max(10 * tol, 0.002)),
+            options=locator_options,
             t1=t1,
-            **solve_kw,
+            n_save=n_save,
         )
         rec["trace"] = {
             "observable": b0.observable,

@@ -43,6 +43,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)
 
+import diffrax  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
@@ -99,6 +100,8 @@ def main(argv=None) -> int:
     speeds = np.linspace(0.2, 0.42, n_v)
     ts = np.linspace(0.0, args.t1, int(round(args.t1 / args.dt_save)) + 1)
     kw = dict(ts=ts, rtol=1e-8, atol=1e-10, max_steps=400_000)
+    # the locator's solves: Tsit5 (its default solver) at the same tolerances
+    lkw = dict(ts=ts, options=jh.SolverOptions(diffrax.Tsit5(), rtol=1e-8, atol=1e-10, max_steps=400_000))
     sc = jh.load_scenario("paper-4.2")
     rec: dict = {
         "scenario": sc.name,
@@ -148,7 +151,7 @@ def main(argv=None) -> int:
     if ks.size != 1:
         raise SystemExit(f"row v_l = {speeds[j0]:.3f} m/s has {ks.size} sign changes of g, expected 1")
     bracket = (float(mus[ks[0]]), float(mus[ks[0] + 1]))
-    tkw = dict(tol=args.tol, method="newton", **kw)
+    tkw = dict(search=jh.SearchOptions(jh.Newton(), tol=args.tol), **lkw)
     t0 = time.perf_counter()
     print("tracing μ*(v_l) upwards ...", flush=True)
     up, tr_up = _trace(sc, bracket, speeds[j0:], tkw)
@@ -198,7 +201,13 @@ def main(argv=None) -> int:
         tol_q = args.tol * abs(q0)
         try:
             b = locate_bifurcation(
-                sc0, path, MARGIN, (q0 * (1 - rel), q0 * (1 + rel)), level=0.0, tol=tol_q, **kw
+                sc0,
+                path,
+                MARGIN,
+                (q0 * (1 - rel), q0 * (1 + rel)),
+                level=0.0,
+                search=jh.SearchOptions(tol=tol_q),
+                **lkw,
             )
         except BifurcationError as e:
             others.append({"param": path, "preset": q0, "error": str(e)})

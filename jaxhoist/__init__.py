@@ -6,6 +6,10 @@ from ._errors import ScenarioError as ScenarioError
 from ._errors import SolveStatus as SolveStatus
 from ._version import __version__ as __version__
 from .apps.bifurcation import Bifurcation as Bifurcation
+from .apps.bifurcation import Bisection as Bisection
+from .apps.bifurcation import Multisection as Multisection
+from .apps.bifurcation import Newton as Newton
+from .apps.bifurcation import SearchOptions as SearchOptions
 from .apps.bifurcation import find_crossings as find_crossings
 from .apps.bifurcation import find_jumps as find_jumps
 from .apps.bifurcation import locate_bifurcation as locate_bifurcation

@@ -6,12 +6,6 @@ from __future__ import annotations
 import sys
 import warnings
 
-#: Modules of this package that still pass the earlier keywords and are migrated separately; their calls
-#: are converted without a warning (users of those modules' functions should not see one). Remove an entry
-#: once its module passes the new objects; under pytest's `filterwarnings = error` a missed call then fails.
-NOT_YET_MIGRATED = ("jaxhoist.apps.bifurcation",)
-
-
 #: Modules whose frames wrap a function without being its caller (run-time type checking under pytest).
 _WRAPPERS = ("jaxtyping", "beartype")
 
@@ -32,13 +26,12 @@ def warn_moved(function: str, moved: dict[str, str], stacklevel: int = 3) -> Non
 
     `stacklevel` counts as in `warnings.warn` from this function's frame, not counting wrappers such as
     jaxtyping's run-time checks: 3 points at the code that called `function` when `function` calls this
-    directly. A call from a module in `NOT_YET_MIGRATED` is converted silently.
+    directly. The package's own modules pass the new objects (under pytest's `filterwarnings = error` a
+    call that does not fails the tests).
     """
     if not moved:
         return
     frame, level = _caller(sys._getframe(0), stacklevel)
-    if frame.f_globals.get("__name__", "").startswith(NOT_YET_MIGRATED):
-        return
     spelled = "; ".join(f"{old} -> {new}" for old, new in moved.items())
     warnings.warn(
         f"{function}(): these arguments moved (issue 11) and will be removed: {spelled}",

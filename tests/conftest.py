@@ -128,10 +128,8 @@ def _release_compiled_code():
     compile died with a segmentation fault (tests/test_statics.py, after ~250 tests). Within a module the
     compiled functions are still shared."""
     yield
-    from jaxhoist.apps import bifurcation
     from jaxhoist.numerics import batch, compile_cache
 
-    compile_cache._CACHE.clear()
-    bifurcation._COMPILED.clear()
+    compile_cache._CACHE.clear()  # the bifurcation locator's solves among them
     batch.chunk_fn.cache_clear()
     jax.clear_caches()

@@ -14,6 +14,9 @@ import pytest  # noqa: E402
 import jaxhoist as jh  # noqa: E402
 from jaxhoist.apps.bifurcation import (  # noqa: E402
     BifurcationError,
+    Bisection,
+    Multisection,
+    SearchOptions,
     find_crossings,
     find_jumps,
     locate_bifurcation,
@@ -47,7 +50,14 @@ def newton_run():
     """The Newton locator on the symmetric lift, with every progress report it made."""
     reports = []
     b = locate_bifurcation(
-        symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), level=0.0, tol=1e-6, progress=reports.append, **SYM_KW
+        symmetric_lift(),
+        XI,
+        E_MINUS_D,
+        (0.46, 0.57),
+        level=0.0,
+        search=SearchOptions(tol=1e-6),
+        progress=reports.append,
+        **SYM_KW,
     )
     return b, reports
 
@@ -107,8 +117,7 @@ def test_bisection_finds_the_same_point_with_more_solves(newton_result):
         E_MINUS_D,
         (0.46, 0.57),
         level=0.0,
-        tol=1e-6,
-        method="bisection",
+        search=SearchOptions(Bisection(), tol=1e-6),
         progress=reps.append,
         **SYM_KW,
     )
@@ -135,10 +144,7 @@ def test_multisection_and_continuation_along_the_hoist_speed():
         E_MINUS_D,
         (0.46, 0.57),
         level=0.0,
-        tol=1e-6,
-        method="multisection",
-        points_per_round=8,
-        lanes=8,
+        search=SearchOptions(Multisection(points_per_round=8, lanes=8), tol=1e-6),
         progress=mreps.append,
         **SYM_KW,
     )
@@ -160,7 +166,7 @@ def test_multisection_and_continuation_along_the_hoist_speed():
         [0.05, 0.06, 0.07],
         E_MINUS_D,
         level=0.0,
-        tol=1e-6,
+        search=SearchOptions(tol=1e-6),
         progress=reps.append,
         **SYM_KW,
     )
@@ -245,8 +251,7 @@ def test_slide_or_tip_first_flips_at_the_static_friction_coefficient():
         obs,
         (0.514, 0.521),
         level=0.0,
-        tol=1e-6,
-        method="bisection",
+        search=SearchOptions("bisection", tol=1e-6),
         t1=3.0,
         n_save=301,
     )
@@ -468,18 +473,77 @@ def test_trace_reports_a_vanished_jump_as_lost(monkeypatch):
     a stand-in (no solves): a jump of size 1 at q = 0 and 0.9, of size 1e-4 at q = 0.5."""
     import types
 
-    import jaxhoist.apps.bifurcation as B
+    from jaxhoist.apps import bifurcation_trace
 
-    def fake_locate(sc, param, obs, br, level=None, tol=1e-6, method="newton", **kw):
+    def fake_locate(sc, param, obs, br, level=None, search=SearchOptions(), **kw):
         q = float(sc.hoist.speed)
         size = 1e-4 if abs(q - 0.5) < 1e-9 else 1.0
         return types.SimpleNamespace(
-            value=0.5 * sum(br), y_lo=0.0, y_hi=size, n_solves=3, width=tol, notes=[]
+            value=0.5 * sum(br), y_lo=0.0, y_hi=size, n_solves=3, width=search.tol, notes=[]
         )
 
-    monkeypatch.setattr(B, "locate_bifurcation", fake_locate)
-    tr = B.trace_boundary(
+    monkeypatch.setattr(bifurcation_trace, "locate_bifurcation", fake_locate)
+    tr = trace_boundary(
         symmetric_lift(), "load.mass_centre[0]", (0.4, 0.6), "hoist.speed", [0.1, 0.5, 0.9], "final_psi"
     )
     assert np.isfinite(tr.values[0]) and np.isnan(tr.values[1]) and np.isfinite(tr.values[2])
     assert "lost" in tr.points[1].notes[0]
+
+
+def test_old_keywords_warn_once_and_give_the_same_result():
+    """The keywords of earlier versions (`tol=`, `method=`, `max_solves=`, `rtol=`, ...) map exactly onto
+    `SearchOptions` and `SolverOptions` (Tsit5 when no solver is given): one DeprecationWarning naming the
+    new spelling, and the same evaluations to the last bit."""
+    import diffrax
+
+    kw = dict(level=0.0, **SYM_KW)
+    search = SearchOptions(Bisection(), tol=1e-3, max_solves=40)
+    options = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-7)
+    new = locate_bifurcation(
+        symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), search=search, options=options, **kw
+    )
+    with pytest.warns(DeprecationWarning, match=r"search=SearchOptions\(.*options=SolverOptions") as caught:
+        old = locate_bifurcation(
+            symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), tol=1e-3, method="bisection", max_solves=40,
+            rtol=1e-7, **kw,
+        )  # fmt: skip
+    assert len(caught) == 1
+    assert old.history == new.history and old.bracket == new.bracket and old.value == new.value
+    assert (old.steps, old.n_solves, old.method) == (new.steps, new.n_solves, "bisection")
+    with pytest.raises(jh.ScenarioError, match="either search= or tol"):
+        locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), search=search, tol=1e-3, **kw)
+    with pytest.raises(TypeError, match="tolerance"):
+        locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), tolerance=1e-3, **kw)
+
+
+def test_trace_boundary_old_keywords_map_onto_the_settings(monkeypatch):
+    """`trace_boundary`'s earlier keywords reach every `locate_bifurcation` call as the same objects as the
+    new spelling (the locator replaced by a recorder: no solves)."""
+    import types
+
+    import diffrax
+
+    from jaxhoist.apps import bifurcation_trace
+
+    seen = []
+
+    def record(sc, param, obs, br, *, search, options, **kw):
+        seen.append((search, options, kw))
+        return types.SimpleNamespace(value=0.5, y_lo=0.0, y_hi=1.0, n_solves=1, width=search.tol, notes=[])
+
+    monkeypatch.setattr(bifurcation_trace, "locate_bifurcation", record)
+    args = (symmetric_lift(), XI, (0.46, 0.57), "hoist.speed", [0.05, 0.06], E_MINUS_D)
+    with pytest.warns(DeprecationWarning, match="trace_boundary"):
+        trace_boundary(
+            *args, tol=1e-5, method="multisection", points_per_round=4, lanes=4, initial_half_width=0.01,
+            max_expansions=3, atol=1e-9, t1=0.2,
+        )  # fmt: skip
+    search = SearchOptions(
+        Multisection(points_per_round=4, lanes=4), 1e-5, initial_half_width=0.01, max_expansions=3
+    )
+    trace_boundary(*args, search=search, options=jh.SolverOptions(diffrax.Tsit5(), atol=1e-9), t1=0.2)
+    assert len(seen) == 4
+    for s, o, kw in seen:
+        assert s == search and o == seen[2][1] and kw["t1"] == 0.2
+    assert seen[0][1] == seen[2][1]
+    assert (seen[0][1].solver, seen[0][1].rtol, seen[0][1].atol) == (diffrax.Tsit5(), 1e-6, 1e-9)

@@ -738,17 +738,19 @@ def test_sweep_objects_count_members_and_refuse_bad_input(box):
         assert "\n" not in str(err.value)
 
 
-def test_callers_not_yet_migrated_convert_silently():
-    """`apps/bifurcation.py` still passes `scan` the earlier keywords (`_deprecated.NOT_YET_MIGRATED`): its
-    calls are converted without a warning; the same call from elsewhere warns."""
-    import warnings
+def test_default_lanes_widen_with_the_member_count_only():
+    """The default group width of an adaptive scan grows with the number of members (a denser scan's
+    groups are close neighbours that take about the same steps) from 16 to 256, keeping at least 16
+    groups, and never depends on the devices (results must not); constant steps keep 256; `lanes` given
+    wins, capped at the member count's next power of two."""
+    from jaxhoist.apps.scan_layout import adaptive_lanes
 
-    from jaxhoist.apps.scan_layout import convert_legacy
-
-    call = 'out = convert_legacy("scan", {"lanes": 4}, None, None, False, None, 3)'
-    for module, warns in (("jaxhoist.apps.bifurcation", False), ("user_code", True)):
-        ns = {"__name__": module, "convert_legacy": convert_legacy}
-        with warnings.catch_warnings(record=True) as rec:
-            warnings.simplefilter("always")
-            exec(call, ns)
-        assert len(rec) == int(warns) and ns["out"][2] == jh.BatchOptions(lanes=4)
+    widths = {n: adaptive_lanes(n) for n in (1, 64, 511, 512, 1024, 4096, 65536)}
+    assert widths == {1: 16, 64: 16, 511: 16, 512: 32, 1024: 64, 4096: 256, 65536: 256}
+    for n, w in widths.items():
+        assert w == 16 or n // w >= 16
+    adaptive, fixed = jh.SolverOptions(), jh.SolverOptions(diffrax.Bosh3(), dt0=1e-3, fixed_step=True)
+    assert jh.BatchOptions().lanes_for(adaptive, 4096) == 256
+    assert jh.BatchOptions(devices=jax.devices()[:1]).lanes_for(adaptive, 4096) == 256
+    assert jh.BatchOptions().lanes_for(fixed, 100) == 128  # 256, capped at the next power of two
+    assert jh.BatchOptions(lanes=8).lanes_for(adaptive, 4096) == 8

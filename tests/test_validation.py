@@ -619,11 +619,11 @@ def test_strict_numbers():
 
 
 def _cli(monkeypatch, capsys, argv) -> tuple[int, str]:
-    from jaxhoist.apps import bifurcation, cli, simulate_cli
+    from jaxhoist.apps import bifurcation_cli, cli, simulate_cli
 
     monkeypatch.setattr(simulate_cli, "_compiled_solve", _core_must_not_run)
     for name in ("scan", "locate_bifurcation", "trace_boundary"):
-        monkeypatch.setattr(bifurcation, name, _core_must_not_run)
+        monkeypatch.setattr(bifurcation_cli, name, _core_must_not_run)
     capsys.readouterr()
     try:
         code = cli.main(argv)

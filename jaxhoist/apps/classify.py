@@ -166,39 +166,15 @@ def _relocate(x, y, i_lo, i_hi):
     return k, k + 1
 
 
-def classify_samples(
-    x,
-    samples: Mapping[str, Any],
-    bracket: tuple[float, float],
-    *,
-    observable: str = "final_psi",
-    param: str = "p",
-    jump_fraction: float = 0.5,
-    event_tol: float = 0.01,
-) -> ChangeClass:
-    """Classify a change located in `bracket` from samples of the observables around it.
-
-    **Arguments**
-    - `x`: parameter values (sorted or not), including the two ends of `bracket`, spread over a window
-      around it (the window's ends define "the change" the fractions and the ramp width refer to).
-    - `samples`: observable name -> values at `x` (any of `OBSERVABLES`; missing ones are skipped).
-    - `bracket`: (lo, hi), the located change's final bracket.
-    - `observable`: the located observable's name (decides whether the event-definition test comes first).
-    - `jump_fraction`: a final-state coordinate jumps if more than this fraction of its change across the
-      window, and more than 1 cm / 1°, happens inside the bracket.
-    - `event_tol`: an event time "jumps" across the bracket if it moves by more than this [s].
-    """
-    x = np.asarray(x, dtype=np.float64)
-    order = np.argsort(x, kind="stable")
-    x = x[order]
-    ys = {k: np.asarray(v, dtype=np.float64)[order] for k, v in samples.items()}
+def _bracket_indices(x, ys, bracket, observable, notes) -> tuple[int, int, float, float]:
+    """(i_lo, i_hi, lo, hi): the bracket's ends among the sorted samples `x`, moved to where `observable`
+    does jump in these solves if it does not across the given bracket (with a note)."""
     lo, hi = float(bracket[0]), float(bracket[1])
     try:
         i_lo = int(np.nonzero(x == lo)[0][0])
         i_hi = int(np.nonzero(x == hi)[0][0])
     except IndexError:
         raise ScenarioError("classify_samples: the samples must include both ends of the bracket") from None
-    notes: list[str] = []
     moved = _relocate(x, ys.get(observable), i_lo, i_hi)
     if moved is not None:
         i_lo, i_hi = moved
@@ -208,7 +184,12 @@ def classify_samples(
             f"can move a jump of a long history by more than a narrow bracket)"
         )
         lo, hi = float(x[i_lo]), float(x[i_hi])
-    facets: list[str] = []
+    return i_lo, i_hi, lo, hi
+
+
+def _final_state_changes(ys, i_lo, i_hi) -> tuple[dict[str, float], dict[str, float]]:
+    """(fractions, window_change): per final-state coordinate, the fraction of its change across the
+    window that happens inside the bracket, and that change [its unit]."""
     fractions: dict[str, float] = {}
     window_change: dict[str, float] = {}
     for name in FINAL_STATE:
@@ -219,11 +200,13 @@ def classify_samples(
         inner = abs(y[i_hi] - y[i_lo])
         window_change[name] = full
         fractions[name] = float(inner / full) if full > 0 else 0.0
-    jumped = [
-        n for n in fractions if fractions[n] > jump_fraction and abs(ys[n][i_hi] - ys[n][i_lo]) > _MATERIAL[n]
-    ]
-    # a ramp: the coordinate that changes most (in units of its material size) changes materially across
-    # the window; its 10-90 % width
+    return fractions, window_change
+
+
+def _ramp(x, ys, window_change, notes) -> tuple[float | None, str | None]:
+    """(width, observable) of a ramp: the coordinate that changes most (in units of its material size)
+    changes materially across the window; its 10-90 % width [unit of the parameter]. (None, None) where
+    there is none, or the change is spread over more than half the window (with a note)."""
     width = ramp_obs = None
     if window_change:
         ramp_obs = max(window_change, key=lambda n: window_change[n] / _MATERIAL[n])
@@ -237,9 +220,11 @@ def classify_samples(
                 width = None
         if width is None:
             ramp_obs = None
-    counts = None
-    if COUNT in ys:
-        counts = (float(ys[COUNT][i_lo]), float(ys[COUNT][i_hi]))
+    return width, ramp_obs
+
+
+def _event_jumps(ys, i_lo, i_hi) -> dict[str, float]:
+    """Per event time, its change across the bracket [s] (inf where it appears or disappears)."""
     events = {}
     for name in EVENT_TIMES:
         if name in ys:
@@ -247,6 +232,12 @@ def classify_samples(
             events[name] = (
                 float(b - a) if (np.isfinite(a) and np.isfinite(b)) else (0.0 if a == b else float("inf"))
             )
+    return events
+
+
+def _facets(observable, jumped, counts, events, width, event_tol) -> list[str]:
+    """The names that apply to the change, the one that names it first."""
+    facets: list[str] = []
 
     def ev_jumps(name):
         return name in events and abs(events[name]) > event_tol
@@ -275,6 +266,47 @@ def classify_samples(
             facets.append("steep ramp")
     if not facets:
         facets.append("continuous crossing")
+    return facets
+
+
+def classify_samples(
+    x,
+    samples: Mapping[str, Any],
+    bracket: tuple[float, float],
+    *,
+    observable: str = "final_psi",
+    param: str = "p",
+    jump_fraction: float = 0.5,
+    event_tol: float = 0.01,
+) -> ChangeClass:
+    """Classify a change located in `bracket` from samples of the observables around it.
+
+    **Arguments**
+    - `x`: parameter values (sorted or not), including the two ends of `bracket`, spread over a window
+      around it (the window's ends define "the change" the fractions and the ramp width refer to).
+    - `samples`: observable name -> values at `x` (any of `OBSERVABLES`; missing ones are skipped).
+    - `bracket`: (lo, hi), the located change's final bracket.
+    - `observable`: the located observable's name (decides whether the event-definition test comes first).
+    - `jump_fraction`: a final-state coordinate jumps if more than this fraction of its change across the
+      window, and more than 1 cm / 1°, happens inside the bracket.
+    - `event_tol`: an event time "jumps" across the bracket if it moves by more than this [s].
+    """
+    x = np.asarray(x, dtype=np.float64)
+    order = np.argsort(x, kind="stable")
+    x = x[order]
+    ys = {k: np.asarray(v, dtype=np.float64)[order] for k, v in samples.items()}
+    notes: list[str] = []
+    i_lo, i_hi, lo, hi = _bracket_indices(x, ys, bracket, observable, notes)
+    fractions, window_change = _final_state_changes(ys, i_lo, i_hi)
+    jumped = [
+        n for n in fractions if fractions[n] > jump_fraction and abs(ys[n][i_hi] - ys[n][i_lo]) > _MATERIAL[n]
+    ]
+    width, ramp_obs = _ramp(x, ys, window_change, notes)
+    counts = None
+    if COUNT in ys:
+        counts = (float(ys[COUNT][i_lo]), float(ys[COUNT][i_hi]))
+    events = _event_jumps(ys, i_lo, i_hi)
+    facets = _facets(observable, jumped, counts, events, width, event_tol)
     if jumped:
         notes.append(f"jumping: {', '.join(jumped)}")
         width = None

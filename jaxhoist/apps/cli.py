@@ -34,7 +34,7 @@ from .simulate_cli import summary_status as summary_status
 # subcommand name -> module exposing configure_parser(subparsers)
 EXTENSIONS = {
     "scan": "jaxhoist.apps.scan_cli",
-    "bifurcation": "jaxhoist.apps.bifurcation",
+    "bifurcation": "jaxhoist.apps.bifurcation_cli",
     "identify": "jaxhoist.apps.identify_cli",
 }
 

@@ -87,16 +87,8 @@ def event_lines(status, ts, normal_forces) -> list[str]:
 def run_simulate(args: argparse.Namespace) -> int:
     """`jaxhoist simulate`: load, validate, compile, solve, save npz+json (+ PNGs), print a summary."""
     _enable_x64()
-    import jax
-    import jax.numpy as jnp
-    import numpy as np
-
-    from .._errors import ScenarioError, SolveStatus, require_x64
-    from ..io.scenario import apply_overrides, load_scenario
+    from .._errors import SolveStatus, require_x64
     from ..io.validate import check_out_dir
-    from ..numerics.compile_cache import is_cached
-    from ..numerics.options import SolverOptions
-    from ..numerics.solve import check_times
 
     require_x64()
     progress = StepTimer(quiet=args.quiet)
@@ -104,26 +96,7 @@ def run_simulate(args: argparse.Namespace) -> int:
 
     # ---- host side: everything is checked before anything is compiled
     with progress(f"loading scenario {args.scenario}"):
-        scenario = load_scenario(args.scenario)
-        scenario, overrides = apply_overrides(scenario, args.set)
-        t1 = scenario.t1 if args.t1 is None else args.t1
-        check_times(t1, None)
-        if args.n_save < 2:
-            raise ScenarioError(f"--n-save must be >= 2, got {args.n_save}")
-        if args.rope != "elastic" and args.model != "rigid":
-            raise ScenarioError(
-                f"--rope {args.rope} needs --model rigid (the elastic-foundation model has the elastic rope)"
-            )
-        if args.model == "rigid":
-            import diffrax
-
-            options = SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
-        else:
-            # diffrax's progress meter (TextProgressMeter) unless --quiet; its lines become a bar on stderr
-            options = SolverOptions(
-                rtol=args.rtol, atol=args.atol, max_steps=args.max_steps, progress=not args.quiet
-            )
-        ts = jnp.linspace(0.0, 1.0, args.n_save) * jnp.asarray(t1, dtype=jnp.float64)
+        scenario, overrides, t1, options, ts = _load_checked(args)
     out_dir = Path(args.out) if args.out else Path("out") / scenario.name
     check_out_dir(out_dir, "--out", refuse_existing=True, overwrite=args.overwrite)
     progress.note(
@@ -132,57 +105,9 @@ def run_simulate(args: argparse.Namespace) -> int:
     )
 
     if args.model == "rigid":
-        from ..numerics.options import as_model
-        from ..numerics.rigid_options import RigidOptions
-        from ..numerics.rigid_solve import simulate_rigid
-
-        label = "solving with the rigid-ground model (each phase compiles on first use)"
-        with (
-            progress(label, bar=True),
-            _bar(
-                float(t1),
-                "rigid model",
-                "s",
-                quiet=args.quiet,
-                bar_format=(
-                    "{desc}: {percentage:3.0f}%|{bar}| t = {n:.3f}/{total:.3g} s "
-                    "[{elapsed}<{remaining}{postfix}]"
-                ),
-            ) as bar,
-        ):
-            with contextlib.redirect_stdout(_LineSink(_phase_to_bar(bar))):
-                traj = simulate_rigid(
-                    scenario,
-                    t1,
-                    ts=np.asarray(ts),
-                    model=as_model("rigid", args.rope),  # pyright: ignore[reportArgumentType]  # "rigid": a RigidGround
-                    options=RigidOptions(
-                        rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
-                        atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
-                        max_steps=args.max_steps,
-                    ),
-                    verbose=not args.quiet,  # the phase log, one line per phase: drives the bar
-                )
-            bar.n = bar.total  # the phase ending at t1 is not logged
-            bar.refresh()
-        wall_solve = progress.times[label]
+        traj, wall_solve = _solve_rigid(args, scenario, t1, ts, options, progress)
     else:
-        cached = is_cached("cli-simulate", _cache_key(scenario, ts, options))
-        with progress("compiling (cached in this process)" if cached else "compiling"):
-            solve_fn = _compiled_solve(scenario, ts, options)
-        with (
-            progress("solving", bar=True),
-            _bar(
-                100.0,
-                "solving",
-                "%",
-                quiet=args.quiet,
-                bar_format=("{desc}: {percentage:3.0f}%|{bar}| t = {n:.0f}% of t1 [{elapsed}<{remaining}]"),
-            ) as bar,
-        ):
-            with contextlib.redirect_stdout(_LineSink(_percent_to_bar(bar))):
-                traj = jax.block_until_ready(solve_fn(scenario, ts, options))
-        wall_solve = progress.times["solving"]
+        traj, wall_solve = _solve_elastic(args, scenario, ts, options, progress)
 
     arrays, written = _write_results(args, out_dir, traj, scenario, options, t1, overrides, progress)
     pngs = []
@@ -197,9 +122,117 @@ def run_simulate(args: argparse.Namespace) -> int:
 
     # ---- summary (stdout)
     status = summary_status(arrays)
+    wall_total = time.perf_counter() - wall0
+    lines = _summary_lines(scenario, arrays, status, wall_solve, wall_total, written, pngs, animation)
+    print("\n".join(lines), flush=True)
+    return 0 if status == SolveStatus.OK else 1
+
+
+def _load_checked(args: argparse.Namespace):
+    """(scenario, overrides, t1 [s], SolverOptions, saved times ts [s]) from the flags, all checked."""
+    import jax.numpy as jnp
+
+    from .._errors import ScenarioError
+    from ..io.scenario import apply_overrides, load_scenario
+    from ..numerics.options import SolverOptions
+    from ..numerics.solve import check_times
+
+    scenario = load_scenario(args.scenario)
+    scenario, overrides = apply_overrides(scenario, args.set)
+    t1 = scenario.t1 if args.t1 is None else args.t1
+    check_times(t1, None)
+    if args.n_save < 2:
+        raise ScenarioError(f"--n-save must be >= 2, got {args.n_save}")
+    if args.rope != "elastic" and args.model != "rigid":
+        raise ScenarioError(
+            f"--rope {args.rope} needs --model rigid (the elastic-foundation model has the elastic rope)"
+        )
+    if args.model == "rigid":
+        import diffrax
+
+        options = SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
+    else:
+        # diffrax's progress meter (TextProgressMeter) unless --quiet; its lines become a bar on stderr
+        options = SolverOptions(
+            rtol=args.rtol, atol=args.atol, max_steps=args.max_steps, progress=not args.quiet
+        )
+    ts = jnp.linspace(0.0, 1.0, args.n_save) * jnp.asarray(t1, dtype=jnp.float64)
+    return scenario, overrides, t1, options, ts
+
+
+def _solve_rigid(args, scenario, t1, ts, options, progress):
+    """The rigid-ground model's phase loop, its phase log drawn as a bar; (trajectory, solve time [s])."""
+    import numpy as np
+
+    from ..numerics.options import as_model
+    from ..numerics.rigid_options import RigidOptions
+    from ..numerics.rigid_solve import simulate_rigid
+
+    label = "solving with the rigid-ground model (each phase compiles on first use)"
+    with (
+        progress(label, bar=True),
+        _bar(
+            float(t1),
+            "rigid model",
+            "s",
+            quiet=args.quiet,
+            bar_format=(
+                "{desc}: {percentage:3.0f}%|{bar}| t = {n:.3f}/{total:.3g} s [{elapsed}<{remaining}{postfix}]"
+            ),
+        ) as bar,
+    ):
+        with contextlib.redirect_stdout(_LineSink(_phase_to_bar(bar))):
+            traj = simulate_rigid(
+                scenario,
+                t1,
+                ts=np.asarray(ts),
+                model=as_model("rigid", args.rope),  # pyright: ignore[reportArgumentType]  # "rigid": a RigidGround
+                options=RigidOptions(
+                    rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
+                    atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
+                    max_steps=args.max_steps,
+                ),
+                verbose=not args.quiet,  # the phase log, one line per phase: drives the bar
+            )
+        bar.n = bar.total  # the phase ending at t1 is not logged
+        bar.refresh()
+    return traj, progress.times[label]
+
+
+def _solve_elastic(args, scenario, ts, options, progress):
+    """The elastic model: compile (cached in the process) and solve, diffrax's progress drawn as a bar;
+    (trajectory, solve time [s])."""
+    import jax
+
+    from ..numerics.compile_cache import is_cached
+
+    cached = is_cached("cli-simulate", _cache_key(scenario, ts, options))
+    with progress("compiling (cached in this process)" if cached else "compiling"):
+        solve_fn = _compiled_solve(scenario, ts, options)
+    with (
+        progress("solving", bar=True),
+        _bar(
+            100.0,
+            "solving",
+            "%",
+            quiet=args.quiet,
+            bar_format=("{desc}: {percentage:3.0f}%|{bar}| t = {n:.0f}% of t1 [{elapsed}<{remaining}]"),
+        ) as bar,
+    ):
+        with contextlib.redirect_stdout(_LineSink(_percent_to_bar(bar))):
+            traj = jax.block_until_ready(solve_fn(scenario, ts, options))
+    return traj, progress.times["solving"]
+
+
+def _summary_lines(scenario, arrays, status, wall_solve, wall_total, written, pngs, animation) -> list[str]:
+    """The run's summary for stdout: final state, events, rope tension, energy check, steps, timings."""
+    import numpy as np
+
+    from .._errors import SolveStatus
+
     ts_np = arrays["ts"]
     resid = float(np.max(np.abs(arrays["energy_residual"])))
-    lines = [
+    return [
         f"scenario      {scenario.name} (t = 0 .. {ts_np[-1]:g} s, {len(ts_np)} saved times)",
         f"status        {status.name.lower()}" + ("" if status == SolveStatus.OK else f": {status.message}"),
         f"final C       {_fmt_vec(arrays['position'][-1])} m",
@@ -209,13 +242,11 @@ def run_simulate(args: argparse.Namespace) -> int:
         f"energy check  max |residual| = {resid:.3g} J (hoist work {arrays['hoist_work'][-1]:.4g} J)",
         f"steps         {int(arrays['num_accepted_steps'])} accepted, "
         f"{int(arrays['num_rejected_steps'])} rejected",
-        f"wall time     solve {wall_solve:.3g} s, total {time.perf_counter() - wall0:.3g} s",
+        f"wall time     solve {wall_solve:.3g} s, total {wall_total:.3g} s",
         f"wrote         {', '.join(map(str, written))}"
         + (f", {len(pngs)} PNGs" if pngs else "")
         + "".join(f", {p.name}" for p in animation),
     ]
-    print("\n".join(lines), flush=True)
-    return 0 if status == SolveStatus.OK else 1
 
 
 def configure_simulate(subparsers) -> None:

@@ -93,7 +93,7 @@ class _Driver:
         self.rejected = 0
         self.debug = False
         self.allow_jam = True  # fallback 2 of the configuration choice (off while choosing after a jam)
-        self.exclude = None  # contact modes not to choose again at once (`_transition`)
+        self.exclude: np.ndarray | None = None  # contact modes not to choose again at once (`_transition`)
         self.notes: list[str] = []  # how ambiguous or inconsistent contact choices were resolved (phase log)
         self.inextensible = False
         self.rope_taut = False  # the inextensible rope is at its length (taut, or may be): try taut first

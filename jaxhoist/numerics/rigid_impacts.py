@@ -197,6 +197,62 @@ def _consistent_impulses(combos, imp, cv1, sd, involved, mu, tP, tV) -> list[int
     return consistent
 
 
+def _rope_impulses(drv, sc, tj, y: State, modes, sd, normal_target):
+    """`_eval_rope_impulses` for every contact combination (`modes`, slide directions `sd`), on the host:
+    (v+, ω+, tip v+, corner impulses, rope impulse P [N s], corner velocities+)."""
+    out = _eval_rope_impulses(
+        tj,
+        y,
+        sc,
+        drv.c,
+        jnp.asarray(modes),
+        jnp.asarray(sd),
+        jnp.asarray(normal_target),
+        drv.settings.rcond,
+    )
+    return tuple(map(_np, out))
+
+
+def _jerk_on_tip_alone(drv, tj, y: State, cv, cv1, s_dot, m0, striking, flat, tip_alone):
+    """The rope jerk on the boom tip alone, or None where the load takes its share: `(y+, hoist work [J])`.
+
+    Settling, as after corner impacts: a load flat on the ground that the jerk would move slower than
+    Settings.rest_velocity stays at rest (the ground takes its share of the impulse) and the jerk acts on
+    the boom tip alone. Without it, a resting load under a rope whose tip lags the hoist chatters: each
+    small jerk lifts it, it falls back and the rope slackens, and the tip springs back into the next jerk.
+    The same for a load sliding flat on the ground: a jerk that would change its corner velocities (`cv` to
+    `cv1` [m/s]) by less than rest_velocity leaves them unchanged and jerks the tip alone, to d|AB|/dt =
+    dl/dt (an inextensible rope over a sliding load chattered at ~3 kHz: jerk, the load tips onto one
+    corner for 30 µs, falls back, the rope slackens; paper-2.3, μ = 0.1). `tip_alone`: no consistent jerk
+    of the load at all."""
+    rest = float(drv.settings.rest_velocity)
+    if not striking and flat and float(np.max(np.linalg.norm(cv1, axis=1))) < rest:
+        e = _np(_rope_direction(tj, y, drv.sc, drv.c))
+        v_A = _np(y.tip_velocity)
+        P_tip = m0 * (float(e @ v_A) + s_dot)  # tip alone: e·v_A+ = dl/dt = -ds/dt, load at rest
+        work = P_tip * s_dot
+        y1 = eqx.tree_at(
+            lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work),
+            y,
+            (jnp.zeros(3), jnp.zeros(3), jnp.asarray(v_A - (P_tip / m0) * e), y.hoist_work + work),
+        )
+        return y1, work
+    if tip_alone or (not striking and flat and float(np.max(np.linalg.norm(cv1 - cv, axis=1))) < rest):
+        e = _np(_rope_direction(tj, y, drv.sc, drv.c))
+        _, rate_error, _ = map(float, _rope_state(tj, y, drv.sc, drv.c))
+        P_tip = m0 * rate_error  # e·(v_A+ - v_B) = -ds/dt
+        work = P_tip * s_dot
+        y1 = eqx.tree_at(
+            lambda s: (s.tip_velocity, s.hoist_work),
+            y,
+            (jnp.asarray(_np(y.tip_velocity) - (P_tip / m0) * e), y.hoist_work + work),
+        )
+        if not tip_alone:
+            drv.notes.append("jerk on the tip alone")
+        return y1, work
+    return None
+
+
 def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=None, fallback: bool = False):
     """The inextensible rope snapping taut (or the hoist starting with a speed jump): a plastic jerk that
     sets d|AB|/dt = dl/dt, with the corners on the ground taking impulses as in `_Driver.impact` (every
@@ -222,35 +278,9 @@ def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=
     # First pass: sticking impulses give the slide directions.
     sticking = _modes([np.where(cb == SLIDE, STICK, cb) for cb in combos])
     tj = jnp.asarray(t if t_rate is None else t_rate, dtype=jnp.float64)
-    out0 = map(
-        _np,
-        _eval_rope_impulses(
-            tj,
-            y,
-            drv.sc,
-            drv.c,
-            jnp.asarray(sticking),
-            jnp.asarray(np.zeros((81, 4, 2))),
-            jnp.asarray(normal_target),
-            drv.settings.rcond,
-        ),
-    )
-    imp0 = list(out0)[3]
+    imp0 = _rope_impulses(drv, drv.sc, tj, y, sticking, np.zeros((81, 4, 2)), normal_target)[3]
     sd = _slide_directions(combos, slipping, dirs, imp0)
-    modes = _modes(combos)
-    v1, w1, tip1, imp, P, cv1 = map(
-        _np,
-        _eval_rope_impulses(
-            tj,
-            y,
-            drv.sc,
-            drv.c,
-            jnp.asarray(modes),
-            jnp.asarray(sd),
-            jnp.asarray(normal_target),
-            drv.settings.rcond,
-        ),
-    )
+    v1, w1, tip1, imp, P, cv1 = _rope_impulses(drv, drv.sc, tj, y, _modes(combos), sd, normal_target)
     tP = drv.tol["force"] * drv.G * 1e-3  # impulses [N s]
     tV = drv.tol["v"] * drv.V
     consistent = [k for k in _consistent_impulses(combos, imp, cv1, sd, near, drv.mu, tP, tV) if P[k] >= -tP]
@@ -263,17 +293,7 @@ def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=
         )
         combos = [cb for cb in combos if not np.any(cb == STICK)]
         sd = np.zeros((81, 4, 2))
-        out = _eval_rope_impulses(
-            tj,
-            y,
-            sc0,
-            drv.c,
-            jnp.asarray(_modes(combos)),
-            jnp.asarray(sd),
-            jnp.asarray(normal_target),
-            drv.settings.rcond,
-        )
-        v1, w1, tip1, imp, P, cv1 = map(_np, out)
+        v1, w1, tip1, imp, P, cv1 = _rope_impulses(drv, sc0, tj, y, _modes(combos), sd, normal_target)
         consistent = [k for k in _consistent_impulses(combos, imp, cv1, sd, near, 0.0, tP, tV) if P[k] >= -tP]
         if consistent:
             drv.notes.append("no Coulomb jerk: friction dropped")
@@ -298,44 +318,11 @@ def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=
         y,
         (jnp.asarray(v1[best]), jnp.asarray(w1[best]), jnp.asarray(tip1[best]), y.hoist_work + work),
     )
-    # Settling, as after corner impacts: a load flat on the ground that the jerk would move slower than
-    # Settings.rest_velocity stays at rest (the ground takes its share of the impulse) and the jerk acts on
-    # the boom tip alone. Without it, a resting load under a rope whose tip lags the hoist chatters: each
-    # small jerk lifts it, it falls back and the rope slackens, and the tip springs back into the next jerk.
-    if (
-        not striking
-        and np.all(near)
-        and float(np.max(np.linalg.norm(cv1[best], axis=1))) < float(drv.settings.rest_velocity)
-    ):
-        e = _np(_rope_direction(tj, y, drv.sc, drv.c))
-        v_A = _np(y.tip_velocity)
-        P_tip = m0 * (float(e @ v_A) + s_dot)  # tip alone: e·v_A+ = dl/dt = -ds/dt, load at rest
-        work = P_tip * s_dot
-        y1 = eqx.tree_at(
-            lambda s: (s.velocity, s.angular_velocity, s.tip_velocity, s.hoist_work),
-            y,
-            (jnp.zeros(3), jnp.zeros(3), jnp.asarray(v_A - (P_tip / m0) * e), y.hoist_work + work),
-        )
-    elif tip_alone or (
-        not striking
-        and np.all(near)
-        and float(np.max(np.linalg.norm(cv1[best] - cv, axis=1))) < float(drv.settings.rest_velocity)
-    ):
-        # The same for a load sliding flat on the ground: a jerk that would change its corner velocities by
-        # less than rest_velocity leaves them unchanged (the ground takes the load's share) and jerks the
-        # tip alone, to d|AB|/dt = dl/dt (an inextensible rope over a sliding load chattered at ~3 kHz:
-        # jerk, the load tips onto one corner for 30 µs, falls back, the rope slackens; paper-2.3, μ = 0.1).
-        e = _np(_rope_direction(tj, y, drv.sc, drv.c))
-        _, rate_error, _ = map(float, _rope_state(tj, y, drv.sc, drv.c))
-        P_tip = m0 * rate_error  # e·(v_A+ - v_B) = -ds/dt
-        work = P_tip * s_dot
-        y1 = eqx.tree_at(
-            lambda s: (s.tip_velocity, s.hoist_work),
-            y,
-            (jnp.asarray(_np(y.tip_velocity) - (P_tip / m0) * e), y.hoist_work + work),
-        )
-        if not tip_alone:
-            drv.notes.append("jerk on the tip alone")
+    settled = _jerk_on_tip_alone(
+        drv, tj, y, cv, cv1[best], s_dot, m0, bool(len(striking)), bool(np.all(near)), tip_alone
+    )
+    if settled is not None:
+        y1, work = settled
     loss = work - (ke(y1) - ke(y))
     if loss < -1e-9 * max(abs(work), 1.0):
         raise RigidContactError(f"t = {t:.9g} s: the rope jerk would gain energy ({-loss:.4g} J)")

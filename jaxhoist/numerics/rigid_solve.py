@@ -39,6 +39,8 @@ phase (`rigid_compliant`), recorded in the phase log. Modules: this one (`simula
 
 from __future__ import annotations
 
+from typing import cast
+
 import diffrax
 import equinox as eqx
 import jax
@@ -246,7 +248,7 @@ class _Run:
         if not (bool(ok) or bool(event)):
             return self.stalled(t, y, phase, result)
         self.save(t, t_end, phase, sys_)
-        modes = tuple(rigid.MODE_NAMES[int(m)] for m in _np(phase.contact))
+        modes = cast(tuple[str, str, str, str], tuple(rigid.MODE_NAMES[int(m)] for m in _np(phase.contact)))
         rope_name = rigid.ROPE_NAMES[int(phase.rope)]
         if not bool(event) or t_end >= self.t1:
             self.log(PhaseRecord(t, t_end, modes, bool(phase.rest), "t1", y_end, rope_name, self.choice))
@@ -328,9 +330,11 @@ class _Run:
         corners, cv, _ = drv.kin(t_end, y_end)
         striking = [k for k in fired if k < 4 and contact[k] == FREE and not bool(phase.rest)]
         hard = [i for i in striking if cv[i, 2] < -drv.tol["v"] * drv.V]
-        record = dict(
-            t_start=t, t_end=t_end, contact=modes, rest=bool(phase.rest), rope=rope_name, choice=self.choice
-        )
+        choice = self.choice
+
+        def record(end: str, state_end: State) -> PhaseRecord:
+            return PhaseRecord(t, t_end, modes, bool(phase.rest), end, state_end, rope_name, choice)
+
         if 11 in fired:
             # The slack inextensible rope reaches its length: a jerk if it would stretch, then a new phase.
             _, rate_error, _ = map(float, _rope_state(jnp.asarray(t_end), y_end, drv.sc, drv.c))
@@ -345,17 +349,17 @@ class _Run:
                 self.impact_events.append((t_end, loss))
                 how = drv.take_notes()
                 end += f" rope-jerk ({loss:.4g} J{', ' + how if how else ''})"
-            self.log(PhaseRecord(**record, end=end, state_end=y_before))
+            self.log(record(end, y_before))
             new, y_end, loss = drv.select_or_jam(t_end, y_end, "after the rope became taut", phase)
             self.impact_total += loss
         elif hard:
             y_before = y_end
             y_end, end = self.after_impact(t_end, y_end, phase, hard, end)
-            self.log(PhaseRecord(**record, end=end, state_end=y_before))
+            self.log(record(end, y_before))
             new, y_end, loss = drv.select_or_jam(t_end, y_end, "after impact")
             self.impact_total += loss
         else:
-            self.log(PhaseRecord(**record, end=end, state_end=y_end))
+            self.log(record(end, y_end))
             self.switch_events.append(t_end)
             new, y_end, loss = _transition(drv, t_end, y_end, phase, fired, self.ts)
             self.impact_total += loss
@@ -408,6 +412,7 @@ class _Run:
         """A compliant phase from (t0, y0) (`numerics.rigid_compliant`): fill its saved samples, log it,
         book its hand-back loss, and choose the next phase. Returns False when t1 is reached."""
         drv, chatter = self.drv, self.chatter
+        assert chatter is not None  # called only with a ChatterRule (`advance`, `stalled`)
         ep = run_episode(drv, t0, y0, self.t1, self.ts, self.filled, chatter)
         drv.accepted += ep.accepted
         drv.rejected += ep.rejected
@@ -437,7 +442,7 @@ class _Run:
             f"ε = {chatter.regularisation_velocity:g} m/s"
             + (f", rope {chatter.rope_stiffness:g} N/m" if drv.inextensible else "")
         )
-        modes = tuple("spring" if on else "free" for on in ep.loaded)
+        modes = cast(tuple[str, str, str, str], tuple("spring" if on else "free" for on in ep.loaded))
         self.log(
             PhaseRecord(
                 t0,
