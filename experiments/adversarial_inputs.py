@@ -52,6 +52,7 @@ def _trap(*args, **kwargs):
 
 
 def _install_traps():
+    # internal on purpose: traps the compile/solve entry points, to see what validation lets through
     import jaxhoist.apps.scan as scan_mod
     import jaxhoist.numerics.solve as solve_mod
     from jaxhoist.apps import bifurcation_cli, simulate_cli
@@ -295,6 +296,7 @@ def api_cases(paper42):
 
 
 def csv_cases(tmp: Path):
+    # the module path, not jaxhoist.read_measurement: older checkouts (the "before" figures) lack the latter
     from jaxhoist.io.measurement import read_measurement
 
     good = "t [s],position_x [m]\n0.0,1.0\n0.1,1.5\n0.2,2.0\n"

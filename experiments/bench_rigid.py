@@ -21,7 +21,7 @@ import jax
 jax.config.update("jax_enable_x64", True)
 
 import jaxhoist  # noqa: E402
-from jaxhoist.numerics.rigid_solve import simulate_rigid  # noqa: E402
+from jaxhoist import simulate_rigid  # noqa: E402
 
 
 def _model(rope: str) -> jaxhoist.RigidGround:

@@ -19,8 +19,7 @@ import numpy as np  # noqa: E402
 from jax.flatten_util import ravel_pytree  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.physics.elastic import vector_field  # noqa: E402
-from jaxhoist.physics.equilibrium import initial_state  # noqa: E402
+from jaxhoist import initial_state, vector_field  # noqa: E402
 
 
 def scipy_baseline(sc, t1, method):

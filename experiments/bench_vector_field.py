@@ -51,11 +51,9 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.numerics.fixed_step import integrate, solve_fixed  # noqa: E402
-from jaxhoist.numerics.options import SolverOptions  # noqa: E402
-from jaxhoist.numerics.solve import solve  # noqa: E402
-from jaxhoist.physics.elastic import vector_field  # noqa: E402
-from jaxhoist.physics.equilibrium import initial_state  # noqa: E402
+from jaxhoist import SolverOptions, initial_state, vector_field  # noqa: E402
+from jaxhoist.numerics.fixed_step import integrate, solve_fixed  # noqa: E402  (internal: times the integrator)
+from jaxhoist.numerics.solve import solve  # noqa: E402  (internal: times the solve core)
 
 MU = "foundation.friction_coefficient"
 MOTION = ("position", "velocity", "quaternion", "angular_velocity", "tip_position", "tip_velocity")

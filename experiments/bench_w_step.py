@@ -22,11 +22,10 @@ import equinox as eqx  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.numerics import fixed_step  # noqa: E402
-from jaxhoist.numerics.rosenbrock import ROS34PW2, w_step  # noqa: E402
-from jaxhoist.physics.elastic import vector_field  # noqa: E402
-from jaxhoist.physics.equilibrium import initial_state  # noqa: E402
-from jaxhoist.physics.linearise import linearise  # noqa: E402
+from jaxhoist import initial_state, vector_field  # noqa: E402
+from jaxhoist.numerics import fixed_step  # noqa: E402  (internal: times one RK step)
+from jaxhoist.numerics.rosenbrock import ROS34PW2, w_step  # noqa: E402  (internal: times one W step)
+from jaxhoist.physics.linearise import linearise  # noqa: E402  (internal: times the linearisation)
 
 H = 1e-3
 

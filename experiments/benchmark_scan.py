@@ -55,9 +55,7 @@ import numpy as np  # noqa: E402
 from jax.flatten_util import ravel_pytree  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist import scan  # noqa: E402
-from jaxhoist.physics.elastic import vector_field  # noqa: E402
-from jaxhoist.physics.equilibrium import initial_state  # noqa: E402
+from jaxhoist import initial_state, scan, vector_field  # noqa: E402
 
 MU = "foundation.friction_coefficient"
 EPS = "foundation.friction.regularisation_velocity"

@@ -42,8 +42,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.numerics.paths import set_param  # noqa: E402
-from jaxhoist.numerics.scan import ScanResult  # noqa: E402
+from jaxhoist import ScanResult, set_param  # noqa: E402
 
 MU = "foundation.friction_coefficient"
 C = "load.mass_centre"

@@ -61,10 +61,15 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist import scan, set_param  # noqa: E402
-from jaxhoist.apps.bifurcation import locate_bifurcation, trace_boundary  # noqa: E402
-from jaxhoist.numerics.observables import Observable, contact_function  # noqa: E402
-from jaxhoist.numerics.observables import get as get_observable  # noqa: E402
+from jaxhoist import (  # noqa: E402
+    Observable,
+    contact_function,
+    get_observable,
+    locate_bifurcation,
+    scan,
+    set_param,
+    trace_boundary,
+)
 
 MU = "foundation.friction_coefficient"
 EPS = "foundation.friction.regularisation_velocity"

@@ -41,8 +41,7 @@ import matplotlib.pyplot as plt  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist import scan  # noqa: E402
-from jaxhoist.apps.bifurcation import BifurcationError, find_jumps, locate_bifurcation, trace_boundary  # noqa: E402
+from jaxhoist import BifurcationError, find_jumps, locate_bifurcation, scan, trace_boundary  # noqa: E402
 
 MU = "foundation.friction_coefficient"
 OBSERVABLES = [

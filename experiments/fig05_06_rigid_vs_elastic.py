@@ -26,7 +26,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxhoist  # noqa: E402
-from jaxhoist.numerics.rigid_solve import simulate_rigid  # noqa: E402
+from jaxhoist import simulate_rigid  # noqa: E402
 
 KEYS = ("ts", "position", "euler", "normal_forces", "ground_reaction", "rope_tension", "hoist_work")
 

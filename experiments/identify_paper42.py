@@ -30,13 +30,8 @@ import numpy as np  # noqa: E402
 import scipy.optimize  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.apps.identify import (  # noqa: E402
-    identify,
-    plot_fit,
-    residual_function,
-    synthetic_measurement,
-)
-from jaxhoist.io.measurement import write_measurement  # noqa: E402
+from jaxhoist import identify, residual_function, synthetic_measurement, write_measurement  # noqa: E402
+from jaxhoist.apps.identify import plot_fit  # noqa: E402  (internal: the CLI's plotting helper)
 
 PARAMS = ["mu", "k", "h", "c_l", "b_l"]
 PATHS = {

@@ -48,8 +48,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxhoist  # noqa: E402
-from jaxhoist.numerics.rigid_solve import simulate_rigid  # noqa: E402
-from jaxhoist.physics import statics  # noqa: E402
+from jaxhoist import simulate_rigid  # noqa: E402
 
 KINDS = ("slide", "tip-edge", "tip-corner", "lift", "twist", "none")
 COLOURS = ("tab:blue", "tab:orange", "tab:red", "tab:green", "tab:purple", "0.8")
@@ -62,17 +61,17 @@ def direction(theta: float, alpha: float) -> np.ndarray:
 
 def thresholds(scenario, e: np.ndarray, inside: bool) -> dict[str, float]:
     """|S| [N] at which each condition of (2.9) fails first for a pull along unit `e` (closed forms)."""
-    th = {"lift": statics.lift_threshold(scenario, e), "slide": statics.slide_threshold(scenario, e)}
-    s_tip, kind, _ = statics.tip_threshold(scenario, e)
+    th = {"lift": jaxhoist.lift_threshold(scenario, e), "slide": jaxhoist.slide_threshold(scenario, e)}
+    s_tip, kind, _ = jaxhoist.tip_threshold(scenario, e)
     th[kind or "tip-edge"] = s_tip
     # The friction resultant's line of action crosses the base when B is above it: twist cannot come first.
-    th["twist"] = math.inf if inside else statics.twist_threshold(scenario, e)
+    th["twist"] = math.inf if inside else jaxhoist.twist_threshold(scenario, e)
     return th
 
 
 @jax.jit
 def _utilisation(scenario, forces):
-    return jax.vmap(lambda S: statics.rest_statics(scenario, S).friction_utilisation)(forces)
+    return jax.vmap(lambda S: jaxhoist.rest_statics(scenario, S).friction_utilisation)(forces)
 
 
 def slip_thresholds(scenario, e: np.ndarray, s_hi: np.ndarray, iterations: int = 40) -> np.ndarray:

@@ -47,8 +47,7 @@ import diffrax  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist import get_param, set_param  # noqa: E402
-from jaxhoist.apps.bifurcation import BifurcationError, locate_bifurcation, trace_boundary  # noqa: E402
+from jaxhoist import BifurcationError, get_param, locate_bifurcation, set_param, trace_boundary  # noqa: E402
 
 MU, VL = "foundation.friction_coefficient", "hoist.speed"
 MARGIN = "contact_margin[E]"

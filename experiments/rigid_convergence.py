@@ -71,8 +71,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxhoist  # noqa: E402
-from jaxhoist.numerics import observables as obs  # noqa: E402
-from jaxhoist.numerics.rigid_solve import simulate_rigid  # noqa: E402
+from jaxhoist import get_observable, simulate_rigid  # noqa: E402
 
 KS = (1.5e7, 1.5e8, 1.5e9)
 K_REF = 1.5e7  # [N/m] the paper's k; p_0 of the "p0" variant is the preset's at this k
@@ -276,7 +275,7 @@ def main(argv=None) -> int:
                 print(f"(first elastic call incl. compilation: {first:.1f} s)")
             status = jaxhoist.SolveStatus(int(tr.status)).name.lower()
             r_el = np.asarray(tr.position)[on_grid]
-            t_lift = float(obs.get("liftoff_time")(tr, sc))
+            t_lift = float(get_observable("liftoff_time")(tr, sc))
             t_cmp = t_lift_rig if math.isfinite(t_lift_rig) else t1
             row = {
                 "variant": v,
@@ -293,7 +292,9 @@ def main(argv=None) -> int:
                 "accepted_steps": int(tr.num_accepted_steps),
                 "rejected_steps": int(tr.num_rejected_steps),
                 "wall_s": wall,
-                "detachment_times_s": [float(x) for x in np.asarray(obs.get("detachment_times")(tr, sc))],
+                "detachment_times_s": [
+                    float(x) for x in np.asarray(get_observable("detachment_times")(tr, sc))
+                ],
             }
             rows.append(row)
             if v in ("base", "eps"):

@@ -49,7 +49,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxhoist  # noqa: E402
-from jaxhoist.numerics.rigid_solve import simulate_rigid  # noqa: E402
+from jaxhoist import simulate_rigid  # noqa: E402
 
 PRESETS = ("paper-2.3", "paper-4.1")
 ROPES = ("elastic", "inextensible")

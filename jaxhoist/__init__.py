@@ -6,6 +6,7 @@ from ._errors import ScenarioError as ScenarioError
 from ._errors import SolveStatus as SolveStatus
 from ._version import __version__ as __version__
 from .apps.bifurcation import Bifurcation as Bifurcation
+from .apps.bifurcation import BifurcationError as BifurcationError
 from .apps.bifurcation import Bisection as Bisection
 from .apps.bifurcation import Multisection as Multisection
 from .apps.bifurcation import Newton as Newton
@@ -18,6 +19,8 @@ from .apps.classify import ChangeClass as ChangeClass
 from .apps.classify import classify_change as classify_change
 from .apps.classify import classify_samples as classify_samples
 from .apps.identify import identify as identify
+from .apps.identify import residual_function as residual_function
+from .apps.identify import synthetic_measurement as synthetic_measurement
 from .apps.identify_options import FitOptions as FitOptions
 from .apps.scan import BatchOptions as BatchOptions
 from .apps.scan import Grid as Grid
@@ -26,9 +29,13 @@ from .apps.scan import ScanResult as ScanResult
 from .apps.scan import ScanStatus as ScanStatus
 from .apps.scan import Sweep as Sweep
 from .apps.scan import scan as scan
+from .io.measurement import read_measurement as read_measurement
+from .io.measurement import write_measurement as write_measurement
 from .io.scenario import load_scenario as load_scenario
 from .io.scenario import scenario_from_dict as scenario_from_dict
 from .numerics.observables import Observable as Observable
+from .numerics.observables import contact_function as contact_function
+from .numerics.observables import get as get_observable  # noqa: F401  (re-export under a clearer name)
 from .numerics.options import ElasticFoundation as ElasticFoundation
 from .numerics.options import ElasticRope as ElasticRope
 from .numerics.options import InextensibleRope as InextensibleRope
@@ -43,6 +50,7 @@ from .numerics.rosenbrock import RosenbrockW as RosenbrockW
 from .numerics.solve import Trajectory as Trajectory
 from .numerics.solve import simulate as simulate
 from .physics.elastic import State as State
+from .physics.elastic import vector_field as vector_field
 from .physics.energy import Energy as Energy
 from .physics.equilibrium import initial_state as initial_state
 from .physics.equilibrium import linear_corner_loads as linear_corner_loads
@@ -61,4 +69,8 @@ from .physics.params import Scenario as Scenario
 from .physics.paths import get_param as get_param
 from .physics.paths import param_unit as param_unit
 from .physics.paths import set_param as set_param
+from .physics.statics import lift_threshold as lift_threshold
 from .physics.statics import rest_statics as rest_statics
+from .physics.statics import slide_threshold as slide_threshold
+from .physics.statics import tip_threshold as tip_threshold
+from .physics.statics import twist_threshold as twist_threshold

@@ -19,17 +19,12 @@ except AttributeError:  # older JAX: the XLA flag, read when the backend initial
     os.environ["XLA_FLAGS"] = (flags + " --xla_force_host_platform_device_count=2").strip()
 jax.config.update("jax_enable_x64", True)
 # Strict dtype promotion (issue 11): mixing dtypes (bool or int with float arrays, float32 with float64) is
-# an error rather than a silent promotion; Python scalars stay weakly typed. Opt-in for now
-# (JAXHOIST_STRICT_PROMOTION=1): the issue-11 code passes under it (tests/test_reference_results.py, the
-# elastic presets and a scan with sensitivities), but three products mix dtypes in code of issues 13 and
-# 15: numerics/observables.py `_configuration_time` (bool * int) and physics/rigid.py
-# `solve_contact_system`, `solve_rope_contact_system` (float * bool, `... * four`). Make it the default once
-# they are cast (`four.astype(w_row.dtype)` etc.: the same numbers).
-STRICT_PROMOTION = os.environ.get("JAXHOIST_STRICT_PROMOTION", "0") == "1"
+# an error rather than a silent promotion; Python scalars stay weakly typed. On by default; opt out with
+# JAXHOIST_STRICT_PROMOTION=0 (e.g. to tell a promotion error from a numerical one).
+STRICT_PROMOTION = os.environ.get("JAXHOIST_STRICT_PROMOTION", "1") != "0"
 if STRICT_PROMOTION:
     jax.config.update("jax_numpy_dtype_promotion", "strict")
 
-import functools  # noqa: E402
 import tomllib  # noqa: E402
 from importlib import resources  # noqa: E402
 
@@ -39,26 +34,6 @@ import jax.numpy as jnp  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-import jaxhoist.numerics.rigid_solve  # noqa: E402
-import jaxhoist.numerics.solve  # noqa: E402
-
-
-def _standard_promotion(fn):
-    """`fn` run under JAX's standard dtype promotion: the rigid model's float * bool products (above) are
-    refused by strict promotion; with this, JAXHOIST_STRICT_PROMOTION=1 still checks everything else."""
-
-    @functools.wraps(fn)
-    def wrapped(*args, **kwargs):
-        with jax.numpy_dtype_promotion("standard"):
-            return fn(*args, **kwargs)
-
-    return wrapped
-
-
-if STRICT_PROMOTION:
-    _rigid = _standard_promotion(jaxhoist.numerics.rigid_solve.simulate_rigid)
-    for _mod in (jaxhoist.numerics.rigid_solve, jaxhoist.numerics.solve, jh):
-        _mod.simulate_rigid = _rigid
 
 PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2", "paper-4.3")
 

@@ -93,7 +93,7 @@ def integrate(f, solver, ts: Float[Array, " n_t"], y0, args, dt: float):
         h = span / n
 
         def body(i, c):
-            return rk_step(f, tableau, t0 + i * h, c[0], c[1], h, args)
+            return rk_step(f, tableau, t0 + i.astype(h.dtype) * h, c[0], c[1], h, args)  # strict promotion
 
         y, fy = jax.lax.fori_loop(0, n.astype(jnp.int32), body, (y, fy))
         return (y, fy), (y, n.astype(jnp.int32))

@@ -216,7 +216,8 @@ def _impact_times(traj, scenario):
 
 def _configuration_time(traj, scenario):
     on = contact_function(traj, scenario) > 0.0
-    code = jnp.sum(on * jnp.array([1, 2, 4, 8]), axis=-1)  # bit i: corner i (D, E, F, H) in contact
+    bits = jnp.array([1, 2, 4, 8])
+    code = jnp.sum(on.astype(bits.dtype) * bits, axis=-1)  # bit i: corner i (D, E, F, H) in contact
     w = _trapezoid_weights(traj.ts)
     return jnp.stack([jnp.sum(jnp.where(code == m, w, 0.0)) for m in range(16)])
 

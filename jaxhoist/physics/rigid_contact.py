@@ -389,7 +389,8 @@ def solve_contact_system(jacobians, Minv, P, s_rows, target, mass, rcond):
     A = mass * (s[:, None] * K @ _block_diag(P)) + jnp.diag(1.0 - s)
     rhs = mass * s * target.reshape(12)
     four = jnp.all(s_rows[:, 2] > 0)
-    w_row = jnp.zeros(12).at[jnp.array([2, 5, 8, 11])].set(jnp.asarray(statics._W)) * four
+    w_row = jnp.zeros(12).at[jnp.array([2, 5, 8, 11])].set(jnp.asarray(statics._W))
+    w_row = w_row * four.astype(w_row.dtype)  # bool -> 0.0/1.0: strict dtype promotion
     A = jnp.concatenate([A, w_row[None, :]], axis=0)
     rhs = jnp.concatenate([rhs, jnp.zeros(1)])
     return jnp.linalg.pinv(A, rtol=rcond) @ rhs
@@ -419,7 +420,8 @@ def solve_rope_contact_system(jacobians, Minv, P, s_rows, target, g_rope, m0, rh
     )
     rhs = jnp.concatenate([s * target.reshape(12), jnp.reshape(rhs_rope, (1,))])
     four = jnp.all(s_rows[:, 2] > 0)
-    w_row = jnp.zeros(13).at[jnp.array([2, 5, 8, 11])].set(jnp.asarray(statics._W)) * four
+    w_row = jnp.zeros(13).at[jnp.array([2, 5, 8, 11])].set(jnp.asarray(statics._W))
+    w_row = w_row * four.astype(w_row.dtype)  # bool -> 0.0/1.0: strict dtype promotion
     A = jnp.concatenate([mass * A, w_row[None, :]], axis=0)
     rhs = jnp.concatenate([mass * rhs, jnp.zeros(1)])
     x = jnp.linalg.pinv(A, rtol=rcond) @ rhs
