@@ -10,6 +10,7 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from .._deprecated import warn_moved
 from .._errors import ScenarioError, SolveStatus, forward_mode_hint, require_x64
 from ..physics import energy as energy_mod
 from ..physics import kinematics
@@ -208,6 +209,56 @@ def saved_times(scenario: Scenario, t1, ts, n_save: int, xp=np):
 
 _LEGACY_SOLVER_KW = ("solver", "rtol", "atol", "dt0", "max_steps", "adjoint", "progress", "fixed_step")
 
+#: The new spelling of each earlier keyword of `simulate` (for the deprecation warning).
+_NEW_SPELLING = {
+    "solver": "options=SolverOptions(solver)",
+    "rtol": "options=SolverOptions(rtol=...)",
+    "atol": "options=SolverOptions(atol=...)",
+    "dt0": "options=SolverOptions(dt0=...)",
+    "max_steps": "options=SolverOptions(max_steps=...)",
+    "adjoint": "options=SolverOptions(adjoint=diffrax.ForwardMode() | diffrax.RecursiveCheckpointAdjoint())",
+    "progress": "options=SolverOptions(progress_meter=diffrax.TextProgressMeter())",
+    "fixed_step": "options=SolverOptions(stepsize_controller=diffrax.ConstantStepSize(), dt0=...)",
+    "rope": "model=RigidGround(rope=ElasticRope() | InextensibleRope())",
+}
+
+
+def convert_legacy(
+    model: AbstractModel | str, options: SolverOptions | None, old: dict
+) -> tuple[AbstractModel, SolverOptions | None, dict[str, str]]:
+    """`(model, options, moved)` from `simulate`'s earlier keywords in `old` (the solver block `solver, rtol,
+    atol, dt0, max_steps, adjoint, progress, fixed_step` and `rope`) and the earlier model strings
+    "elastic"/"rigid", built exactly as the earlier `simulate` built them; `moved` (old name -> new
+    spelling) is for the one `DeprecationWarning`, which the caller gives once nothing can fail any more.
+    `options` stays None where neither it nor a solver keyword is given.
+
+    **Raises** `TypeError` for an unknown keyword, `ScenarioError` for an old keyword given with the object
+    that replaces it, an unknown model or rope name, or a solver keyword the rigid model does not read.
+    """
+    old = dict(old)
+    rope = old.pop("rope", None)
+    unknown = sorted(set(old) - set(_LEGACY_SOLVER_KW))
+    if unknown:
+        raise TypeError(f"simulate() got unexpected keyword argument(s): {', '.join(unknown)}")
+    moved = {k: _NEW_SPELLING[k] for k in old}
+    if rope is not None:
+        moved["rope"] = _NEW_SPELLING["rope"]
+    if isinstance(model, str):
+        moved["model"] = f"model={'RigidGround()' if model == 'rigid' else 'ElasticFoundation()'}"
+    model = as_model(model, rope)
+    if options is not None and old:
+        raise ScenarioError(f"give either options or the keywords {', '.join(sorted(old))}, not both")
+    if options is None and old:
+        if isinstance(model, RigidGround):
+            extra = set(old) - {"rtol", "atol", "max_steps"}
+            if extra and any(old[k] not in (None, False, "reverse") for k in extra):
+                raise ScenarioError("model='rigid' takes only t1, ts, n_save, rtol, atol, max_steps and rope")
+            kw = {k: v for k, v in old.items() if k in ("rtol", "atol", "max_steps")}
+            options = SolverOptions(diffrax.Tsit5(), **kw)  # for its default tolerances 1e-6, 1e-8
+        else:
+            options = SolverOptions(**old)
+    return model, options, moved
+
 
 def simulate(
     scenario: Scenario,
@@ -223,9 +274,9 @@ def simulate(
     """Simulate a lift from rest at t = 0 to `t1`.
 
     Works under `jax.jit`, `jax.vmap` over any scenario leaf, `jax.grad` (the default adjoint) and
-    `jax.jacfwd` (`SolverOptions(adjoint=diffrax.ForwardMode())`, or `adjoint="forward"`), for the elastic
-    model. For derivatives over long spans pass `solver=diffrax.Tsit5()`: through the default Rosenbrock-W
-    solver they are not reliable yet at high friction (see `RosenbrockW`).
+    `jax.jacfwd` (`SolverOptions(adjoint=diffrax.ForwardMode())`), for the elastic model. For derivatives
+    over long spans pass `options=SolverOptions(diffrax.Tsit5())`: through the default Rosenbrock-W solver
+    they are not reliable yet at high friction (see `RosenbrockW`).
 
     **Arguments**
     - `scenario`: a `Scenario` (see `load_scenario`).
@@ -234,14 +285,15 @@ def simulate(
     - `model`: `ElasticFoundation()` (paper §3, the default: one compiled, differentiable solve) or
       `RigidGround(rope=ElasticRope() | InextensibleRope())` (paper §2, the event-driven reference
       `simulate_rigid`: host-side phase loop, not differentiable or vmappable; it returns a
-      `RigidTrajectory` with the same output names plus `impact_loss` and the phase log). The strings
-      "elastic" and "rigid" are accepted too.
+      `RigidTrajectory` with the same output names plus `impact_loss` and the phase log). The earlier
+      strings "elastic" and "rigid" still work, with a `DeprecationWarning`.
     - `options`: `SolverOptions` (solver, step-size controller, adjoint, dt0, max_steps, progress meter).
       The rigid model reads only its tolerances and step budget.
     - `throw`: raise if the solve fails (max steps, non-finite state); with False, read `Trajectory.status`.
-    - `**solver_kw`: the earlier keywords `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`,
-      `progress`, `fixed_step` (converted to `SolverOptions`; not together with `options`) and `rope`
-      ("elastic" or "inextensible", rigid model only).
+    - `**solver_kw`: deprecated. The earlier keywords `solver`, `rtol`, `atol`, `dt0`, `max_steps`,
+      `adjoint`, `progress`, `fixed_step` (converted to `SolverOptions` exactly as before; not together with
+      `options`) and `rope` ("elastic" or "inextensible", rigid model only; converted to `RigidGround`)
+      still work, with one `DeprecationWarning` naming the new spelling.
 
     **Returns** a `Trajectory` (elastic model) or a `RigidTrajectory` (rigid model).
 
@@ -249,20 +301,11 @@ def simulate(
     and (with `throw=True`) an `EquinoxRuntimeError` naming the failure.
     """
     require_x64()
-    rope = solver_kw.pop("rope", None)
-    unknown = sorted(set(solver_kw) - set(_LEGACY_SOLVER_KW))
-    if unknown:
-        raise TypeError(f"simulate() got unexpected keyword argument(s): {', '.join(unknown)}")
-    model = as_model(model, rope)
-    if options is not None and solver_kw:
-        raise ScenarioError(f"give either options or the keywords {', '.join(sorted(solver_kw))}, not both")
+    model, options, moved = convert_legacy(model, options, solver_kw)
     if isinstance(model, RigidGround):
         if options is None:
-            extra = set(solver_kw) - {"rtol", "atol", "max_steps"}
-            if extra and any(solver_kw[k] not in (None, False, "reverse") for k in extra):
-                raise ScenarioError("model='rigid' takes only t1, ts, n_save, rtol, atol, max_steps and rope")
-            kw = {k: v for k, v in solver_kw.items() if k in ("rtol", "atol", "max_steps")}
-            options = SolverOptions(diffrax.Tsit5(), **kw)  # for its default tolerances 1e-6, 1e-8
+            options = SolverOptions(diffrax.Tsit5())  # for its default tolerances 1e-6, 1e-8
+        warn_moved("simulate", moved)
         rigid_options = RigidOptions(
             rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
             atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
@@ -281,8 +324,9 @@ def simulate(
     scenario.check()
     scenario = as_float64_leaves(scenario)
     if options is None:
-        options = SolverOptions(**solver_kw)
+        options = SolverOptions()
     t1, ts = saved_times(scenario, t1, ts, n_save, jnp)
+    warn_moved("simulate", moved)
     ts = jnp.asarray(ts, dtype=jnp.float64)
     with forward_mode_hint():  # jacfwd through the reverse adjoint: say to pass adjoint="forward"
         traj = _solve_jit(scenario, ts, options)
