@@ -285,6 +285,7 @@ def test_model_switch_and_cli_reach_the_rigid_driver(slide_run, tmp_path):
     opts = jh.SolverOptions(rtol=1e-8, atol=1e-9)
     tr = jh.simulate(sc, T1, n_save=N_SAVE, model=jh.RigidGround(), options=opts)
     assert isinstance(tr, jh.RigidTrajectory)
+    assert isinstance(tr, jh.Trajectory) and bool(tr.ok)  # one trajectory type: the rigid one is a subclass
     np.testing.assert_array_equal(np.asarray(tr.position), np.asarray(ref.position))
     with pytest.raises(jh.ScenarioError, match="model"):
         jh.simulate(sc, T1, model="rigid", fixed_step=True, dt0=1e-3)

@@ -15,60 +15,12 @@ from .._errors import ScenarioError, SolveStatus, forward_mode_hint, require_x64
 from ..physics import energy as energy_mod
 from ..physics import kinematics
 from ..physics.elastic import Constants, State, snapshot, vector_field
-from ..physics.energy import Energy
 from ..physics.equilibrium import initial_state
 from ..physics.params import Scenario
 from .options import AbstractModel, ElasticFoundation, RigidGround, SolverOptions, as_model
 from .rigid_options import RigidOptions
-from .rigid_solve import RigidTrajectory, simulate_rigid
-
-
-class Trajectory(eqx.Module):
-    """The outputs of one solve at the saved times `ts` (leading axis n_t; in a vmap, a batch axis first).
-
-    - `ts`: saved times [s].
-    - `position`, `velocity`: mass centre C in world axes [m], [m/s].
-    - `euler`: (φ, ψ, ϑ) [rad], R = R_Z(ψ) R_Y(ϑ) R_X(φ); φ and ψ unwrapped along time.
-    - `angular_velocity`: ω in body axes ξηζ [rad/s].
-    - `corners`: D, E, F, H in world axes [m], shape (n_t, 4, 3).
-    - `normal_forces`: N_i [N], (n_t, 4); `friction_forces`: T_i in world axes [N], (n_t, 4, 3).
-    - `ground_reaction`: R = Σ N_i [N]; `rope_tension`: S [N].
-    - `tip_position`: boom tip A [m].
-    - `energy`: `Energy` terms [J]; `hoist_work`, `damping_loss`, `friction_work`: accumulated [J].
-    - `states`: the raw `State` at each saved time.
-    - `status`: a `SolveStatus` code (0 = ok); `num_accepted_steps`, `num_rejected_steps`.
-    """
-
-    ts: Float[Array, " n_t"]
-    position: Float[Array, "n_t 3"]
-    velocity: Float[Array, "n_t 3"]
-    euler: Float[Array, "n_t 3"]
-    angular_velocity: Float[Array, "n_t 3"]
-    corners: Float[Array, "n_t 4 3"]
-    normal_forces: Float[Array, "n_t 4"]
-    friction_forces: Float[Array, "n_t 4 3"]
-    ground_reaction: Float[Array, " n_t"]
-    rope_tension: Float[Array, " n_t"]
-    tip_position: Float[Array, "n_t 3"]
-    energy: Energy
-    hoist_work: Float[Array, " n_t"]
-    damping_loss: Float[Array, " n_t"]
-    friction_work: Float[Array, " n_t"]
-    states: State
-    status: Int[Array, ""]
-    num_accepted_steps: Int[Array, ""]
-    num_rejected_steps: Int[Array, ""]
-
-    @property
-    def ok(self):
-        """True where the solve reached t1 with a finite state."""
-        return self.status == SolveStatus.OK
-
-    def energy_residual(self) -> Float[Array, "*batch n_t"]:
-        """E(t) - E(0) - [W_hoist - D_damping - W_friction](t) [J]: zero up to the solver error."""
-        mech = self.energy.mechanical
-        supplied = self.hoist_work - self.damping_loss - self.friction_work
-        return (mech - mech[..., :1]) - (supplied - supplied[..., :1])
+from .rigid_solve import simulate_rigid
+from .trajectory import Trajectory as Trajectory
 
 
 def _status(result, y1: State) -> Int[Array, ""]:
@@ -270,7 +222,7 @@ def simulate(
     options: SolverOptions | None = None,
     throw: bool = True,
     **solver_kw,
-) -> Trajectory | RigidTrajectory:
+) -> Trajectory:
     """Simulate a lift from rest at t = 0 to `t1`.
 
     Works under `jax.jit`, `jax.vmap` over any scenario leaf, `jax.grad` (the default adjoint) and
@@ -295,7 +247,8 @@ def simulate(
       `options`) and `rope` ("elastic" or "inextensible", rigid model only; converted to `RigidGround`)
       still work, with one `DeprecationWarning` naming the new spelling.
 
-    **Returns** a `Trajectory` (elastic model) or a `RigidTrajectory` (rigid model).
+    **Returns** a `Trajectory`: for the rigid model its subclass `RigidTrajectory`, which adds `impact_loss`
+    and the phase log.
 
     **Raises** `ScenarioError` for invalid input (before compiling), `Float64Error` without x64,
     and (with `throw=True`) an `EquinoxRuntimeError` naming the failure.
