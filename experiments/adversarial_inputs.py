@@ -264,7 +264,9 @@ def api_cases(paper42):
     def jacfwd():
         def f(x):
             sc = paper42.replace(**{mu: x})
-            return jh.simulate(sc, 0.05, n_save=3, max_steps=10, throw=False).position[-1]
+            return jh.simulate(
+                sc, 0.05, n_save=3, options=jh.SolverOptions(max_steps=10), throw=False
+            ).position[-1]
 
         import jaxhoist.numerics.solve as solve_mod
 

@@ -132,7 +132,9 @@ def variant_scenario(sc, k, eps, p0):
 
 def run_elastic(sc, ts, max_steps):
     t0 = time.perf_counter()
-    tr = jax.block_until_ready(jaxhoist.simulate(sc, ts=ts, throw=False, max_steps=max_steps))
+    tr = jax.block_until_ready(
+        jaxhoist.simulate(sc, ts=ts, throw=False, options=jaxhoist.SolverOptions(max_steps=max_steps))
+    )
     return tr, time.perf_counter() - t0
 
 

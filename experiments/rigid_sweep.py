@@ -325,7 +325,9 @@ def elastic_check(
             }
         )
         t0 = time.perf_counter()
-        el = jax.block_until_ready(jaxhoist.simulate(el_sc, ts=ts, throw=False, max_steps=4_000_000))
+        el = jax.block_until_ready(
+            jaxhoist.simulate(el_sc, ts=ts, throw=False, options=jaxhoist.SolverOptions(max_steps=4_000_000))
+        )
         wall = time.perf_counter() - t0
         d = np.linalg.norm(np.asarray(el.position) - np.asarray(rig.position), axis=-1)
         row = dict(

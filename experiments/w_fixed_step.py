@@ -26,9 +26,8 @@ def main(argv=None):
     args = p.parse_args(argv)
     for mu in (float(x) for x in args.mu.split(",")):
         sc = jh.load_scenario("paper-4.2").replace(**{"foundation.friction_coefficient": mu})
-        ref = jh.simulate(
-            sc, args.t1, n_save=11, solver=diffrax.Tsit5(), rtol=1e-10, atol=1e-12, max_steps=10**6
-        )
+        tight = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-10, atol=1e-12, max_steps=10**6)
+        ref = jh.simulate(sc, args.t1, n_save=11, options=tight)
         row = []
         for dt in (float(x) for x in args.dt.split(",")):
             opts = jh.SolverOptions(jh.RosenbrockW(), diffrax.ConstantStepSize(), dt0=dt, max_steps=10**6)

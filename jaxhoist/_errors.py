@@ -84,8 +84,8 @@ _MESSAGES = {
 
 FORWARD_MODE_HINT = (
     "forward-mode differentiation (jax.jacfwd, jax.jvp) cannot pass through the default reverse-mode "
-    'adjoint of the solve: call simulate(..., adjoint="forward") (or SolverOptions(adjoint="forward")) '
-    "for jacfwd/jvp; keep the default for jax.grad"
+    'adjoint of the solve: call simulate(..., options=SolverOptions(adjoint="forward")) for jacfwd/jvp; '
+    "keep the default for jax.grad"
 )
 
 

@@ -3,7 +3,7 @@
 Compile once, reuse: the fixtures below derive every scenario from the `paper-4.2` preset (so the static
 fields `name` and `t1` and the pytree structure are the same) and change leaf *values* only
 (`Scenario.replace`, `eqx.tree_at`). Tests that simulate pass `N_SAVE` saved times and the shared
-`SOLVE_KW`, so the jit cache of the solve core hits across tests and test files. Only the friction law
+`SOLVE_OPTIONS`, so the jit cache of the solve core hits across tests and test files. Only the friction law
 (`RegularisedCoulomb` in the preset, `BristleFriction` in `paper42_bristle`) changes the structure.
 """
 
@@ -43,12 +43,12 @@ N_SAVE = 201
 # Shared solver settings (static arguments of the jitted core: a change recompiles). Tsit5 at rtol 1e-8 keeps
 # the solver error well below every physical tolerance asserted with them (the default Rosenbrock-W solver is
 # order 3 and meant for loose tolerances; it has tests of its own in test_rosenbrock.py).
-SOLVE_KW = dict(solver=diffrax.Tsit5(), rtol=1e-8, atol=1e-9)
+SOLVE_OPTIONS = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-8, atol=1e-9)
 
 
 def run(scenario: jh.Scenario, ts, **kw) -> jh.Trajectory:
     """`simulate` with the shared solver settings on the given saved times (len(ts) should be N_SAVE)."""
-    return jh.simulate(scenario, ts=jnp.asarray(ts, dtype=jnp.float64), **{**SOLVE_KW, **kw})
+    return jh.simulate(scenario, ts=jnp.asarray(ts, dtype=jnp.float64), options=SOLVE_OPTIONS, **kw)
 
 
 def with_bristle(scenario: jh.Scenario, **kw) -> jh.Scenario:

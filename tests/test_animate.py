@@ -22,9 +22,9 @@ from jaxhoist.apps import cli  # noqa: E402
 from jaxhoist.io import results  # noqa: E402
 
 try:  # share the compiled core with the physics tests (same saved-time count and solver options)
-    from conftest import N_SAVE, SOLVE_KW
+    from conftest import N_SAVE, SOLVE_OPTIONS
 except ImportError:  # pragma: no cover - running this file alone without the shared conftest
-    N_SAVE, SOLVE_KW = 201, dict(rtol=1e-8, atol=1e-9)
+    N_SAVE, SOLVE_OPTIONS = 201, jh.SolverOptions(rtol=1e-8, atol=1e-9)
 
 T1 = 1.0  # [s]: corners D and H of paper-4.2 leave the ground within 0.3 s
 
@@ -33,7 +33,7 @@ T1 = 1.0  # [s]: corners D and H of paper-4.2 leave the ground within 0.3 s
 def result_dir(tmp_path_factory):
     """A saved paper-4.2 result over T1 (N_SAVE saved times), as `jaxhoist simulate` writes it."""
     scenario = jh.load_scenario("paper-4.2")
-    traj = jh.simulate(scenario, ts=jnp.linspace(0.0, T1, N_SAVE), **SOLVE_KW)
+    traj = jh.simulate(scenario, ts=jnp.linspace(0.0, T1, N_SAVE), options=SOLVE_OPTIONS)
     out = tmp_path_factory.mktemp("anim") / "paper-4.2"
     results.save_trajectory(out / "trajectory", traj, scenario, options={"model": "elastic"})
     return out

@@ -16,9 +16,9 @@ from jaxhoist.apps import plots  # noqa: E402
 from jaxhoist.io import results  # noqa: E402
 
 try:  # share the compiled core with the physics tests (same saved-time count and solver options)
-    from conftest import N_SAVE, SOLVE_KW
+    from conftest import N_SAVE, SOLVE_OPTIONS
 except ImportError:  # pragma: no cover - running this file alone without the shared conftest
-    N_SAVE, SOLVE_KW = 201, dict(rtol=1e-8, atol=1e-9)
+    N_SAVE, SOLVE_OPTIONS = 201, jh.SolverOptions(rtol=1e-8, atol=1e-9)
 
 T1 = 1.0  # [s]: corners D and H of paper-4.2 leave the ground within 0.3 s, so every plot has content
 
@@ -27,7 +27,7 @@ T1 = 1.0  # [s]: corners D and H of paper-4.2 leave the ground within 0.3 s, so 
 def traj42():
     scenario = jh.load_scenario("paper-4.2")
     ts = jnp.linspace(0.0, T1, N_SAVE)
-    return scenario, jh.simulate(scenario, ts=ts, **SOLVE_KW)
+    return scenario, jh.simulate(scenario, ts=ts, options=SOLVE_OPTIONS)
 
 
 def test_npz_round_trip_preserves_arrays_units_and_scenario(traj42, tmp_path):

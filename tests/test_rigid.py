@@ -275,15 +275,17 @@ def test_errors_are_raised_not_guessed():
 
 
 def test_model_switch_and_cli_reach_the_rigid_driver(slide_run, tmp_path):
-    """`simulate(..., model="rigid")` and `jaxhoist simulate --model rigid` run the same phase driver: the
-    same sliding motion (bit for bit: same solver, same settings), and the CLI's energy residual includes
+    """`simulate(..., model=RigidGround())` and `jaxhoist simulate --model rigid` run the same phase driver:
+    the same sliding motion (bit for bit: same solver, same settings), and the CLI's energy residual includes
     the impact losses."""
     from jaxhoist.apps.cli import main
     from jaxhoist.io.results import load_trajectory
 
     sc, ref = slide_run
-    tr = jh.simulate(sc, T1, n_save=N_SAVE, model="rigid", rtol=1e-8, atol=1e-9)
+    opts = jh.SolverOptions(rtol=1e-8, atol=1e-9)
+    tr = jh.simulate(sc, T1, n_save=N_SAVE, model=jh.RigidGround(), options=opts)
     assert isinstance(tr, jh.RigidTrajectory)
+    assert isinstance(tr, jh.Trajectory) and bool(tr.ok)  # one trajectory type: the rigid one is a subclass
     np.testing.assert_array_equal(np.asarray(tr.position), np.asarray(ref.position))
     with pytest.raises(jh.ScenarioError, match="model"):
         jh.simulate(sc, T1, model="rigid", fixed_step=True, dt0=1e-3)

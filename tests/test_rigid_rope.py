@@ -189,14 +189,22 @@ def test_rope_switch_errors():
 
 
 def test_model_switch_reaches_the_inextensible_rope(ramped_lift):
-    """`jaxhoist.simulate(..., model="rigid", rope="inextensible")` is `simulate_rigid(..., rope=...)`."""
+    """`jaxhoist.simulate(..., model=RigidGround(rope=InextensibleRope()))` is
+    `simulate_rigid(..., rope=...)`; the earlier strings give the same lift, with a `DeprecationWarning`."""
     sc, ref = ramped_lift
     # simulate and simulate_rigid share their defaults (max_steps is static in the compiled solve: the same
     # value reuses it).
-    tr = jh.simulate(sc, T1, n_save=N_SAVE, model="rigid", rope="inextensible", rtol=1e-8, atol=1e-9)
+    model = jh.RigidGround(rope=jh.InextensibleRope())
+    tr = jh.simulate(sc, T1, n_save=N_SAVE, model=model, options=jh.SolverOptions(rtol=1e-8, atol=1e-9))
     np.testing.assert_array_equal(np.asarray(tr.position), np.asarray(ref.position))
     assert [p.rope for p in tr.phases] == [p.rope for p in ref.phases]
     assert math.isfinite(float(tr.rope_tension[-1]))
+    # The earlier spelling: one DeprecationWarning, the same lift bit for bit.
+    with pytest.warns(DeprecationWarning, match="rope -> model=RigidGround") as rec:
+        old = jh.simulate(sc, T1, n_save=N_SAVE, model="rigid", rope="inextensible", rtol=1e-8, atol=1e-9)
+    assert len(rec) == 1
+    np.testing.assert_array_equal(np.asarray(old.position), np.asarray(tr.position))
+    np.testing.assert_array_equal(np.asarray(old.impact_loss), np.asarray(tr.impact_loss))
 
 
 def test_cli_runs_the_inextensible_rope(ramped_lift, tmp_path):

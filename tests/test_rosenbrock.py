@@ -12,7 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
-from conftest import N_SAVE, SOLVE_KW
+from conftest import N_SAVE, SOLVE_OPTIONS
 
 import jaxhoist as jh
 from jaxhoist.numerics.rosenbrock import ROS34PW2, RosenbrockW, w_step
@@ -145,7 +145,7 @@ def test_default_solver_is_rosenbrock_w():
 def test_default_agrees_with_tight_reference(paper42, default_run):
     """The default solve of paper-4.2 over 2 s (corner lift, drag) is within 0.1 mm and 1e-4 rad of Tsit5 at
     rtol 1e-8, and within 0.1 % of its rope tension, at every saved time."""
-    ref = jh.simulate(paper42, ts=TS, **SOLVE_KW)
+    ref = jh.simulate(paper42, ts=TS, options=SOLVE_OPTIONS)
     assert int(default_run.status) == 0
     assert float(jnp.max(jnp.abs(default_run.position - ref.position))) < 1e-4
     assert float(jnp.max(jnp.abs(default_run.euler - ref.euler))) < 1e-4
@@ -209,5 +209,5 @@ def test_stiff_member_solves(paper42):
     base = jh.simulate(paper42, ts=ts)
     steps_w = int(w.num_accepted_steps + w.num_rejected_steps)
     assert steps_w < 4 * int(base.num_accepted_steps + base.num_rejected_steps)
-    t5 = jh.simulate(stiff, ts=ts, solver=diffrax.Tsit5(), max_steps=20_000, throw=False)
+    t5 = jh.simulate(stiff, ts=ts, options=jh.SolverOptions(diffrax.Tsit5(), max_steps=20_000), throw=False)
     assert steps_w < 0.1 * int(t5.num_accepted_steps + t5.num_rejected_steps)

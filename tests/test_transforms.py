@@ -16,7 +16,9 @@ from jaxhoist.physics.params import get_leaf
 # two saved times [0, t1] and rtol 1e-12.
 # Tsit5 at a tight tolerance: these tests check the transforms of the explicit diffrax path against
 # differences and single solves; the default Rosenbrock-W solver has its own in test_rosenbrock.py.
-TIGHT = dict(solver=diffrax.Tsit5(), rtol=1e-12, atol=1e-14)
+TIGHT = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-12, atol=1e-14)
+TIGHT_FORWARD = jh.SolverOptions(diffrax.Tsit5(), adjoint=diffrax.ForwardMode(), rtol=1e-12, atol=1e-14)
+LOOSE = jh.SolverOptions(rtol=1e-4, atol=1e-6)
 PATHS = ("foundation.friction_coefficient", "foundation.stiffness", "rope.stiffness")  # μ, k, c_l
 
 
@@ -24,7 +26,7 @@ def final_x(scenario, x, t1, adjoint="reverse", throw=True):
     """X_C(t1) [m] of paper-4.2 with (μ, k, c_l) = x."""
     sc = scenario.replace(**{p: x[i] for i, p in enumerate(PATHS)})
     ts = jnp.stack([jnp.zeros(()), jnp.asarray(t1)])
-    tr = jh.simulate(sc, ts=ts, adjoint=adjoint, throw=throw, **TIGHT)
+    tr = jh.simulate(sc, ts=ts, options=TIGHT_FORWARD if adjoint == "forward" else TIGHT, throw=throw)
     return tr.position[-1, 0]
 
 
@@ -59,7 +61,7 @@ def test_vmap_over_mu_equals_single_solves(paper42):
 
     def one(mu):
         sc = paper42.replace(**{"foundation.friction_coefficient": mu})
-        return jh.simulate(sc, ts=ts, throw=False, **TIGHT)
+        return jh.simulate(sc, ts=ts, throw=False, options=TIGHT)
 
     batch = jax.vmap(one)(mus)
     assert np.all(np.asarray(batch.status) == jh.SolveStatus.OK)
@@ -127,7 +129,7 @@ def _mu(s):
 def test_no_recompile_when_leaf_values_change(paper42, guarded_core):
     """One trace serves every call that changes only values: leaves through `Scenario.replace` and
     `eqx.tree_at` (float64 arrays), t1 as a float, numpy or JAX scalar, saved times of the same length."""
-    kw = dict(n_save=3, rtol=1e-4, atol=1e-6)
+    kw = dict(n_save=3, options=LOOSE)
     jh.simulate(paper42, 0.05, **kw)
     jh.simulate(
         paper42.replace(
@@ -144,15 +146,15 @@ def test_no_recompile_when_leaf_values_change(paper42, guarded_core):
     jh.simulate(eqx.tree_at(_mu, paper42, np.asarray(0.35)), 0.05, **kw)
     jh.simulate(paper42, np.float64(0.04), **kw)
     jh.simulate(paper42, jnp.asarray(0.06), **kw)
-    jh.simulate(paper42, ts=np.array([0.0, 0.01, 0.03]), rtol=1e-4, atol=1e-6)
+    jh.simulate(paper42, ts=np.array([0.0, 0.01, 0.03]), options=LOOSE)
     # The guard is live: a new shape of the saved times must retrace, and does.
     with pytest.raises(RuntimeError, match="traced"):
-        jh.simulate(paper42, 0.05, n_save=4, rtol=1e-4, atol=1e-6)
+        jh.simulate(paper42, 0.05, n_save=4, options=LOOSE)
 
 
 @pytest.mark.parametrize("value", [0.35, jnp.asarray(0.35)], ids=["python-float", "weak-f64"])
 def test_no_recompile_for_float_or_weak_leaf(paper42, guarded_core, value):
-    kw = dict(n_save=3, rtol=1e-4, atol=1e-6)
+    kw = dict(n_save=3, options=LOOSE)
     jh.simulate(paper42, 0.05, **kw)
     jh.simulate(eqx.tree_at(_mu, paper42, value), 0.05, **kw)
 
@@ -163,7 +165,7 @@ def test_no_recompile_for_float_or_weak_leaf(paper42, guarded_core, value):
 def test_max_steps_reported_or_raised(paper42):
     """A step budget of 16 cannot reach t1 = 0.5 s (thousands of steps): status MAX_STEPS with throw=False,
     an error naming max_steps with throw=True."""
-    kw = dict(n_save=3, max_steps=16)
+    kw = dict(n_save=3, options=jh.SolverOptions(max_steps=16))
     tr = jh.simulate(paper42, 0.5, throw=False, **kw)
     assert int(tr.status) == jh.SolveStatus.MAX_STEPS
     assert not bool(tr.ok)
@@ -181,3 +183,40 @@ def test_nan_leaf_rejected_before_compiling(paper42, monkeypatch):
             jh.simulate(paper42.replace(**{path: float("nan")}), 0.1)
     with pytest.raises(jh.ScenarioError, match=r"load\.mass_centre"):
         jh.simulate(paper42.replace(**{"load.mass_centre": [1.0, float("nan"), 1.0]}), 0.1)
+
+
+# ---------------------------------------------------------------------------- earlier keywords
+
+
+def test_earlier_keywords_warn_once_and_match(paper42):
+    """`simulate`'s earlier solver keywords and model strings still work: one `DeprecationWarning` that
+    names the new spelling and points at the caller, and the same result bit for bit."""
+    new = jh.simulate(paper42, 0.05, n_save=3, options=LOOSE)
+    with pytest.warns(DeprecationWarning) as rec:
+        old = jh.simulate(paper42, 0.05, n_save=3, model="elastic", rtol=1e-4, atol=1e-6)
+    assert len(rec) == 1
+    assert rec[0].filename == __file__
+    msg = str(rec[0].message)
+    assert "rtol -> options=SolverOptions(rtol=...)" in msg and "model -> model=ElasticFoundation()" in msg
+    assert bool(eqx.tree_equal(old, new))
+    # The conversion itself, keyword by keyword (no solve): the same options as the new spelling.
+    conv = solve_mod.convert_legacy
+    model, opts, moved = conv("rigid", None, dict(rope="inextensible", rtol=1e-8, max_steps=10))
+    assert model == jh.RigidGround(rope=jh.InextensibleRope())
+    assert bool(eqx.tree_equal(opts, jh.SolverOptions(diffrax.Tsit5(), rtol=1e-8, max_steps=10)))
+    assert set(moved) == {"model", "rope", "rtol", "max_steps"}
+    old_kw = dict(solver=diffrax.Tsit5(), adjoint="forward", fixed_step=True, dt0=1e-3, progress=True)
+    _, opts, _ = conv(jh.ElasticFoundation(), None, old_kw)
+    want = jh.SolverOptions(
+        diffrax.Tsit5(),
+        diffrax.ConstantStepSize(),
+        diffrax.ForwardMode(),
+        dt0=1e-3,
+        progress_meter=diffrax.TextProgressMeter(),
+    )
+    assert bool(eqx.tree_equal(opts, want))
+    assert conv(jh.ElasticFoundation(), None, {}) == (jh.ElasticFoundation(), None, {})
+    with pytest.raises(jh.ScenarioError, match="either options"):
+        conv(jh.ElasticFoundation(), LOOSE, dict(rtol=1e-3))
+    with pytest.raises(TypeError, match="rtoll"):
+        conv(jh.ElasticFoundation(), None, dict(rtoll=1e-3))

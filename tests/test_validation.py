@@ -319,12 +319,14 @@ def test_bad_times_and_options(paper42):
             (dict(t1=float("nan")), "t1"),
             (dict(ts=np.array([0.1, 0.2])), "ts"),
             (dict(ts=np.array([0.0, 0.2, 0.1])), "ts"),
-            (dict(t1=1.0, rtol=-1e-6), "rtol"),
-            (dict(t1=1.0, max_steps=0), "max_steps"),
-            (dict(t1=1.0, adjoint="backward"), "adjoint"),
+            (dict(t1=1.0, options=dict(rtol=-1e-6)), "rtol"),
+            (dict(t1=1.0, options=dict(max_steps=0)), "max_steps"),
+            (dict(t1=1.0, options=dict(adjoint="backward")), "adjoint"),
             (dict(t1=1.0, n_save=1), "n_save"),
         ]:
             with pytest.raises(jh.ScenarioError, match=word):
+                if "options" in kw:
+                    kw = {**kw, "options": jh.SolverOptions(**kw["options"])}
                 jh.simulate(paper42, **kw)
 
 
@@ -582,7 +584,9 @@ def test_forward_mode_through_a_reverse_adjoint_says_what_to_do():
 def test_jacfwd_through_simulate_says_adjoint_forward(paper42):
     def final_x(mu):
         sc = paper42.replace(**{"foundation.friction_coefficient": mu})
-        return jh.simulate(sc, 0.05, n_save=3, max_steps=10, throw=False).position[-1]
+        return jh.simulate(sc, 0.05, n_save=3, options=jh.SolverOptions(max_steps=10), throw=False).position[
+            -1
+        ]
 
     with pytest.raises(TypeError, match='adjoint="forward"'):
         jax.jacfwd(final_x)(0.3)

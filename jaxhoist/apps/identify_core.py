@@ -186,7 +186,8 @@ def _model_and_jacobian(cfg: _Config, z, args):
 
     `cfg.sensitivity = "equations"` (default): the forward sensitivity equations with error control
     (`_sensitivity_solve`). `"solver"`: `jax.jacfwd` through the solve with `diffrax.ForwardMode`
-    (`simulate(..., adjoint="forward")`), cheaper but without error control on the tangents."""
+    (`simulate(..., options=SolverOptions(adjoint="forward"))`), cheaper but without error control on the
+    tangents."""
     _, _, data, sigma, _ = args
     if cfg.sensitivity == "solver":
 

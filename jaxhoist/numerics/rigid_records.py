@@ -8,10 +8,9 @@ import dataclasses
 import equinox as eqx
 from jaxtyping import Array, Float, Int
 
-from .._errors import SolveStatus
 from ..physics import rigid
 from ..physics.elastic import State
-from ..physics.energy import Energy
+from .trajectory import Trajectory
 
 
 class RigidContactError(RuntimeError):
@@ -66,8 +65,9 @@ class PhaseRecord:
         return f"{self.t_start:10.6f} - {self.t_end:10.6f} s  {modes:40s} -> {self.end}{choice}"
 
 
-class RigidTrajectory(eqx.Module):
-    """Outputs of `simulate_rigid` at the saved times; the field names are those of `Trajectory`.
+class RigidTrajectory(Trajectory):
+    """Outputs of `simulate_rigid` at the saved times: a `Trajectory` (every field and method of it, so code
+    written for `Trajectory` reads this too) with the rigid model's impact losses and phase log.
 
     - `ts`, `position`, `velocity`, `euler`, `angular_velocity`, `corners`, `normal_forces`,
       `friction_forces`, `ground_reaction`, `rope_tension`, `tip_position`, `energy`, `hoist_work`,
@@ -78,41 +78,20 @@ class RigidTrajectory(eqx.Module):
     - `phases`: the phase log, a tuple of `PhaseRecord` (static).
     """
 
-    ts: Float[Array, " n_t"]
-    position: Float[Array, "n_t 3"]
-    velocity: Float[Array, "n_t 3"]
-    euler: Float[Array, "n_t 3"]
-    angular_velocity: Float[Array, "n_t 3"]
-    corners: Float[Array, "n_t 4 3"]
-    normal_forces: Float[Array, "n_t 4"]
-    friction_forces: Float[Array, "n_t 4 3"]
-    ground_reaction: Float[Array, " n_t"]
-    rope_tension: Float[Array, " n_t"]
-    tip_position: Float[Array, "n_t 3"]
-    energy: Energy
-    hoist_work: Float[Array, " n_t"]
-    damping_loss: Float[Array, " n_t"]
-    friction_work: Float[Array, " n_t"]
     impact_loss: Float[Array, " n_t"]
-    states: State
-    status: Int[Array, ""]
-    num_accepted_steps: Int[Array, ""]
-    num_rejected_steps: Int[Array, ""]
     phase_index: Int[Array, " n_t"]
     phases: tuple = eqx.field(static=True)
 
-    @property
-    def ok(self):
-        return self.status == SolveStatus.OK
-
     def energy_residual(self) -> Float[Array, " n_t"]:
-        """E(t) - E(0) - [W_hoist - D_damping - W_friction - W_impact](t) [J]: zero up to solver error."""
+        """E(t) - E(0) - [W_hoist - D_damping - W_friction - W_impact](t) [J]: zero up to solver error
+        (`Trajectory.energy_residual` with the impact losses)."""
         e = self.energy
         mech = e.kinetic + e.potential + e.ground_spring + e.rope_spring + e.boom_spring
         supplied = self.hoist_work - self.damping_loss - self.friction_work - self.impact_loss
         return (mech - mech[..., :1]) - (supplied - supplied[..., :1])
 
     def phase_log(self) -> str:
+        """The phase log, one `PhaseRecord` a line."""
         return "\n".join(str(p) for p in self.phases)
 
 

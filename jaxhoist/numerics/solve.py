@@ -10,64 +10,17 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, ArrayLike, Float, Int
 
+from .._deprecated import warn_moved
 from .._errors import ScenarioError, SolveStatus, forward_mode_hint, require_x64
 from ..physics import energy as energy_mod
 from ..physics import kinematics
 from ..physics.elastic import Constants, State, snapshot, vector_field
-from ..physics.energy import Energy
 from ..physics.equilibrium import initial_state
 from ..physics.params import Scenario
 from .options import AbstractModel, ElasticFoundation, RigidGround, SolverOptions, as_model
 from .rigid_options import RigidOptions
-from .rigid_solve import RigidTrajectory, simulate_rigid
-
-
-class Trajectory(eqx.Module):
-    """The outputs of one solve at the saved times `ts` (leading axis n_t; in a vmap, a batch axis first).
-
-    - `ts`: saved times [s].
-    - `position`, `velocity`: mass centre C in world axes [m], [m/s].
-    - `euler`: (φ, ψ, ϑ) [rad], R = R_Z(ψ) R_Y(ϑ) R_X(φ); φ and ψ unwrapped along time.
-    - `angular_velocity`: ω in body axes ξηζ [rad/s].
-    - `corners`: D, E, F, H in world axes [m], shape (n_t, 4, 3).
-    - `normal_forces`: N_i [N], (n_t, 4); `friction_forces`: T_i in world axes [N], (n_t, 4, 3).
-    - `ground_reaction`: R = Σ N_i [N]; `rope_tension`: S [N].
-    - `tip_position`: boom tip A [m].
-    - `energy`: `Energy` terms [J]; `hoist_work`, `damping_loss`, `friction_work`: accumulated [J].
-    - `states`: the raw `State` at each saved time.
-    - `status`: a `SolveStatus` code (0 = ok); `num_accepted_steps`, `num_rejected_steps`.
-    """
-
-    ts: Float[Array, " n_t"]
-    position: Float[Array, "n_t 3"]
-    velocity: Float[Array, "n_t 3"]
-    euler: Float[Array, "n_t 3"]
-    angular_velocity: Float[Array, "n_t 3"]
-    corners: Float[Array, "n_t 4 3"]
-    normal_forces: Float[Array, "n_t 4"]
-    friction_forces: Float[Array, "n_t 4 3"]
-    ground_reaction: Float[Array, " n_t"]
-    rope_tension: Float[Array, " n_t"]
-    tip_position: Float[Array, "n_t 3"]
-    energy: Energy
-    hoist_work: Float[Array, " n_t"]
-    damping_loss: Float[Array, " n_t"]
-    friction_work: Float[Array, " n_t"]
-    states: State
-    status: Int[Array, ""]
-    num_accepted_steps: Int[Array, ""]
-    num_rejected_steps: Int[Array, ""]
-
-    @property
-    def ok(self):
-        """True where the solve reached t1 with a finite state."""
-        return self.status == SolveStatus.OK
-
-    def energy_residual(self) -> Float[Array, "*batch n_t"]:
-        """E(t) - E(0) - [W_hoist - D_damping - W_friction](t) [J]: zero up to the solver error."""
-        mech = self.energy.mechanical
-        supplied = self.hoist_work - self.damping_loss - self.friction_work
-        return (mech - mech[..., :1]) - (supplied - supplied[..., :1])
+from .rigid_solve import simulate_rigid
+from .trajectory import Trajectory as Trajectory
 
 
 def _status(result, y1: State) -> Int[Array, ""]:
@@ -208,6 +161,56 @@ def saved_times(scenario: Scenario, t1, ts, n_save: int, xp=np):
 
 _LEGACY_SOLVER_KW = ("solver", "rtol", "atol", "dt0", "max_steps", "adjoint", "progress", "fixed_step")
 
+#: The new spelling of each earlier keyword of `simulate` (for the deprecation warning).
+_NEW_SPELLING = {
+    "solver": "options=SolverOptions(solver)",
+    "rtol": "options=SolverOptions(rtol=...)",
+    "atol": "options=SolverOptions(atol=...)",
+    "dt0": "options=SolverOptions(dt0=...)",
+    "max_steps": "options=SolverOptions(max_steps=...)",
+    "adjoint": "options=SolverOptions(adjoint=diffrax.ForwardMode() | diffrax.RecursiveCheckpointAdjoint())",
+    "progress": "options=SolverOptions(progress_meter=diffrax.TextProgressMeter())",
+    "fixed_step": "options=SolverOptions(stepsize_controller=diffrax.ConstantStepSize(), dt0=...)",
+    "rope": "model=RigidGround(rope=ElasticRope() | InextensibleRope())",
+}
+
+
+def convert_legacy(
+    model: AbstractModel | str, options: SolverOptions | None, old: dict
+) -> tuple[AbstractModel, SolverOptions | None, dict[str, str]]:
+    """`(model, options, moved)` from `simulate`'s earlier keywords in `old` (the solver block `solver, rtol,
+    atol, dt0, max_steps, adjoint, progress, fixed_step` and `rope`) and the earlier model strings
+    "elastic"/"rigid", built exactly as the earlier `simulate` built them; `moved` (old name -> new
+    spelling) is for the one `DeprecationWarning`, which the caller gives once nothing can fail any more.
+    `options` stays None where neither it nor a solver keyword is given.
+
+    **Raises** `TypeError` for an unknown keyword, `ScenarioError` for an old keyword given with the object
+    that replaces it, an unknown model or rope name, or a solver keyword the rigid model does not read.
+    """
+    old = dict(old)
+    rope = old.pop("rope", None)
+    unknown = sorted(set(old) - set(_LEGACY_SOLVER_KW))
+    if unknown:
+        raise TypeError(f"simulate() got unexpected keyword argument(s): {', '.join(unknown)}")
+    moved = {k: _NEW_SPELLING[k] for k in old}
+    if rope is not None:
+        moved["rope"] = _NEW_SPELLING["rope"]
+    if isinstance(model, str):
+        moved["model"] = f"model={'RigidGround()' if model == 'rigid' else 'ElasticFoundation()'}"
+    model = as_model(model, rope)
+    if options is not None and old:
+        raise ScenarioError(f"give either options or the keywords {', '.join(sorted(old))}, not both")
+    if options is None and old:
+        if isinstance(model, RigidGround):
+            extra = set(old) - {"rtol", "atol", "max_steps"}
+            if extra and any(old[k] not in (None, False, "reverse") for k in extra):
+                raise ScenarioError("model='rigid' takes only t1, ts, n_save, rtol, atol, max_steps and rope")
+            kw = {k: v for k, v in old.items() if k in ("rtol", "atol", "max_steps")}
+            options = SolverOptions(diffrax.Tsit5(), **kw)  # for its default tolerances 1e-6, 1e-8
+        else:
+            options = SolverOptions(**old)
+    return model, options, moved
+
 
 def simulate(
     scenario: Scenario,
@@ -219,13 +222,13 @@ def simulate(
     options: SolverOptions | None = None,
     throw: bool = True,
     **solver_kw,
-) -> Trajectory | RigidTrajectory:
+) -> Trajectory:
     """Simulate a lift from rest at t = 0 to `t1`.
 
     Works under `jax.jit`, `jax.vmap` over any scenario leaf, `jax.grad` (the default adjoint) and
-    `jax.jacfwd` (`SolverOptions(adjoint=diffrax.ForwardMode())`, or `adjoint="forward"`), for the elastic
-    model. For derivatives over long spans pass `solver=diffrax.Tsit5()`: through the default Rosenbrock-W
-    solver they are not reliable yet at high friction (see `RosenbrockW`).
+    `jax.jacfwd` (`SolverOptions(adjoint=diffrax.ForwardMode())`), for the elastic model. For derivatives
+    over long spans pass `options=SolverOptions(diffrax.Tsit5())`: through the default Rosenbrock-W solver
+    they are not reliable yet at high friction (see `RosenbrockW`).
 
     **Arguments**
     - `scenario`: a `Scenario` (see `load_scenario`).
@@ -234,35 +237,28 @@ def simulate(
     - `model`: `ElasticFoundation()` (paper §3, the default: one compiled, differentiable solve) or
       `RigidGround(rope=ElasticRope() | InextensibleRope())` (paper §2, the event-driven reference
       `simulate_rigid`: host-side phase loop, not differentiable or vmappable; it returns a
-      `RigidTrajectory` with the same output names plus `impact_loss` and the phase log). The strings
-      "elastic" and "rigid" are accepted too.
+      `RigidTrajectory` with the same output names plus `impact_loss` and the phase log). The earlier
+      strings "elastic" and "rigid" still work, with a `DeprecationWarning`.
     - `options`: `SolverOptions` (solver, step-size controller, adjoint, dt0, max_steps, progress meter).
       The rigid model reads only its tolerances and step budget.
     - `throw`: raise if the solve fails (max steps, non-finite state); with False, read `Trajectory.status`.
-    - `**solver_kw`: the earlier keywords `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`,
-      `progress`, `fixed_step` (converted to `SolverOptions`; not together with `options`) and `rope`
-      ("elastic" or "inextensible", rigid model only).
+    - `**solver_kw`: deprecated. The earlier keywords `solver`, `rtol`, `atol`, `dt0`, `max_steps`,
+      `adjoint`, `progress`, `fixed_step` (converted to `SolverOptions` exactly as before; not together with
+      `options`) and `rope` ("elastic" or "inextensible", rigid model only; converted to `RigidGround`)
+      still work, with one `DeprecationWarning` naming the new spelling.
 
-    **Returns** a `Trajectory` (elastic model) or a `RigidTrajectory` (rigid model).
+    **Returns** a `Trajectory`: for the rigid model its subclass `RigidTrajectory`, which adds `impact_loss`
+    and the phase log.
 
     **Raises** `ScenarioError` for invalid input (before compiling), `Float64Error` without x64,
     and (with `throw=True`) an `EquinoxRuntimeError` naming the failure.
     """
     require_x64()
-    rope = solver_kw.pop("rope", None)
-    unknown = sorted(set(solver_kw) - set(_LEGACY_SOLVER_KW))
-    if unknown:
-        raise TypeError(f"simulate() got unexpected keyword argument(s): {', '.join(unknown)}")
-    model = as_model(model, rope)
-    if options is not None and solver_kw:
-        raise ScenarioError(f"give either options or the keywords {', '.join(sorted(solver_kw))}, not both")
+    model, options, moved = convert_legacy(model, options, solver_kw)
     if isinstance(model, RigidGround):
         if options is None:
-            extra = set(solver_kw) - {"rtol", "atol", "max_steps"}
-            if extra and any(solver_kw[k] not in (None, False, "reverse") for k in extra):
-                raise ScenarioError("model='rigid' takes only t1, ts, n_save, rtol, atol, max_steps and rope")
-            kw = {k: v for k, v in solver_kw.items() if k in ("rtol", "atol", "max_steps")}
-            options = SolverOptions(diffrax.Tsit5(), **kw)  # for its default tolerances 1e-6, 1e-8
+            options = SolverOptions(diffrax.Tsit5())  # for its default tolerances 1e-6, 1e-8
+        warn_moved("simulate", moved)
         rigid_options = RigidOptions(
             rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
             atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
@@ -281,8 +277,9 @@ def simulate(
     scenario.check()
     scenario = as_float64_leaves(scenario)
     if options is None:
-        options = SolverOptions(**solver_kw)
+        options = SolverOptions()
     t1, ts = saved_times(scenario, t1, ts, n_save, jnp)
+    warn_moved("simulate", moved)
     ts = jnp.asarray(ts, dtype=jnp.float64)
     with forward_mode_hint():  # jacfwd through the reverse adjoint: say to pass adjoint="forward"
         traj = _solve_jit(scenario, ts, options)
