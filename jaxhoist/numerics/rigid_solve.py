@@ -25,7 +25,8 @@ Where no configuration is consistent, documented fallbacks take over, in order: 
 (degenerate contacts), a tangential impact of the sliding corners on the ground (Painlevé-type
 inconsistency; "dynamic jamming"), the least-violating configuration as a short phase. Impacts with no
 consistent Coulomb impulse (a grazing touch) take the frictionless one; several consistent impulses, the
-most dissipative. A phase that stalls at `max_steps` is chosen again once without its configuration.
+most dissipative. A phase that stalls (its mean step over a window of steps falls below a floor,
+`StallRule`; or it reaches `max_steps`) is chosen again once without its configuration.
 Each such step is recorded in the phase log (`PhaseRecord.choice`, or the impact's
 `end`); see docs/rigid-model.md, "Resolution of contact choices and impacts". `RigidContactError` is left
 for inputs that cannot be continued: too many phases, a failed phase solve, an impact that would gain
@@ -52,6 +53,7 @@ from ..physics.params import Scenario
 from ..physics.rigid import FREE, SLIDE, STICK, Phase
 from .rigid_compiled import (
     OUTPUT_CHUNK,
+    StallRule,
     _chunked_outputs,
     _Jam,
     _np,
@@ -72,6 +74,7 @@ __all__ = [
     "PhaseRecord",
     "RigidContactError",
     "RigidTrajectory",
+    "StallRule",
     "simulate_rigid",
     "OUTPUT_CHUNK",
     "coulomb_pattern",
@@ -100,6 +103,7 @@ def simulate_rigid(
     verbose: bool = False,
     rope: str = "elastic",
     chatter: ChatterRule | None = ChatterRule(),
+    stall: StallRule | None = StallRule(),
 ) -> RigidTrajectory:
     """Simulate a lift with the rigid-body-on-rigid-ground model (paper §2) from rest at t = 0 to `t1`.
 
@@ -124,6 +128,9 @@ def simulate_rigid(
     - `chatter`: a `ChatterRule`: when a sustained cycle of impacts (or a phase that stalls twice) is passed
       by a compliant phase (`numerics.rigid_compliant`; recorded in the phase log); None: never (such a
       run ends at `max_phases`, or raises at the second stall).
+    - `stall`: a `StallRule`: a phase solve whose mean step over `stall.window` step attempts falls below
+      `stall.min_step` [s] has stalled (as one that reaches `max_steps`, found after thousands of steps
+      instead of `max_steps`); None: only `max_steps` ends a stalled phase (the behaviour before the rule).
 
     **Returns** a `RigidTrajectory` (with the phase log in `.phases`).
 
@@ -140,6 +147,10 @@ def simulate_rigid(
         raise ScenarioError(f"chatter must be a ChatterRule or None, got {type(chatter).__name__}")
     if chatter is not None:
         chatter.check()
+    if stall is not None and not isinstance(stall, StallRule):
+        raise ScenarioError(f"stall must be a StallRule or None, got {type(stall).__name__}")
+    if stall is not None:
+        stall.check()
     if not (0.0 <= restitution <= 1.0):
         raise ScenarioError(f"restitution (e) must be in [0, 1], got {restitution}")
     if t1 is None:
@@ -153,7 +164,14 @@ def simulate_rigid(
     if ts.ndim != 1 or ts.size < 2 or ts[0] != 0.0 or np.any(np.diff(ts) <= 0) or abs(ts[-1] - t1) > 1e-12:
         raise ScenarioError("ts must be a 1-D, strictly increasing array from 0 to t1 [s]")
     settings = rigid.Settings() if settings is None else settings
-    options = _Options(rtol=float(rtol), atol=float(atol), max_steps=int(max_steps), event_atol=1e-10)
+    options = _Options(
+        rtol=float(rtol),
+        atol=float(atol),
+        max_steps=int(max_steps),
+        event_atol=1e-10,
+        stall_window=0 if stall is None else int(stall.window),
+        stall_step=0.0 if stall is None else float(stall.min_step),
+    )
     y0, c = rigid.initial_state(scenario)
     drv = _Driver(scenario, c, settings, options, restitution, dict(_DEFAULT_TOL))
     drv.debug = verbose == "debug"
@@ -285,9 +303,15 @@ class _Run:
 
     def stalled(self, t: float, y: State, phase: Phase, result) -> bool:
         """A phase that failed (typically a corner sliding with a slip speed near zero, where the slip
-        direction turns quickly): chosen again once at its start without that configuration; a second
-        stall at the same time is passed by a compliant phase (or raises without `chatter`)."""
+        direction turns quickly): its mean step fell below `StallRule.min_step` or it reached `max_steps`.
+        Chosen again once at its start without that configuration; a second stall at the same time is
+        passed by a compliant phase (or raises without `chatter`)."""
         drv = self.drv
+        opt = drv.options
+        if result == diffrax.RESULTS.dt_min_reached and opt.stall_window > 0:
+            how_stalled = f"stalled (mean step < {opt.stall_step:g} s over {opt.stall_window} steps)"
+        else:
+            how_stalled = "stalled at max_steps"
         if self.retried_at != t and not bool(phase.rest):
             self.retried_at = t
             stalled = _fmt(_np(phase.contact))
@@ -298,20 +322,22 @@ class _Run:
                 drv.exclude = None
             self.impact_total += loss
             how = drv.take_notes()
-            choice = f"{stalled} stalled at max_steps, chosen again without it"
+            choice = f"{stalled} {how_stalled}, chosen again without it"
             choice += f"; {how}" if how else ""
             self.y, self.phase, self.choice = y, phase, choice
             return True
         if self.chatter is None or bool(phase.rest):
+            hint = ", or pass chatter=ChatterRule() to pass it by a compliant phase"
+            hint = hint if self.chatter is None else ""
             raise RigidContactError(
-                f"the phase starting at t = {t:.9g} s failed: {result} "
-                f"(raise max_steps = {self.max_steps} or loosen rtol/atol)"
+                f"the phase starting at t = {t:.9g} s failed: {how_stalled}, {result} "
+                f"(raise max_steps = {self.max_steps} or loosen rtol/atol{hint})"
             )
         if self.saved_states is None:
             self.saved_states = jax.tree_util.tree_map(
                 lambda x: np.zeros((self.ts.size,) + np.shape(x), np.asarray(x).dtype), y
             )
-        return self.compliant(t, y, phase, f"{_fmt(_np(phase.contact))} stalled at max_steps twice")
+        return self.compliant(t, y, phase, f"{_fmt(_np(phase.contact))} {how_stalled}, twice")
 
     def after_event(self, t, t_end, y_end, phase, g_start, modes, rope_name):
         """The guards of `phase` fired at (t_end, y_end): log the phase, resolve an impact or rope jerk, and
