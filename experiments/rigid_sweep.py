@@ -11,8 +11,8 @@
 Full sweep: μ = 0.10, 0.105, ..., 0.50 (81 values) on `paper-2.3` and `paper-4.1`, each with the elastic rope
 (2.14) and the inextensible rope (2.15), to the preset's t1 (20 s and 70 s); plus, at the preset's μ, the
 hoist speed v_l times 0.5 and 2, and the rope point B moved by ±0.25 m along ξ and η on the top face (clipped
-to the face). μ is run coarse to fine (every 0.02 first, then the variants, then every 0.01 and 0.005), so an
-interrupted sweep covers the whole range.
+to the face). The variants run first (seconds each at the presets' μ), then μ coarse to fine (every 0.02
+first, then every 0.01 and 0.005), so an interrupted sweep covers the whole range.
 Each finished run is appended to `runs.jsonl` at once (a restarted sweep skips the runs already there):
 completed or the error, the number of phases (records) and of phase solves, how many contact choices and
 impacts needed a resolution step beyond consistency (`PhaseRecord.choice`, impact notes; see
@@ -113,11 +113,8 @@ def run_list(quick: bool):
         ):
             runs.append(dict(preset=preset, rope=rope, mu=mu, variant="", changes={}, t1=t1))
     else:
-        mus = coarse_to_fine(list(MUS))
-        n_coarse = len(MUS[::4])  # every 0.02: the first pass
-        for k, mu in enumerate(mus):
-            if k == n_coarse:  # the variants after the coarse pass, before the finer μ values
-                runs += variant_runs()
+        runs += variant_runs()  # first: at the presets' μ they take seconds each
+        for mu in coarse_to_fine(list(MUS)):
             for preset in PRESETS:
                 for rope in ROPES:
                     runs.append(dict(preset=preset, rope=rope, mu=float(mu), variant="", changes={}, t1=None))
