@@ -4,13 +4,15 @@
     python experiments/rigid_sweep.py --out out/rigid_sweep --quick     # a minute or two: 4 runs
     python experiments/rigid_sweep.py --out out/rigid_sweep             # the full sweep (hours on 2 cores)
     python experiments/rigid_sweep.py --out out/rigid_sweep --plot-only # figures from what is done so far
+    python experiments/rigid_sweep.py --out out/one --one paper-2.3,elastic,0.30,17  # one run, its record
     python experiments/rigid_sweep.py --out out/rigid_elastic --elastic # rigid vs elastic, k = 1.5e9
     python experiments/rigid_sweep.py --out out/rigid_chatter --elastic-chatter  # ... where cycles were
 
 Full sweep: μ = 0.10, 0.105, ..., 0.50 (81 values) on `paper-2.3` and `paper-4.1`, each with the elastic rope
 (2.14) and the inextensible rope (2.15), to the preset's t1 (20 s and 70 s); plus, at the preset's μ, the
 hoist speed v_l times 0.5 and 2, and the rope point B moved by ±0.25 m along ξ and η on the top face (clipped
-to the face). μ is run coarse to fine (every 0.02 first), so an interrupted sweep covers the whole range.
+to the face). The variants run first (seconds each at the presets' μ), then μ coarse to fine (every 0.02
+first, then every 0.01 and 0.005), so an interrupted sweep covers the whole range.
 Each finished run is appended to `runs.jsonl` at once (a restarted sweep skips the runs already there):
 completed or the error, the number of phases (records) and of phase solves, how many contact choices and
 impacts needed a resolution step beyond consistency (`PhaseRecord.choice`, impact notes; see
@@ -94,6 +96,17 @@ def variants(preset: str):
     return out
 
 
+def variant_runs():
+    """The runs of `variants` around each preset at its μ, both ropes."""
+    runs = []
+    for preset in PRESETS:
+        mu0 = float(jaxhoist.load_scenario(preset).foundation.friction_coefficient)
+        for name, changes in variants(preset):
+            for rope in ROPES:
+                runs.append(dict(preset=preset, rope=rope, mu=mu0, variant=name, changes=changes, t1=None))
+    return runs
+
+
 def run_list(quick: bool):
     """Every run of the sweep as a dict (key, preset, rope, mu, variant, changes, t1)."""
     runs = []
@@ -106,17 +119,11 @@ def run_list(quick: bool):
         ):
             runs.append(dict(preset=preset, rope=rope, mu=mu, variant="", changes={}, t1=t1))
     else:
+        runs += variant_runs()  # first: at the presets' μ they take seconds each
         for mu in coarse_to_fine(list(MUS)):
             for preset in PRESETS:
                 for rope in ROPES:
                     runs.append(dict(preset=preset, rope=rope, mu=float(mu), variant="", changes={}, t1=None))
-        for preset in PRESETS:
-            mu0 = float(jaxhoist.load_scenario(preset).foundation.friction_coefficient)
-            for name, changes in variants(preset):
-                for rope in ROPES:
-                    runs.append(
-                        dict(preset=preset, rope=rope, mu=mu0, variant=name, changes=changes, t1=None)
-                    )
     for r in runs:
         r["key"] = f"{r['preset']}|{r['rope']}|{r['mu']:.3f}|{r['variant']}|{r['t1']}"
     return runs
@@ -154,6 +161,8 @@ def one_run(r: dict) -> dict:
             impact_loss_J=float(np.asarray(tr.impact_loss)[-1]),
             closes=bool(resid <= max(CLOSE * hoist, CLOSE_IMPACT * float(np.asarray(tr.impact_loss)[-1]))),
             steps=int(tr.num_accepted_steps),
+            compliant=[f"{p.t_start:.6f}" for p in tr.phases if p.choice.startswith("compliant phase")],
+            stalls=sum(p.choice.count("stalled") for p in tr.phases),
         )
     except Exception as err:  # the sweep records failures instead of stopping
         out.update(
@@ -408,6 +417,13 @@ def main(argv=None) -> int:
         help="i/n: run every n-th of the runs still to do, from the "
         "i-th (parallel processes, each with its own --out; concatenate their runs.jsonl)",
     )
+    p.add_argument(
+        "--one",
+        default=None,
+        help="PRESET,ROPE,MU,T1: one run (e.g. paper-2.3,elastic,0.30,17), its record printed and "
+        "appended to one.jsonl; with the phases that stalled or were compliant (the stall benchmark of "
+        "docs/rigid-model.md)",
+    )
     p.add_argument("--only-preset", default=None, help="run only this preset")
     p.add_argument("--mus", default=None, help="comma-separated μ values: run only these (first)")
     args = p.parse_args(argv)
@@ -419,6 +435,15 @@ def main(argv=None) -> int:
     if args.elastic_chatter:
         chatter_check(out)
         return 0
+    if args.one:
+        preset, rope, mu, t1 = args.one.split(",")
+        r = dict(preset=preset, rope=rope, mu=float(mu), variant="", changes={}, t1=float(t1))
+        r["key"] = f"{preset}|{rope}|{float(mu):.3f}||{float(t1)}"
+        rec = one_run(r)
+        with (out / "one.jsonl").open("a") as f:
+            f.write(json.dumps(rec) + "\n")
+        print(json.dumps({k: v for k, v in rec.items() if k != "traceback"}, indent=1))
+        return 0 if rec["completed"] else 1
     path = out / "runs.jsonl"
     done = load_done(path)
     if not args.plot_only:

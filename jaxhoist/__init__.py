@@ -41,6 +41,7 @@ from .numerics.options import ElasticRope as ElasticRope
 from .numerics.options import InextensibleRope as InextensibleRope
 from .numerics.options import RigidGround as RigidGround
 from .numerics.options import SolverOptions as SolverOptions
+from .numerics.rigid_compiled import StallRule as StallRule
 from .numerics.rigid_compliant import ChatterRule as ChatterRule
 from .numerics.rigid_options import RigidOptions as RigidOptions
 from .numerics.rigid_solve import RigidContactError as RigidContactError

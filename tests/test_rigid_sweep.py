@@ -159,3 +159,33 @@ def test_persistent_contact_holds_a_corner_the_impact_would_lift():
     v_n = float(ph[k].end.split("|v_n| <= ")[1].split(" m/s")[0])
     assert v_n < 1e-3
     assert ph[-1].end == "t1" and _closes(tr)
+
+
+def test_stall_rule_finds_a_stalled_phase_after_thousands_of_steps():
+    """paper-4.2 (elastic rope): the first sliding phase (all four corners, 0.305 ms) stalls, its mean step
+    falling to about 1e-7 s. The `StallRule` (mean step under 2e-7 s over 5000 step attempts) ends it after
+    5000 attempts, where before it ran to `max_steps` (here 30 000 instead of the default 200 000, to stay
+    cheap); either way the stalled solve is dropped and the phase is chosen again from its start without
+    that configuration, so the trajectory is the same sample for sample and only the steps spent differ."""
+    sc = jh.load_scenario("paper-4.2")
+    t1 = 0.1
+    fast = simulate_rigid(sc, t1, n_save=N_SAVE, options=jh.RigidOptions(max_steps=30_000))
+    slow = simulate_rigid(sc, t1, n_save=N_SAVE, options=jh.RigidOptions(max_steps=30_000, stall=None))
+    notes = [p.choice for p in fast.phases if "stalled" in p.choice]
+    assert len(notes) == 1 and "stalled (mean step < 2e-07 s over 5000 steps)" in notes[0], fast.phase_log()
+    assert any("stalled at max_steps" in p.choice for p in slow.phases), slow.phase_log()
+    np.testing.assert_array_equal(np.asarray(fast.position), np.asarray(slow.position))
+    np.testing.assert_array_equal(np.asarray(fast.normal_forces), np.asarray(slow.normal_forces))
+    assert [str(p).split("[")[0] for p in fast.phases] == [str(p).split("[")[0] for p in slow.phases]
+    # The stalled solve cost at most one window of 5000 attempts (all attempts counted, the accepted ones
+    # reported) instead of max_steps.
+    spent = int(slow.num_accepted_steps) - int(fast.num_accepted_steps)
+    assert spent > 10_000, (int(slow.num_accepted_steps), int(fast.num_accepted_steps))
+
+
+def test_stall_rule_rejects_invalid_values():
+    from jaxhoist.numerics.rigid_solve import StallRule
+
+    for bad in (StallRule(window=0), StallRule(min_step=0.0), StallRule(min_step=float("nan"))):
+        with pytest.raises(jh.ScenarioError, match="StallRule"):
+            jh.RigidOptions(stall=bad)

@@ -4,6 +4,8 @@ configurations, impulses, rope state and outputs (`numerics.rigid_solve`), and s
 from __future__ import annotations
 
 import dataclasses
+import math
+from collections.abc import Callable
 
 import diffrax
 import equinox as eqx
@@ -12,6 +14,7 @@ import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
 
+from .._errors import ScenarioError
 from ..physics import rigid
 
 
@@ -21,6 +24,88 @@ class _Options:
     atol: float
     max_steps: int
     event_atol: float
+    stall_window: int = 0  # step attempts per progress check (0: no check); see `StallRule`
+    stall_step: float = 0.0  # [s] smallest mean step over a window before the phase counts as stalled
+
+
+@dataclasses.dataclass(frozen=True)
+class StallRule:
+    """When a phase solve of the rigid model counts as stalled, long before `max_steps`.
+
+    A phase stalls when its step size collapses and stays collapsed: typically a corner sliding with a slip
+    speed near zero, where the slip direction turns quickly and the steps resolve the slip regularisation
+    (`Settings.slip_velocity` ε_v = 1e-6 m/s over accelerations ~g: ε_v/g ≈ 1e-7 s) instead of the motion.
+    The solve checks its progress every `window` step attempts (accepted and rejected): if the time reached
+    advanced by less than `window x min_step` since the previous check, the phase has stalled (the solve
+    ends with `diffrax.RESULTS.dt_min_reached`); the driver then treats it as it treats a phase that reached
+    `max_steps` (chosen again once without its configuration, then a compliant phase).
+
+    - `window` [-]: step attempts per progress check.
+    - `min_step` [s]: the smallest mean step over a window.
+
+    Defaults (docs/rigid-model.md, "Resolution"), from the mean step over windows of 1000 attempts: stalled
+    phases 0.6-1.6e-7 s (paper-2.3, elastic rope, μ = 0.30 at 16.1-16.9 s; paper-4.2 at 0.3 ms), i.e. about
+    ε_v/g; phases that complete: at least 3.3e-6 s in the presets paper-2.3 and paper-4.1 (both ropes, full
+    length), 1.4e-6 s at the start of sliding (paper-2.3, μ = 0.30, 0.32 s), and the slowest, corner F of
+    paper-4.2 sliding at near-zero slip at 10.1-11.5 s, 3.8-5.7e-7 s (8 000-18 000 attempts each).
+    `min_step` = 2e-7 s (about 2 ε_v/g) lies between; 5000 attempts average over a start-up transient of a
+    few hundred small steps, and cost 1/40 of `max_steps` = 200 000.
+    """
+
+    window: int = 5000
+    min_step: float = 2e-7
+
+    def check(self) -> None:
+        """Raise `ScenarioError` if `window` is not an integer >= 1 or `min_step` not a positive finite
+        time [s]."""
+        if not (isinstance(self.window, int) and self.window >= 1):
+            raise ScenarioError(f"StallRule.window must be an integer >= 1, got {self.window!r}")
+        v = self.min_step
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise ScenarioError(f"StallRule.min_step must be a positive finite time [s], got {v!r}")
+
+
+class _StallGuard(diffrax.AbstractAdaptiveStepSizeController):
+    """A `diffrax.PIDController` that also ends the solve when it stops making progress: after every
+    `window` step attempts (accepted or rejected) the time reached must have advanced by at least
+    `window x min_step` [s] since the previous check, else the solve ends with
+    `diffrax.RESULTS.dt_min_reached` (the mean step fell below `min_step`; "stalled").
+
+    The step sizes, acceptance and controller state are the PID controller's, unchanged: a solve that never
+    falls below the floor takes exactly the steps it took without the guard. See `_Driver.solve` and
+    docs/rigid-model.md, "Resolution", for the values and why."""
+
+    rtol: float
+    atol: float
+    window: int = eqx.field(static=True)
+    min_step: float = eqx.field(static=True)
+    norm: Callable = optx.rms_norm
+
+    @property
+    def controller(self) -> diffrax.PIDController:
+        """The PID controller whose steps are taken."""
+        return diffrax.PIDController(rtol=self.rtol, atol=self.atol, norm=self.norm)
+
+    def wrap(self, direction):
+        del direction  # PIDController.wrap keeps itself
+        return self
+
+    def init(self, terms, t0, t1, y0, dt0, args, func, error_order):
+        tnext, state = self.controller.init(terms, t0, t1, y0, dt0, args, func, error_order)
+        return tnext, (state, jnp.asarray(t0, dtype=jnp.result_type(tnext)), jnp.asarray(0, dtype=jnp.int32))
+
+    def adapt_step_size(self, t0, t1, y0, y1_candidate, args, y_error, error_order, controller_state):
+        state, t_mark, n = controller_state
+        keep, next_t0, next_t1, jump, state, result = self.controller.adapt_step_size(
+            t0, t1, y0, y1_candidate, args, y_error, error_order, state
+        )
+        n = n + 1
+        check = n >= self.window
+        stalled = check & (next_t0 - t_mark < self.window * self.min_step)
+        result = diffrax.RESULTS.where(stalled, diffrax.RESULTS.dt_min_reached, result)
+        t_mark = jnp.where(check, next_t0, t_mark)
+        n = jnp.where(check, 0, n)
+        return keep, next_t0, next_t1, jump, (state, t_mark, n), result
 
 
 def _phase_solve(scenario, c, phase, settings, y0, t0, t1, ts, options: _Options, inextensible: bool = False):
@@ -38,12 +123,22 @@ def _phase_solve(scenario, c, phase, settings, y0, t0, t1, ts, options: _Options
         y0=y0,
         args=(scenario, c, phase, settings) + ((True,) if inextensible else ()),
         saveat=diffrax.SaveAt(ts=ts, t1=True),
-        stepsize_controller=diffrax.PIDController(rtol=options.rtol, atol=options.atol),
+        stepsize_controller=_controller(options),
         max_steps=options.max_steps,
         event=event,
         throw=False,
     )
     return sol.ts, sol.ys, sol.result, sol.stats["num_accepted_steps"], sol.stats["num_rejected_steps"]
+
+
+def _controller(options: _Options):
+    """The phase solves' step size controller: PID at (rtol, atol), with the progress check of
+    `_StallGuard` when `options.stall_window` > 0."""
+    if options.stall_window <= 0:
+        return diffrax.PIDController(rtol=options.rtol, atol=options.atol)
+    return _StallGuard(
+        rtol=options.rtol, atol=options.atol, window=options.stall_window, min_step=options.stall_step
+    )
 
 
 _phase_solve_jit = eqx.filter_jit(_phase_solve)

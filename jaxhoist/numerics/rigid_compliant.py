@@ -17,8 +17,8 @@ losses, so the energy balance stays closed; the phase log records the episode.
 Detection (`ChatterRule.detect`): at least `min_impacts` impacts (corner impacts and rope jerks) within
 the last `window` seconds, whose losses do not decay (the mean of the later half at least `decay` times
 the mean of the earlier half). A decaying train (a rocking load settling) is left to the rigid model,
-whose settling rule (`Settings.rest_velocity`) ends it. A phase that stalls twice at `max_steps` is passed
-the same way.
+whose settling rule (`Settings.rest_velocity`) ends it. A phase that stalls twice (its mean step below
+`StallRule.min_step`, or `max_steps` reached) is passed the same way.
 """
 
 from __future__ import annotations

@@ -13,6 +13,7 @@ from .._deprecated import warn_moved
 from .._errors import ScenarioError
 from ..physics.rigid_contact import Settings
 from .options import ElasticRope, InextensibleRope, RigidGround
+from .rigid_compiled import StallRule
 from .rigid_compliant import ChatterRule
 
 
@@ -29,8 +30,12 @@ class RigidOptions(eqx.Module):
     - `chatter`: a `ChatterRule`: when a sustained cycle of impacts (or a phase that stalls twice) is passed
       by a compliant phase (`numerics.rigid_compliant`; recorded in the phase log); None: never (such a run
       ends at `max_phases`, or raises at the second stall).
+    - `stall`: a `StallRule`: a phase solve whose mean step over `stall.window` step attempts falls below
+      `stall.min_step` [s] has stalled (as one that reaches `max_steps`, found after thousands of steps
+      instead of `max_steps`); None: only `max_steps` ends a stalled phase (the behaviour before the rule).
 
-    **Raises** `ScenarioError` for a non-positive tolerance, a budget below 1 or an invalid `ChatterRule`.
+    **Raises** `ScenarioError` for a non-positive tolerance, a budget below 1 or an invalid `ChatterRule`
+    or `StallRule`.
     """
 
     rtol: float = eqx.field(default=1e-8, static=True)
@@ -39,6 +44,7 @@ class RigidOptions(eqx.Module):
     max_phases: int = eqx.field(default=2000, static=True)
     settings: Settings | None = None
     chatter: ChatterRule | None = eqx.field(default=ChatterRule(), static=True)
+    stall: StallRule | None = eqx.field(default=StallRule(), static=True)
 
     def __check_init__(self):
         for name in ("rtol", "atol"):
@@ -58,6 +64,10 @@ class RigidOptions(eqx.Module):
                     f"chatter must be a ChatterRule or None, got {type(self.chatter).__name__}"
                 )
             self.chatter.check()
+        if self.stall is not None:
+            if not isinstance(self.stall, StallRule):
+                raise ScenarioError(f"stall must be a StallRule or None, got {type(self.stall).__name__}")
+            self.stall.check()
 
 
 _MODEL_KW = ("restitution", "rope")

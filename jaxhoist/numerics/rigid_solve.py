@@ -25,7 +25,8 @@ Where no configuration is consistent, documented fallbacks take over, in order: 
 (degenerate contacts), a tangential impact of the sliding corners on the ground (Painlevé-type
 inconsistency; "dynamic jamming"), the least-violating configuration as a short phase. Impacts with no
 consistent Coulomb impulse (a grazing touch) take the frictionless one; several consistent impulses, the
-most dissipative. A phase that stalls at `max_steps` is chosen again once without its configuration.
+most dissipative. A phase that stalls (its mean step over a window of steps falls below a floor,
+`StallRule`; or it reaches `max_steps`) is chosen again once without its configuration.
 Each such step is recorded in the phase log (`PhaseRecord.choice`, or the impact's
 `end`); see docs/rigid-model.md, "Resolution of contact choices and impacts". `RigidContactError` is left
 for inputs that cannot be continued: too many phases, a failed phase solve, an impact that would gain
@@ -55,6 +56,7 @@ from ..physics.rigid import FREE, SLIDE, STICK, Phase
 from .options import InextensibleRope, RigidGround
 from .rigid_compiled import (
     OUTPUT_CHUNK,
+    StallRule,
     _chunked_outputs,
     _Jam,
     _np,
@@ -77,6 +79,7 @@ __all__ = [
     "RigidContactError",
     "RigidOptions",
     "RigidTrajectory",
+    "StallRule",
     "simulate_rigid",
     "OUTPUT_CHUNK",
     "coulomb_pattern",
@@ -120,7 +123,7 @@ def simulate_rigid(
       `impact_loss` (see docs/rigid-model.md, "Inextensible rope (2.15)"); `RampedHoist(v, ramp_time > 0)`
       starts without one.
     - `options`: `RigidOptions` (phase tolerances and step budget, `max_phases`, contact `settings`, the
-      `chatter` rule); default `RigidOptions()`.
+      `chatter` rule, the `stall` rule); default `RigidOptions()`.
     - `verbose`: print each phase as it ends.
     - `**deprecated`: the earlier keywords `restitution`, `rope` (now `model`) and `rtol`, `atol`,
       `max_steps`, `max_phases`, `settings`, `chatter` (now `options`) still work, with a
@@ -151,8 +154,14 @@ def simulate_rigid(
     if ts.ndim != 1 or ts.size < 2 or ts[0] != 0.0 or np.any(np.diff(ts) <= 0) or abs(ts[-1] - t1) > 1e-12:
         raise ScenarioError("ts must be a 1-D, strictly increasing array from 0 to t1 [s]")
     settings = rigid.Settings() if options.settings is None else options.settings
+    stall = options.stall
     phase_options = _Options(
-        rtol=float(options.rtol), atol=float(options.atol), max_steps=int(options.max_steps), event_atol=1e-10
+        rtol=float(options.rtol),
+        atol=float(options.atol),
+        max_steps=int(options.max_steps),
+        event_atol=1e-10,
+        stall_window=0 if stall is None else int(stall.window),
+        stall_step=0.0 if stall is None else float(stall.min_step),
     )
     y0, c = rigid.initial_state(scenario)
     drv = _Driver(scenario, c, settings, phase_options, float(model.restitution), dict(_DEFAULT_TOL))
@@ -285,9 +294,15 @@ class _Run:
 
     def stalled(self, t: float, y: State, phase: Phase, result) -> bool:
         """A phase that failed (typically a corner sliding with a slip speed near zero, where the slip
-        direction turns quickly): chosen again once at its start without that configuration; a second
-        stall at the same time is passed by a compliant phase (or raises without `chatter`)."""
+        direction turns quickly): its mean step fell below `StallRule.min_step` or it reached `max_steps`.
+        Chosen again once at its start without that configuration; a second stall at the same time is
+        passed by a compliant phase (or raises without `chatter`)."""
         drv = self.drv
+        opt = drv.options
+        if result == diffrax.RESULTS.dt_min_reached and opt.stall_window > 0:
+            how_stalled = f"stalled (mean step < {opt.stall_step:g} s over {opt.stall_window} steps)"
+        else:
+            how_stalled = "stalled at max_steps"
         if self.retried_at != t and not bool(phase.rest):
             self.retried_at = t
             stalled = _fmt(_np(phase.contact))
@@ -298,20 +313,22 @@ class _Run:
                 drv.exclude = None
             self.impact_total += loss
             how = drv.take_notes()
-            choice = f"{stalled} stalled at max_steps, chosen again without it"
+            choice = f"{stalled} {how_stalled}, chosen again without it"
             choice += f"; {how}" if how else ""
             self.y, self.phase, self.choice = y, phase, choice
             return True
         if self.chatter is None or bool(phase.rest):
+            hint = ", or pass chatter=ChatterRule() to pass it by a compliant phase"
+            hint = hint if self.chatter is None else ""
             raise RigidContactError(
-                f"the phase starting at t = {t:.9g} s failed: {result} "
-                f"(raise max_steps = {self.max_steps} or loosen rtol/atol)"
+                f"the phase starting at t = {t:.9g} s failed: {how_stalled}, {result} "
+                f"(raise max_steps = {self.max_steps} or loosen rtol/atol{hint})"
             )
         if self.saved_states is None:
             self.saved_states = jax.tree_util.tree_map(
                 lambda x: np.zeros((self.ts.size,) + np.shape(x), np.asarray(x).dtype), y
             )
-        return self.compliant(t, y, phase, f"{_fmt(_np(phase.contact))} stalled at max_steps twice")
+        return self.compliant(t, y, phase, f"{_fmt(_np(phase.contact))} {how_stalled}, twice")
 
     def after_event(self, t, t_end, y_end, phase, g_start, modes, rope_name):
         """The guards of `phase` fired at (t_end, y_end): log the phase, resolve an impact or rope jerk, and
