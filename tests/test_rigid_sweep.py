@@ -57,9 +57,9 @@ def test_grazing_impact_drops_friction_and_is_logged(monkeypatch):
     16.92 s (under 2 µm of travel). No Coulomb impulse is consistent with F sticking; the documented
     fallback takes the frictionless impulse, books its (small) loss and notes it in the phase log; the lift
     goes on."""
-    from jaxhoist.numerics import rigid_solve
+    from jaxhoist.numerics import rigid_run
 
-    monkeypatch.setattr(rigid_solve, "PERSISTENT_CONTACT", False)
+    monkeypatch.setattr(rigid_run, "PERSISTENT_CONTACT", False)
     tr = _run(0.26, 17.0)
     ph = tr.phases
     assert ph[-1].end == "t1"
