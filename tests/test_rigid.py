@@ -225,12 +225,9 @@ def test_tipping_about_an_edge_at_the_statics_threshold():
     assert resid.max() < 1e-6 * float(np.asarray(tr.hoist_work)[-1])
 
 
-def test_rocking_impacts_settle_and_the_energy_balance_closes():
-    """The hoist stops dead (the rope loses its damping force b_l v at once) just after the tall box has
-    started to tip about DE: it falls back, edge FH strikes the ground, the box rocks on alternate edges
-    with plastic impacts (restitution 0) losing energy at each, and settles flat. The energy lost in the
-    impacts closes the balance E(t) - E(0) = W_hoist - D_damping - W_friction - W_impact."""
-    sc = _scenario(
+def _rocking_box():
+    """A tall box (1 x 1 x 2 m, μ = 0.9) whose hoist stops dead just after it starts to tip about DE."""
+    return _scenario(
         size=(1.0, 1.0, 2.0),
         mu=0.9,
         attachment=(0.5, 0.0, 2.0),
@@ -240,6 +237,14 @@ def test_rocking_impacts_settle_and_the_energy_balance_closes():
         speed=0.05,
         travel=0.018,
     )
+
+
+def test_rocking_impacts_settle_and_the_energy_balance_closes():
+    """The hoist stops dead (the rope loses its damping force b_l v at once) just after the tall box has
+    started to tip about DE: it falls back, edge FH strikes the ground, the box rocks on alternate edges
+    with plastic impacts (restitution 0) losing energy at each, and settles flat. The energy lost in the
+    impacts closes the balance E(t) - E(0) = W_hoist - D_damping - W_friction - W_impact."""
+    sc = _rocking_box()
     tr = simulate_rigid(sc, T1, n_save=N_SAVE)
     ph = tr.phases
     assert ph[0].end == "rest:tip" and ph[1].contact == ("stick", "stick", "free", "free")
@@ -260,16 +265,7 @@ def test_errors_are_raised_not_guessed():
     with pytest.raises(jh.ScenarioError, match=r"restitution \(e\) must be in \[0, 1\], got 1.5"):
         jh.RigidGround(restitution=1.5)
     # A phase budget too small for the rocking sequence: a clear error naming the last phases.
-    sc = _scenario(
-        size=(1.0, 1.0, 2.0),
-        mu=0.9,
-        attachment=(0.5, 0.0, 2.0),
-        tip=(0.5, -6.0, 10.0),
-        rope_stiffness=2e5,
-        rope_damping=2e4,
-        speed=0.05,
-        travel=0.018,
-    )
+    sc = _rocking_box()
     with pytest.raises(RigidContactError, match="(?s)max_phases = 3.*impact:FH"):
         simulate_rigid(sc, T1, n_save=N_SAVE, options=jh.RigidOptions(max_phases=3))
 
