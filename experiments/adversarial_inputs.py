@@ -53,16 +53,16 @@ def _trap(*args, **kwargs):
 
 def _install_traps():
     # internal on purpose: traps the compile/solve entry points, to see what validation lets through
-    import jaxhoist.apps.scan as scan_mod
-    import jaxhoist.numerics.solve as solve_mod
-    from jaxhoist.apps import bifurcation_cli, simulate_cli
+    import jaxhoist._apps.scan as scan_mod
+    import jaxhoist._numerics.solve as solve_mod
+    from jaxhoist._apps import bifurcation_cli, simulate_cli
 
     simulate_cli._compiled_solve = _trap
     solve_mod._solve_jit = _trap
     scan_mod._fingerprint = _trap  # scan(): called after every host-side check, before compiling
     for name in ("scan", "locate_bifurcation", "trace_boundary"):
         setattr(bifurcation_cli, name, _trap)
-    import jaxhoist.numerics.rigid_solve as rigid
+    import jaxhoist._numerics.rigid_solve as rigid
 
     rigid.simulate_rigid = _trap
 
@@ -87,7 +87,7 @@ def run_py(fn) -> str:
 
 
 def run_cli(argv) -> str:
-    from jaxhoist.apps import cli
+    from jaxhoist._apps import cli
 
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
@@ -110,7 +110,7 @@ def run_cli(argv) -> str:
 
 
 def preset(name="paper-4.2") -> str:
-    return resources.files("jaxhoist.io.presets").joinpath(f"{name}.toml").read_text()
+    return resources.files("jaxhoist._io.presets").joinpath(f"{name}.toml").read_text()
 
 
 def file_cases(tmp: Path, n_mutations: int):
@@ -268,7 +268,7 @@ def api_cases(paper42):
                 sc, 0.05, n_save=3, options=jh.SolverOptions(max_steps=10), throw=False
             ).position[-1]
 
-        import jaxhoist.numerics.solve as solve_mod
+        import jaxhoist._numerics.solve as solve_mod
 
         saved = solve_mod._solve_jit
         solve_mod._solve_jit = solve_mod.eqx.filter_jit(solve_mod.solve)  # tracing only: fails before solving
@@ -299,7 +299,7 @@ def api_cases(paper42):
 
 def csv_cases(tmp: Path):
     # the module path, not jaxhoist.read_measurement: older checkouts (the "before" figures) lack the latter
-    from jaxhoist.io.measurement import read_measurement
+    from jaxhoist._io.measurement import read_measurement
 
     good = "t [s],position_x [m]\n0.0,1.0\n0.1,1.5\n0.2,2.0\n"
     items = [

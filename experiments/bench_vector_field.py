@@ -52,8 +52,8 @@ import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist import SolverOptions, initial_state, vector_field  # noqa: E402
-from jaxhoist.numerics.fixed_step import integrate, solve_fixed  # noqa: E402  (internal: times the integrator)
-from jaxhoist.numerics.solve import solve  # noqa: E402  (internal: times the solve core)
+from jaxhoist._numerics.fixed_step import integrate, solve_fixed  # noqa: E402  (internal: times the integrator)
+from jaxhoist._numerics.solve import solve  # noqa: E402  (internal: times the solve core)
 
 MU = "foundation.friction_coefficient"
 MOTION = ("position", "velocity", "quaternion", "angular_velocity", "tip_position", "tip_velocity")

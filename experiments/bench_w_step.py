@@ -23,9 +23,9 @@ import jax.numpy as jnp  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist import initial_state, vector_field  # noqa: E402
-from jaxhoist.numerics import fixed_step  # noqa: E402  (internal: times one RK step)
-from jaxhoist.numerics.rosenbrock import ROS34PW2, w_step  # noqa: E402  (internal: times one W step)
-from jaxhoist.physics.linearise import linearise  # noqa: E402  (internal: times the linearisation)
+from jaxhoist._numerics import fixed_step  # noqa: E402  (internal: times one RK step)
+from jaxhoist._numerics.rosenbrock import ROS34PW2, w_step  # noqa: E402  (internal: times one W step)
+from jaxhoist._physics.linearise import linearise  # noqa: E402  (internal: times the linearisation)
 
 H = 1e-3
 

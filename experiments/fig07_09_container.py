@@ -28,8 +28,8 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxhoist  # noqa: E402
-from jaxhoist.apps import plots  # noqa: E402  (internal: the CLI's plotting and result-file helpers)
-from jaxhoist.io.results import (  # noqa: E402
+from jaxhoist import plots  # noqa: E402
+from jaxhoist._io.results import (  # noqa: E402  (internal: the CLI's result-file helpers)
     corner_detach_times,
     liftoff_time,
     save_trajectory,

@@ -3,7 +3,7 @@
 The measurement: the mass-centre path (position_x, _y, _z) sampled at 50 Hz with 5 mm Gaussian noise and the
 rope tension with 1 % noise (standard deviation 1 % of its RMS value), simulated from the paper-4.2 preset.
 The fit starts from every parameter perturbed by ±30 % (alternating signs) and fits all five together with
-`jaxhoist.apps.identify.identify` (optimistix Levenberg-Marquardt, forward-mode sensitivities). In the same
+`jaxhoist._apps.identify.identify` (optimistix Levenberg-Marquardt, forward-mode sensitivities). In the same
 process, `scipy.optimize.least_squares` (trust-region reflective, 2-point finite-difference Jacobian) solves
 the same weighted problem in the same log variables, through the same compiled forward solve.
 
@@ -31,7 +31,7 @@ import scipy.optimize  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist import identify, residual_function, synthetic_measurement, write_measurement  # noqa: E402
-from jaxhoist.apps.identify import plot_fit  # noqa: E402  (internal: the CLI's plotting helper)
+from jaxhoist._apps.identify import plot_fit  # noqa: E402  (internal: the CLI's plotting helper)
 
 PARAMS = ["mu", "k", "h", "c_l", "b_l"]
 PATHS = {

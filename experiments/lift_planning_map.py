@@ -11,7 +11,7 @@ The rope direction is B -> A at t = 0: its angle θ from the vertical and its az
 base, measured from the edge DE (the body ξ axis) towards DH (η); the boom tip A is placed at the preset's
 distance |AB| from the rope point B along it. For each direction and μ, the rope-force magnitudes at which
 the load lifts (N = 0), slides (T = μN), twists or tips (R leaves the base, about an edge or a corner) come
-from `jaxhoist.physics.statics` in closed form; the smallest one names the first motion. Sliding starts
+from `jaxhoist._physics.statics` in closed form; the smallest one names the first motion. Sliding starts
 where the exact corner-friction utilisation ρ* reaches 1 (`statics.friction_utilisation`; bisection on the
 pull, vectorised over all directions), which is what the rigid dynamics uses: the paper's T = μN ignores
 the moment that the friction must also resist, and names a different first motion where the map is

@@ -46,7 +46,7 @@ import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist import set_param  # noqa: E402
-from jaxhoist.numerics.solve import as_float64_leaves, solve  # noqa: E402  (internal: the bare solve core under vmap)
+from jaxhoist._numerics.solve import as_float64_leaves, solve  # noqa: E402  (internal: the bare solve core under vmap)
 
 CONTROLLERS = {
     "I (0, 1), diffrax's default": (0.0, 1.0),

@@ -32,7 +32,7 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.numerics._tree import lin_comb  # noqa: E402  (internal: re-implements the W step)
+from jaxhoist._numerics._tree import lin_comb  # noqa: E402  (internal: re-implements the W step)
 
 MU = "foundation.friction_coefficient"
 

@@ -1,5 +1,5 @@
 """`python -m jaxhoist ...`: the same as the `jaxhoist` command."""
 
-from jaxhoist.apps.cli import main
+from jaxhoist._apps.cli import main
 
 raise SystemExit(main())

@@ -38,3 +38,42 @@ def warn_moved(function: str, moved: dict[str, str], stacklevel: int = 3) -> Non
         DeprecationWarning,
         stacklevel=level,
     )
+
+
+def _importer_level() -> int:
+    """The `warnings.warn` stack level of the first frame outside jaxhoist and the import machinery: the
+    user's `import` statement, so that Python's default filter shows the warning in a script. Frames of
+    `importlib._bootstrap` are not counted (`warnings.warn` skips them too)."""
+    frame, level = sys._getframe(1), 1
+    while frame.f_back is not None:
+        frame = frame.f_back
+        if frame.f_code.co_filename.startswith("<frozen importlib"):
+            continue
+        level += 1
+        name = frame.f_globals.get("__name__", "")
+        if not (name == "jaxhoist" or name.startswith("jaxhoist.")):
+            break
+    return level
+
+
+def alias_moved_package(old: str, new: str) -> None:
+    """Let the package path `old` (the layout before 0.2) name the modules of its private successor `new`.
+
+    Called from `old`'s `__init__.py`: warns once (`DeprecationWarning`) and registers every module of `new`
+    under `old` too, so `from jaxhoist.physics.params import Load` gives the same class object as
+    `jaxhoist.Load` (no module is loaded twice).
+    """
+    import importlib
+    import pkgutil
+
+    warnings.warn(
+        f"{old} moved to the private package {new} (issue 11); import the public names from `jaxhoist` "
+        f"(and plots from `jaxhoist.plots`); {old} will be removed",
+        DeprecationWarning,
+        stacklevel=_importer_level(),
+    )
+    old_package, new_package = sys.modules[old], importlib.import_module(new)
+    for info in pkgutil.iter_modules(new_package.__path__):
+        module = importlib.import_module(f"{new}.{info.name}")
+        sys.modules[f"{old}.{info.name}"] = module
+        setattr(old_package, info.name, module)

@@ -64,7 +64,7 @@ def with_coulomb(scenario: jh.Scenario, eps: float = 1e-3) -> jh.Scenario:
 @pytest.fixture(scope="session")
 def preset_dicts() -> dict[str, dict]:
     """The bundled presets as plain TOML dicts (to edit and feed to `scenario_from_dict`)."""
-    pkg = resources.files("jaxhoist.io.presets")
+    pkg = resources.files("jaxhoist._io.presets")
     return {n: tomllib.loads(pkg.joinpath(f"{n}.toml").read_text()) for n in PRESETS}
 
 
@@ -103,7 +103,7 @@ def _release_compiled_code():
     compile died with a segmentation fault (tests/test_statics.py, after ~250 tests). Within a module the
     compiled functions are still shared."""
     yield
-    from jaxhoist.numerics import batch, compile_cache
+    from jaxhoist._numerics import batch, compile_cache
 
     compile_cache._CACHE.clear()  # the bifurcation locator's solves among them
     batch.chunk_fn.cache_clear()

@@ -10,7 +10,7 @@ import scipy.linalg
 from conftest import N_SAVE, run, with_bristle
 
 import jaxhoist as jh
-from jaxhoist.physics import elastic, kinematics
+from jaxhoist._physics import elastic, kinematics
 
 G = 9.81
 

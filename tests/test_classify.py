@@ -1,4 +1,4 @@
-"""`jaxhoist.apps.classify`: each kind of located change recognised on synthetic samples, the 10-90 % ramp
+"""`jaxhoist._apps.classify`: each kind of located change recognised on synthetic samples, the 10-90 % ramp
 width against its closed form, the `last_contact_time` observable against `liftoff_time`, and one cheap
 real case."""
 
@@ -13,8 +13,8 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.apps.classify import classify_change, classify_samples, ramp_width  # noqa: E402
-from jaxhoist.numerics import observables as O  # noqa: E402
+from jaxhoist._apps.classify import classify_change, classify_samples, ramp_width  # noqa: E402
+from jaxhoist._numerics import observables as O  # noqa: E402
 
 BR = (0.4999995, 0.5000005)  # a located bracket of width 1e-6 around p* = 0.5
 
@@ -169,7 +169,7 @@ def test_paper_43_preset_is_paper_42_with_the_fitted_mass_centre():
     import tomllib
     from importlib import resources
 
-    pkg = resources.files("jaxhoist.io.presets")
+    pkg = resources.files("jaxhoist._io.presets")
     d42 = tomllib.loads(pkg.joinpath("paper-4.2.toml").read_text())
     d43 = tomllib.loads(pkg.joinpath("paper-4.3.toml").read_text())
     assert d43["foundation"]["friction_coefficient"] == 0.3635  # paper §4.3
@@ -190,7 +190,7 @@ def test_cli_bifurcation_classify(tmp_path, capsys):
     the level crossing of the mass centre's x after 0.3 s of paper-4.2 is a continuous crossing."""
     import json
 
-    from jaxhoist.apps import cli
+    from jaxhoist._apps import cli
 
     out = tmp_path / "bif"
     code = cli.main(

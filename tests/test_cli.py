@@ -17,9 +17,9 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from jaxhoist.apps import cli, simulate_cli  # noqa: E402
-from jaxhoist.io import results  # noqa: E402
-from jaxhoist.io.scenario import SCHEMA  # noqa: E402
+from jaxhoist._apps import cli, simulate_cli  # noqa: E402
+from jaxhoist._io import results  # noqa: E402
+from jaxhoist._io.scenario import SCHEMA  # noqa: E402
 
 SHORT = ["--t1", "0.5", "--n-save", "11"]
 
@@ -68,7 +68,7 @@ def test_simulate_writes_results_and_plots(short_run, capsys):
 def test_trajectory_csv_and_netcdf_hold_the_npz_values(short_run):
     import scipy.io
 
-    from jaxhoist.io.measurement import SIGNALS, read_measurement
+    from jaxhoist._io.measurement import SIGNALS, read_measurement
 
     _, out = short_run
     d = results.load_trajectory(out / "trajectory.npz")
@@ -152,7 +152,7 @@ def test_simulate_csv_goes_into_identify_unchanged(tmp_path):
 
 
 def cli_plots():
-    from jaxhoist.apps import plots
+    from jaxhoist._apps import plots
 
     return plots.PLOTS
 
@@ -187,7 +187,7 @@ def test_summary_and_progress_lines(short_run, tmp_path, capsys):
 
 def test_misspelled_field_exits_2_naming_the_field(tmp_path, capsys, monkeypatch):
     _no_compile(monkeypatch)
-    text = resources.files("jaxhoist.io.presets").joinpath("paper-4.2.toml").read_text()
+    text = resources.files("jaxhoist._io.presets").joinpath("paper-4.2.toml").read_text()
     assert "friction_coefficient = 0.25" in text
     bad = tmp_path / "typo.toml"
     bad.write_text(text.replace("friction_coefficient = 0.25", "friction_coeficient = 0.25"))
@@ -203,7 +203,7 @@ def test_misspelled_field_exits_2_naming_the_field(tmp_path, capsys, monkeypatch
 
 def test_invalid_value_and_bad_override_exit_2(tmp_path, capsys, monkeypatch):
     _no_compile(monkeypatch)
-    text = resources.files("jaxhoist.io.presets").joinpath("paper-4.2.toml").read_text()
+    text = resources.files("jaxhoist._io.presets").joinpath("paper-4.2.toml").read_text()
     assert text.count("stiffness = 1.4e7") == 1  # c_l of paper §4.2, only in [rope]
     neg = tmp_path / "neg.toml"
     neg.write_text(text.replace("stiffness = 1.4e7", "stiffness = -1.4e7"))
@@ -255,7 +255,7 @@ def test_extension_subcommands_plug_in(monkeypatch, capsys):
         {
             "scan": "fake_scan_module",
             "other": "fake_broken_module",
-            "missing": "jaxhoist.apps.no_such_module",
+            "missing": "jaxhoist._apps.no_such_module",
         },
     )
     assert cli.main(["scan", "--n", "7"]) == 0
@@ -312,7 +312,7 @@ def test_library_hints_use_the_flag_names(monkeypatch, capsys):
     import inspect
 
     from jaxhoist._errors import ScenarioError
-    from jaxhoist.io import scan_store
+    from jaxhoist._io import scan_store
 
     src = inspect.getsource(scan_store)
     assert "use another out_dir, or resume=False to " in src and '"overwrite it"' in src  # the text reworded
@@ -341,7 +341,7 @@ def test_library_hints_use_the_flag_names(monkeypatch, capsys):
 def test_scan_progress_bar_shows_members_rate_eta_failures(monkeypatch):
     import io
 
-    from jaxhoist.apps import progress as scan_mod
+    from jaxhoist._apps import progress as scan_mod
 
     stream = io.StringIO()
     bar = cli.ScanProgressBar(stream=stream)

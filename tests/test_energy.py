@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 from conftest import N_SAVE, run, with_bristle
 
-from jaxhoist.physics import elastic, energy, kinematics
+from jaxhoist._physics import elastic, energy, kinematics
 
 G = 9.81
 

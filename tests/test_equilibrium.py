@@ -9,7 +9,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 import jaxhoist as jh
-from jaxhoist.physics import kinematics
+from jaxhoist._physics import kinematics
 
 G = 9.81
 

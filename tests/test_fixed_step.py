@@ -1,4 +1,4 @@
-"""`jaxhoist.numerics.fixed_step`: the lean fixed-step Runge-Kutta loop used by `scan(fixed_step=True)`.
+"""`jaxhoist._numerics.fixed_step`: the lean fixed-step Runge-Kutta loop used by `scan(fixed_step=True)`.
 
 It must take the same steps as diffrax's `ConstantStepSize` with the same tableau and give the same states
 to round-off; land on saved times that are not multiples of the step; carry forward-mode sensitivities
@@ -17,10 +17,10 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.apps.scan import scan  # noqa: E402
-from jaxhoist.numerics import fixed_step  # noqa: E402
-from jaxhoist.numerics.options import SolverOptions  # noqa: E402
-from jaxhoist.numerics.solve import solve  # noqa: E402
+from jaxhoist._apps.scan import scan  # noqa: E402
+from jaxhoist._numerics import fixed_step  # noqa: E402
+from jaxhoist._numerics.options import SolverOptions  # noqa: E402
+from jaxhoist._numerics.solve import solve  # noqa: E402
 
 MU = "foundation.friction_coefficient"
 DT = 1e-3

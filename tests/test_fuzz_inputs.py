@@ -13,8 +13,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import jaxhoist as jh
+from jaxhoist._apps import cli, simulate_cli
 from jaxhoist._errors import MAX_MESSAGE_CHARS
-from jaxhoist.apps import cli, simulate_cli
 
 PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2", "paper-4.3")
 FUZZ = settings(
@@ -23,7 +23,7 @@ FUZZ = settings(
 
 
 def _text(name: str) -> str:
-    return resources.files("jaxhoist.io.presets").joinpath(f"{name}.toml").read_text()
+    return resources.files("jaxhoist._io.presets").joinpath(f"{name}.toml").read_text()
 
 
 TEXTS = {n: _text(n) for n in PRESETS}

@@ -8,7 +8,7 @@ import pytest
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
-from jaxhoist.physics import kinematics as K
+from jaxhoist._physics import kinematics as K
 
 FEW = settings(max_examples=40, derandomize=True, deadline=None)
 _f = dict(allow_nan=False, allow_infinity=False)

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 import jaxhoist as jh
-from jaxhoist.numerics.rigid_solve import RigidContactError, simulate_rigid
-from jaxhoist.physics import rigid, statics
+from jaxhoist._numerics.rigid_solve import RigidContactError, simulate_rigid
+from jaxhoist._physics import rigid, statics
 
 N_SAVE = 61
 T1 = 1.5
@@ -274,8 +274,8 @@ def test_model_switch_and_cli_reach_the_rigid_driver(slide_run, tmp_path):
     """`simulate(..., model=RigidGround())` and `jaxhoist simulate --model rigid` run the same phase driver:
     the same sliding motion (bit for bit: same solver, same settings), and the CLI's energy residual includes
     the impact losses."""
-    from jaxhoist.apps.cli import main
-    from jaxhoist.io.results import load_trajectory
+    from jaxhoist._apps.cli import main
+    from jaxhoist._io.results import load_trajectory
 
     sc, ref = slide_run
     opts = jh.SolverOptions(rtol=1e-8, atol=1e-9)
@@ -345,8 +345,8 @@ def test_earlier_keywords_warn_and_build_the_same_objects():
     """Issue 11: `simulate_rigid`'s `restitution`, `rope` moved into the model `RigidGround`, the phase
     solver's settings into `RigidOptions`; the earlier keywords still work, with one `DeprecationWarning`
     at the caller's line, converted to exactly those objects (the same run)."""
-    from jaxhoist.numerics.rigid_compliant import ChatterRule
-    from jaxhoist.numerics.rigid_options import convert_legacy
+    from jaxhoist._numerics.rigid_compliant import ChatterRule
+    from jaxhoist._numerics.rigid_options import convert_legacy
 
     old = dict(restitution=0.3, rope="inextensible", rtol=1e-7, max_phases=50, chatter=None)
     with pytest.warns(

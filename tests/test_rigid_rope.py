@@ -15,7 +15,7 @@ import pytest
 from scipy.optimize import brentq
 
 import jaxhoist as jh
-from jaxhoist.numerics.rigid_solve import simulate_rigid
+from jaxhoist._numerics.rigid_solve import simulate_rigid
 
 N_SAVE = 61
 T1 = 1.5
@@ -181,7 +181,7 @@ def test_rope_switch_errors():
         jh.simulate(sc, T1, model="rigid", rope="chain")
     with pytest.raises(jh.ScenarioError, match="rope='inextensible' is available with model='rigid' only"):
         jh.simulate(sc, T1, rope="inextensible")
-    from jaxhoist.apps.cli import main
+    from jaxhoist._apps.cli import main
 
     assert main(["simulate", "paper-4.1", "--rope", "inextensible", "--quiet", "--no-plots"]) == 2
     with pytest.raises(SystemExit):
@@ -209,8 +209,8 @@ def test_model_switch_reaches_the_inextensible_rope(ramped_lift):
 
 def test_cli_runs_the_inextensible_rope(ramped_lift, tmp_path):
     """`jaxhoist simulate FILE --model rigid --rope inextensible` gives the same lift."""
-    from jaxhoist.apps.cli import main
-    from jaxhoist.io.results import load_trajectory
+    from jaxhoist._apps.cli import main
+    from jaxhoist._io.results import load_trajectory
 
     _, ref = ramped_lift
     path = tmp_path / "rope.toml"

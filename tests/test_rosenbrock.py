@@ -15,10 +15,10 @@ import pytest
 from conftest import N_SAVE, SOLVE_OPTIONS
 
 import jaxhoist as jh
-from jaxhoist.numerics.rosenbrock import ROS34PW2, RosenbrockW, w_step
-from jaxhoist.physics.elastic import vector_field
-from jaxhoist.physics.equilibrium import initial_state
-from jaxhoist.physics.linearise import linearise
+from jaxhoist._numerics.rosenbrock import ROS34PW2, RosenbrockW, w_step
+from jaxhoist._physics.elastic import vector_field
+from jaxhoist._physics.equilibrium import initial_state
+from jaxhoist._physics.linearise import linearise
 
 MU = "foundation.friction_coefficient"
 T1 = 2.0

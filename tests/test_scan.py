@@ -1,4 +1,4 @@
-"""`jaxhoist.apps.scan` (with `io.scan_store`, `apps.scan_result`): chunked, vmapped, sharded parameter scans.
+"""`jaxhoist.scan` (with `_io/scan_store.py`, `_apps/scan_result.py`): chunked, vmapped, sharded scans.
 
 The scans here share one compiled core (same scenario structure, observables, options, saved times and
 chunk shape) wherever a test does not need another shape. The box is a 1 m cube of 1000 kg pulled
@@ -17,11 +17,11 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist.apps.scan import ScanResult, ScanStatus, scan  # noqa: E402
-from jaxhoist.apps.sweep import members as _members  # noqa: E402
-from jaxhoist.apps.sweep import parse_values  # noqa: E402
-from jaxhoist.numerics import observables as O  # noqa: E402
-from jaxhoist.numerics.paths import get_param, parse_path, set_param  # noqa: E402
+from jaxhoist._apps.scan import ScanResult, ScanStatus, scan  # noqa: E402
+from jaxhoist._apps.sweep import members as _members  # noqa: E402
+from jaxhoist._apps.sweep import parse_values  # noqa: E402
+from jaxhoist._numerics import observables as O  # noqa: E402
+from jaxhoist._numerics.paths import get_param, parse_path, set_param  # noqa: E402
 
 MU = "foundation.friction_coefficient"
 MUS = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
@@ -311,7 +311,7 @@ def test_forward_sensitivities_match_differences(box, tmp_path):
     # The sensitivities of a vector observable keep both axes, labelled, in the netCDF file and the plots.
     import scipy.io
 
-    from jaxhoist.apps.scan_plots import _components
+    from jaxhoist._apps.scan_plots import _components
 
     assert res.axes("d_final_position") == [
         ("final_position_component", 3, ("x", "y", "z")),
@@ -391,7 +391,7 @@ jax.distributed.initialize(coordinator_address=f"127.0.0.1:{port}", num_processe
 import numpy as np
 sys.path.insert(0, sys.argv[4])
 from test_scan import KW, MU, MUS, T1, kw, oblique_box
-from jaxhoist.apps.scan import scan
+from jaxhoist._apps.scan import scan
 assert jax.process_count() == 2 and len(jax.local_devices()) == 1
 res = scan(oblique_box(), {MU: MUS}, T1, out_dir=out, **kw(chunk_size=4, wait_timeout=300))
 np.savez(f"{out}/process{pid}.npz", **{k: res[k] for k in res.data}, status=res.status)
@@ -450,7 +450,7 @@ sys.path.insert(0, here)
 from jaxtyping import install_import_hook
 install_import_hook("jaxhoist", "beartype.beartype")
 from test_scan import KW, MU, MUS, T1, kw, oblique_box
-from jaxhoist.apps.scan import scan
+from jaxhoist._apps.scan import scan
 assert len(jax.devices()) == 4
 save = lambda name, r: np.savez(f"{tmp}/{name}.npz", **{k: r[k] for k in r.data}, status=r.status)
 res = scan(oblique_box(), {MU: MUS}, T1, **kw(chunk_size=4))
@@ -520,9 +520,9 @@ def test_four_devices_and_resumes_across_device_counts(clean, tmp_path):
 def test_fingerprint_sees_constants_and_closures_of_custom_observables():
     """Issue 14: a custom observable whose constant or closed-over value changed must not reuse the chunks
     of the old one (the fingerprint hashed only the bytecode)."""
-    from jaxhoist.apps.scan import _fingerprint
-    from jaxhoist.numerics.batch import BatchSpec as _Spec
-    from jaxhoist.numerics.observables import resolve
+    from jaxhoist._apps.scan import _fingerprint
+    from jaxhoist._numerics.batch import BatchSpec as _Spec
+    from jaxhoist._numerics.observables import resolve
 
     sc = oblique_box()
     ts = np.linspace(0.0, T1, 3)
@@ -554,7 +554,7 @@ def test_a_damaged_or_foreign_store_is_recomputed_with_a_warning(box, clean, tmp
     fingerprint and the member indices inside the file); a truncated or emptied chunk, a chunk copied over
     another, a chunk whose values were changed (NaNs marked ok) and a truncated manifest are each recomputed
     with a `ScanStoreWarning` naming the file, and the result equals the clean scan."""
-    from jaxhoist.io.scan_store import ScanStoreWarning
+    from jaxhoist._io.scan_store import ScanStoreWarning
 
     out = tmp_path / "store"
     first = scan(box, {MU: MUS}, T1, out_dir=out, **kw(chunk_size=4))  # 2 chunks (4 and 2 members)
@@ -598,9 +598,9 @@ sys.path.insert(0, sys.argv[1])
 from jaxtyping import install_import_hook
 install_import_hook("jaxhoist", "beartype.beartype")
 from test_scan import KW, MU, MUS, T1, oblique_box
-from jaxhoist.numerics.observables import resolve
-from jaxhoist.apps.scan import _fingerprint
-from jaxhoist.numerics.batch import BatchSpec as _Spec
+from jaxhoist._numerics.observables import resolve
+from jaxhoist._apps.scan import _fingerprint
+from jaxhoist._numerics.batch import BatchSpec as _Spec
 import jaxhoist as jh
 spec = _Spec(paths=(MU,), observables=tuple(resolve(KW["observables"])), histories=(),
              options=jh.SolverOptions(), lanes=2, devices=(), derivatives=False)
@@ -615,9 +615,9 @@ def test_fingerprint_is_the_same_in_every_process():
     import sys
     from pathlib import Path
 
-    from jaxhoist.apps.scan import _fingerprint
-    from jaxhoist.numerics.batch import BatchSpec as _Spec
-    from jaxhoist.numerics.observables import resolve
+    from jaxhoist._apps.scan import _fingerprint
+    from jaxhoist._numerics.batch import BatchSpec as _Spec
+    from jaxhoist._numerics.observables import resolve
 
     spec = _Spec(
         paths=(MU,),
@@ -681,7 +681,7 @@ def test_earlier_keywords_build_the_same_objects():
     pytrees, so the same compiled core and the same numbers)."""
     import equinox as eqx
 
-    from jaxhoist.apps.scan_layout import convert_legacy, scan_solver_options
+    from jaxhoist._apps.scan_layout import convert_legacy, scan_solver_options
 
     dev = jax.devices()[:1]
     old = dict(mode="points", solver=diffrax.Bosh3(), dt0=1e-3, fixed_step=True, max_steps=10, lanes=8)
@@ -710,7 +710,7 @@ def test_sweep_objects_count_members_and_refuse_bad_input(box):
     """`Sweep`, `Grid` (outer product) and `Points` (zipped): member counts and layout; a plain mapping is a
     `Sweep` for one parameter and a `Grid` for several; bad input gives a one-line `ScenarioError` naming
     the path, before anything is compiled."""
-    from jaxhoist.apps.sweep import as_sweep
+    from jaxhoist._apps.sweep import as_sweep
 
     g = jh.Grid({MU: "0.1:0.6:6", "hoist.speed": [0.2, 0.3]})
     assert g.size == len(g) == 12 and g.shape == (6, 2) and g.params == (MU, "hoist.speed")
@@ -743,7 +743,7 @@ def test_default_lanes_widen_with_the_member_count_only():
     groups are close neighbours that take about the same steps) from 16 to 256, keeping at least 16
     groups, and never depends on the devices (results must not); constant steps keep 256; `lanes` given
     wins, capped at the member count's next power of two."""
-    from jaxhoist.apps.scan_layout import adaptive_lanes
+    from jaxhoist._apps.scan_layout import adaptive_lanes
 
     widths = {n: adaptive_lanes(n) for n in (1, 64, 511, 512, 1024, 4096, 65536)}
     assert widths == {1: 16, 64: 16, 511: 16, 512: 32, 1024: 64, 4096: 256, 65536: 256}

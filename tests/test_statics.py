@@ -10,7 +10,7 @@ import pytest
 from scipy.optimize import minimize
 
 import jaxhoist as jh
-from jaxhoist.physics import statics
+from jaxhoist._physics import statics
 
 A_TIP = np.array([3.0, 4.0, 10.0])
 

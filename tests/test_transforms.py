@@ -9,8 +9,8 @@ import numpy as np
 import pytest
 
 import jaxhoist as jh
-import jaxhoist.numerics.solve as solve_mod
-from jaxhoist.physics.params import get_leaf
+import jaxhoist._numerics.solve as solve_mod
+from jaxhoist._physics.params import get_leaf
 
 # Tight solves shared by the vmap, derivative and finite-difference tests (one compile per transform):
 # two saved times [0, t1] and rtol 1e-12.

@@ -16,8 +16,8 @@ from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
 import jaxhoist as jh
-import jaxhoist.numerics.solve as solve_mod
-from jaxhoist.physics.params import get_leaf, leaf_getter
+import jaxhoist._numerics.solve as solve_mod
+from jaxhoist._physics.params import get_leaf, leaf_getter
 
 PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2", "paper-4.3")
 FEW = settings(max_examples=25, derandomize=True, deadline=None)
@@ -341,7 +341,7 @@ MAX_MESSAGE = 600  # jaxhoist._errors.MAX_MESSAGE_CHARS: a capped error line is 
 def _preset_text(name: str = "paper-4.2") -> str:
     from importlib import resources
 
-    return resources.files("jaxhoist.io.presets").joinpath(f"{name}.toml").read_text()
+    return resources.files("jaxhoist._io.presets").joinpath(f"{name}.toml").read_text()
 
 
 def _one_bounded_line(msg: str) -> str:
@@ -428,7 +428,7 @@ def test_error_messages_are_capped_and_on_one_line():
 
 
 def _set_error(paper42, item: str) -> str:
-    from jaxhoist.io.scenario import apply_overrides
+    from jaxhoist._io.scenario import apply_overrides
 
     with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
         with pytest.raises(jh.ScenarioError) as info:
@@ -456,7 +456,7 @@ def _set_error(paper42, item: str) -> str:
     ],
 )
 def test_bad_override_names_its_field(paper42, item, field):
-    from jaxhoist.io.scenario import apply_overrides
+    from jaxhoist._io.scenario import apply_overrides
 
     if field is None:
         sc, over = apply_overrides(paper42, [item])
@@ -548,7 +548,7 @@ def test_replace_refuses_wrong_shapes_and_types(paper42):
 
 
 def test_t1_contradicting_ts_is_refused():
-    from jaxhoist.numerics.solve import check_times
+    from jaxhoist._numerics.solve import check_times
 
     with pytest.raises(jh.ScenarioError, match=r"t1.*ts"):
         check_times(1.0, [0.0, 0.02, 0.05])
@@ -596,7 +596,7 @@ def test_jacfwd_through_simulate_says_adjoint_forward(paper42):
 
 
 def test_static_fields_are_no_scan_parameters(paper42):
-    from jaxhoist.io.validate import check_param_path
+    from jaxhoist._io.validate import check_param_path
 
     for path in ("t1", "name", "load.mass.real", "load.size[5]"):
         with pytest.raises(jh.ScenarioError, match=re.escape(path.split(".")[0].split("[")[0])):
@@ -605,7 +605,7 @@ def test_static_fields_are_no_scan_parameters(paper42):
 
 
 def test_strict_numbers():
-    from jaxhoist.io.validate import parse_number, parse_values
+    from jaxhoist._io.validate import parse_number, parse_values
 
     assert parse_number(" 1.5e-3 ", "x") == 1.5e-3 and parse_number("-2", "x") == -2.0
     assert np.isnan(parse_number("nan", "x")) and parse_number("-inf", "x") == -np.inf
@@ -623,7 +623,7 @@ def test_strict_numbers():
 
 
 def _cli(monkeypatch, capsys, argv) -> tuple[int, str]:
-    from jaxhoist.apps import bifurcation_cli, cli, simulate_cli
+    from jaxhoist._apps import bifurcation_cli, cli, simulate_cli
 
     monkeypatch.setattr(simulate_cli, "_compiled_solve", _core_must_not_run)
     for name in ("scan", "locate_bifurcation", "trace_boundary"):
@@ -702,7 +702,7 @@ def test_cli_existing_result_folder_needs_overwrite(monkeypatch, capsys, tmp_pat
 
 
 def test_overwrite_cleans_only_the_files_simulate_writes(tmp_path):
-    from jaxhoist.io.validate import clean_outputs
+    from jaxhoist._io.validate import clean_outputs
 
     out = tmp_path / "o"
     out.mkdir()
@@ -715,8 +715,8 @@ def test_overwrite_cleans_only_the_files_simulate_writes(tmp_path):
 
 
 def test_failed_run_summary_prints_no_event_times():
+    from jaxhoist._apps.cli import event_lines, summary_status
     from jaxhoist._errors import SolveStatus
-    from jaxhoist.apps.cli import event_lines, summary_status
 
     ts = np.linspace(0.0, 1.0, 11)
     normal = np.full((11, 4), np.inf)
@@ -779,7 +779,7 @@ GOOD_CSV = "t [s],position_x [m]\n0.0,1.0\n0.1,1.5\n0.2,2.0\n"
 
 
 def test_measurement_bom_header_is_read(tmp_path):
-    from jaxhoist.io.measurement import read_measurement
+    from jaxhoist._io.measurement import read_measurement
 
     m = read_measurement(_csv(tmp_path, b"\xef\xbb\xbf" + GOOD_CSV.encode()))
     np.testing.assert_allclose(m.t, [0.0, 0.1, 0.2])
@@ -797,7 +797,7 @@ def test_measurement_bom_header_is_read(tmp_path):
     ids=["underscore", "utf-16", "latin-1", "nul", "huge"],
 )
 def test_measurement_bad_bytes_and_numbers(tmp_path, content, word):
-    from jaxhoist.io.measurement import MeasurementError, read_measurement
+    from jaxhoist._io.measurement import MeasurementError, read_measurement
 
     with pytest.raises(MeasurementError) as info:
         read_measurement(_csv(tmp_path, content))
@@ -806,7 +806,7 @@ def test_measurement_bad_bytes_and_numbers(tmp_path, content, word):
 
 
 def test_measurement_path_that_is_a_folder(tmp_path):
-    from jaxhoist.io.measurement import MeasurementError, read_measurement
+    from jaxhoist._io.measurement import MeasurementError, read_measurement
 
     with pytest.raises(MeasurementError, match="folder"):
         read_measurement(tmp_path)
@@ -815,8 +815,8 @@ def test_measurement_path_that_is_a_folder(tmp_path):
 def test_cli_overwrite_replaces_a_previous_run(tmp_path, capsys):
     """End to end (the short solve of tests/test_cli.py, compiled once per process): a second run into the
     same folder is refused; with --overwrite and --no-plots the old PNGs are gone and the data is new."""
-    from jaxhoist.apps import cli
-    from jaxhoist.io import results
+    from jaxhoist._apps import cli
+    from jaxhoist._io import results
 
     out = tmp_path / "o"
     short = ["simulate", "paper-4.2", "--t1", "0.5", "--n-save", "11", "--out", str(out), "--quiet"]

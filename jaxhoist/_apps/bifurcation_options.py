@@ -1,0 +1,180 @@
+"""How `locate_bifurcation` and `trace_boundary` search, as objects: the refinement method (`Newton`,
+`Bisection`, `Multisection`), the tolerance and solve budget, and the bracketing of the continuation
+corrector (`SearchOptions`); and the conversion of the keywords of earlier versions (`tol=`, `method=`,
+`rtol=`, ...), which still work with a `DeprecationWarning`."""
+
+from __future__ import annotations
+
+import warnings
+from typing import ClassVar
+
+import diffrax
+import equinox as eqx
+import numpy as np
+
+from .._errors import ScenarioError
+from .._numerics.options import DEFAULT_MAX_STEPS, SolverOptions
+
+
+class AbstractSearchMethod(eqx.Module):
+    """How the bracket around a change of character is narrowed."""
+
+    name: ClassVar[str]
+
+
+class Newton(AbstractSearchMethod):
+    """Safeguarded Newton on the indicator g, with dg/dp [1/unit of the parameter] from forward-mode
+    sensitivities; bisection whenever a Newton step leaves the bracket or does not shrink it fast enough."""
+
+    name: ClassVar[str] = "newton"
+
+
+class Bisection(AbstractSearchMethod):
+    """Bisection with value-only solves (~log2(width/tol) of them)."""
+
+    name: ClassVar[str] = "bisection"
+
+
+class Multisection(AbstractSearchMethod):
+    """`points_per_round` values per round in one vmapped `scan` (more solves, fewer rounds of wall time).
+
+    - `points_per_round`: values solved per round (>= 2).
+    - `lanes`: members per vmapped group of the scan.
+    """
+
+    name: ClassVar[str] = "multisection"
+    points_per_round: int = eqx.field(static=True, default=16)
+    lanes: int = eqx.field(static=True, default=16)
+
+    def __check_init__(self):
+        if self.points_per_round < 2:
+            raise ScenarioError(
+                f"points_per_round must be >= 2 for multisection, got {self.points_per_round}"
+            )
+
+
+_METHODS = {"newton": Newton, "bisection": Bisection, "multisection": Multisection}
+
+
+def as_method(method) -> AbstractSearchMethod:
+    """The method object for `method` (an `AbstractSearchMethod`, or its name "newton", "bisection",
+    "multisection")."""
+    if isinstance(method, AbstractSearchMethod):
+        return method
+    if isinstance(method, str) and method in _METHODS:
+        return _METHODS[method]()
+    raise ScenarioError(f"method must be 'newton', 'bisection' or 'multisection', got {method!r}")
+
+
+class SearchOptions(eqx.Module):
+    """Settings of the bifurcation search (host-side numbers; nothing here is traced).
+
+    - `method`: `Newton()` (default), `Bisection()` or `Multisection(points_per_round, lanes)`; the names
+      "newton", "bisection", "multisection" are accepted too.
+    - `tol`: the final bracket width [unit of the located parameter], > 0.
+    - `max_solves`: give up (converged=False) after this many solves.
+    - `initial_half_width`: `trace_boundary` only: the corrector's half-width at the second point [unit of
+      the parameter] (default None: 5 % of the initial bracket).
+    - `max_expansions`: `trace_boundary` only: how many times the corrector's bracket is doubled before a
+      point is given up.
+    - `min_jump_fraction`: `trace_boundary` only (with `level=None`): a point whose change across its final
+      bracket is below this fraction of the first point's is reported lost.
+
+    **Raises** `ScenarioError` for a non-positive `tol`, an unknown method, or fewer than 2 points per round.
+    """
+
+    method: AbstractSearchMethod
+    tol: float = eqx.field(static=True)
+    max_solves: int = eqx.field(static=True)
+    initial_half_width: float | None = eqx.field(static=True)
+    max_expansions: int = eqx.field(static=True)
+    min_jump_fraction: float = eqx.field(static=True)
+
+    def __init__(
+        self,
+        method: AbstractSearchMethod | str = "newton",
+        tol: float = 1e-6,
+        max_solves: int = 200,
+        *,
+        initial_half_width: float | None = None,
+        max_expansions: int = 8,
+        min_jump_fraction: float = 0.1,
+    ):
+        self.method = as_method(method)
+        if not (np.isfinite(tol) and tol > 0):
+            raise ScenarioError(f"tol must be > 0, got {tol}")
+        self.tol = tol
+        self.max_solves = max_solves
+        self.initial_half_width = initial_half_width
+        self.max_expansions = max_expansions
+        self.min_jump_fraction = min_jump_fraction
+
+
+def default_solver_options() -> SolverOptions:
+    """The locator's solver settings: `diffrax.Tsit5()` with rtol 1e-6, atol 1e-8 (its default tolerances).
+    Newton steps take forward-mode sensitivities, which through the default Rosenbrock-W solver are not
+    reliable yet at high friction (they grow without bound over 25 s of paper-4.2 at mu >= 0.5;
+    docs/performance.md)."""
+    return SolverOptions(solver=diffrax.Tsit5())
+
+
+_SEARCH_KW = ("tol", "method", "max_solves", "points_per_round", "lanes")
+_TRACE_KW = ("initial_half_width", "max_expansions", "min_jump_fraction")
+_SOLVER_KW = ("solver", "rtol", "atol", "dt0", "max_steps")
+
+
+def _search_from_keywords(kw: dict, trace: bool) -> SearchOptions:
+    method = kw.get("method", "newton")
+    if method == "multisection":
+        method = Multisection(kw.get("points_per_round", 16), kw.get("lanes", 16))
+    extra = {k: kw[k] for k in _TRACE_KW if k in kw} if trace else {}
+    return SearchOptions(method, kw.get("tol", 1e-6), kw.get("max_solves", 200), **extra)
+
+
+def _options_from_keywords(kw: dict) -> SolverOptions:
+    solver = kw.get("solver")
+    return SolverOptions(
+        solver=diffrax.Tsit5() if solver is None else solver,
+        rtol=kw.get("rtol"),
+        atol=kw.get("atol"),
+        dt0=kw.get("dt0"),
+        max_steps=kw.get("max_steps", DEFAULT_MAX_STEPS),
+    )
+
+
+def settings(
+    who: str, search: SearchOptions | None, options: SolverOptions | None, legacy: dict, trace: bool = False
+) -> tuple[SearchOptions, SolverOptions]:
+    """(search, options) for `who`, from the objects or, with one `DeprecationWarning`, from the keywords of
+    earlier versions in `legacy` (mapped exactly: the same `SolverOptions`, Tsit5 when no solver is given).
+
+    **Raises** `TypeError` for an unknown keyword; `ScenarioError` when a keyword comes with the object it
+    moved into."""
+    search_kw = _SEARCH_KW + (_TRACE_KW if trace else ())
+    unknown = sorted(set(legacy) - set(search_kw) - set(_SOLVER_KW))
+    if unknown:
+        raise TypeError(f"{who}() got unexpected keyword argument(s): {', '.join(unknown)}")
+    moved_search = [k for k in search_kw if k in legacy]
+    moved_solver = [k for k in _SOLVER_KW if k in legacy]
+    if moved_search and search is not None:
+        raise ScenarioError(f"{who}: give either search= or {', '.join(moved_search)}, not both")
+    if moved_solver and options is not None:
+        raise ScenarioError(f"{who}: give either options= or {', '.join(moved_solver)}, not both")
+    if legacy:
+        new = []
+        if moved_search:
+            new.append(f"search=SearchOptions(...) for {', '.join(moved_search)}")
+        if moved_solver:
+            new.append(f"options=SolverOptions(diffrax.Tsit5(), ...) for {', '.join(moved_solver)}")
+        warnings.warn(
+            f"{who}: the keywords {', '.join(moved_search + moved_solver)} are deprecated; pass "
+            + " and ".join(new)
+            + " (jaxhoist._apps.bifurcation.SearchOptions, jaxhoist.SolverOptions)",
+            DeprecationWarning,
+            stacklevel=3,
+        )
+    if search is None:
+        search = _search_from_keywords(legacy, trace)
+    if options is None:
+        options = _options_from_keywords(legacy) if moved_solver else default_solver_options()
+    return search, options

@@ -1,0 +1,121 @@
+"""The choices of `identify` as objects: `FitOptions` (starts, Levenberg-Marquardt termination,
+identifiability thresholds), the fit's `SolverOptions`, and the conversion of the earlier keyword arguments
+(`rtol=`, `n_starts=`, `lm_rtol=`, ...) to them."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import diffrax
+import equinox as eqx
+import numpy as np
+
+from .._deprecated import warn_moved
+from .._errors import ScenarioError
+from .._numerics.options import DEFAULT_MAX_STEPS, SolverOptions
+from .._numerics.rosenbrock import RosenbrockW
+
+
+class FitOptions(eqx.Module):
+    """How `identify` fits: starts, the Levenberg-Marquardt termination and the identifiability thresholds.
+
+    - `n_starts`, `start_spread`, `seed`: `n_starts - 1` extra starts drawn around the start (relative
+      spread s [-]: θ·(1+s)^U(-1,1) for positive leaves) from `numpy.random.default_rng(seed)`; the lowest
+      cost wins, all are reported in `IdentificationResult.starts`.
+    - `lm_rtol`, `lm_atol`: Levenberg-Marquardt termination, the Cauchy test on the fit variables z and on
+      the whitened residuals [-] (optimistix `rtol`, `atol`).
+    - `max_iterations`: the step budget of each Levenberg-Marquardt run.
+    - `max_relative_se`: a parameter whose standard error exceeds this fraction of its value [-] is not
+      identifiable; `condition_limit`: nor are the parameters when the condition number of JᵀJ (in relative
+      units) exceeds this [-].
+
+    **Raises** `ScenarioError` for `n_starts` or `max_iterations` below 1, a negative spread or a
+    non-positive tolerance or threshold.
+    """
+
+    n_starts: int = 1
+    start_spread: float = 0.3
+    seed: int = 0
+    lm_rtol: float = 1e-4
+    lm_atol: float = 1e-6
+    max_iterations: int = 100
+    max_relative_se: float = 0.5
+    condition_limit: float = 1e12
+
+    def __check_init__(self):
+        for name in ("n_starts", "max_iterations"):
+            if int(getattr(self, name)) < 1:
+                raise ScenarioError(f"{name} must be >= 1, got {getattr(self, name)}")
+        if not (np.isfinite(self.start_spread) and self.start_spread >= 0):
+            raise ScenarioError(f"start_spread must be >= 0, got {self.start_spread}")
+        for name in ("lm_rtol", "lm_atol", "max_relative_se", "condition_limit"):
+            v = getattr(self, name)
+            if not (np.isfinite(v) and v > 0):
+                raise ScenarioError(f"{name} must be a positive number, got {v}")
+
+
+def fit_solver_options(options: SolverOptions | None) -> SolverOptions:
+    """The fit's `SolverOptions`: default `SolverOptions(diffrax.Tsit5())`, always with forward mode
+    (`diffrax.ForwardMode`).
+
+    **Raises** `ScenarioError` for the Rosenbrock-W solver: the fit integrates the state with its parameter
+    tangents as one augmented system, which that solver's structured linearisation does not cover.
+    """
+    if options is None:
+        return SolverOptions(diffrax.Tsit5(), adjoint="forward")
+    if not isinstance(options, SolverOptions):
+        raise ScenarioError(f"options must be a jaxhoist.SolverOptions, got {type(options).__name__}")
+    if isinstance(options.solver, RosenbrockW):
+        raise ScenarioError(
+            "identify integrates the state with its sensitivities, which the Rosenbrock-W solver does not "
+            "cover: pass an explicit solver, e.g. SolverOptions(diffrax.Tsit5())"
+        )
+    return options if options.forward_mode else options.replace(adjoint=diffrax.ForwardMode())
+
+
+_SOLVER_KW = ("rtol", "atol", "max_steps")
+_FIT_KW = tuple(FitOptions.__dataclass_fields__)
+
+
+def convert_legacy(
+    function: str,
+    old: dict[str, Any],
+    options: SolverOptions | None,
+    fit: FitOptions | None,
+    allow_fit: bool = True,
+    forward: bool = True,
+    stacklevel: int = 4,
+) -> tuple[SolverOptions | None, FitOptions | None]:
+    """`(options, fit)` from the earlier keywords of `identify` in `old` (`rtol, atol, max_steps` and,
+    with `allow_fit`, the `FitOptions` fields), built exactly as the earlier `identify` built them (forward
+    mode if `forward`, else the default reverse adjoint, as `synthetic_measurement` had it); one
+    `DeprecationWarning` naming the new spelling (`stacklevel` as in `warn_moved`, from the caller of this
+    function).
+
+    **Raises** `TypeError` for an unknown keyword, `ScenarioError` for an old keyword given with the object
+    that replaces it.
+    """
+    known = _SOLVER_KW + (_FIT_KW if allow_fit else ())
+    unknown = sorted(set(old) - set(known))
+    if unknown:
+        raise TypeError(f"{function}() got unexpected keyword argument(s): {', '.join(unknown)}")
+    solver_kw = {k: old[k] for k in _SOLVER_KW if k in old}
+    fit_kw = {k: old[k] for k in _FIT_KW if k in old}
+    moved = {k: f"options=SolverOptions(diffrax.Tsit5(), {k}=...)" for k in solver_kw}
+    moved.update({k: f"fit=FitOptions({k}=...)" for k in fit_kw})
+    if solver_kw:
+        if options is not None:
+            raise ScenarioError(f"give either options or {', '.join(solver_kw)}, not both")
+        options = SolverOptions(
+            diffrax.Tsit5(),
+            rtol=solver_kw.get("rtol"),
+            atol=solver_kw.get("atol"),
+            max_steps=solver_kw.get("max_steps", DEFAULT_MAX_STEPS),
+            adjoint="forward" if forward else "reverse",
+        )
+    if fit_kw:
+        if fit is not None:
+            raise ScenarioError(f"give either fit or {', '.join(fit_kw)}, not both")
+        fit = FitOptions(**fit_kw)
+    warn_moved(function, moved, stacklevel=stacklevel)
+    return options, fit

@@ -1,0 +1,211 @@
+"""A linearly implicit Rosenbrock-W integrator that treats the model's stiff forces implicitly.
+
+The method is ROS34PW2 (Rang & Angermann, BIT 45 (2005) 761-787): four stages, order 3 with an embedded
+order-2 solution for the error estimate, stiffly accurate and L-stable, and a *W-method*: it keeps order 3 for
+any approximation W of the Jacobian. That is what lets the solver use `physics.linearise` (the velocity and
+displacement derivatives of the contact, rope and boom forces, reduced to a 6x6 system and a rank-one update
+per member) instead of the full Jacobian: the modes that make the elastic model stiff (friction slope μN/ε,
+foundation and rope dampers, ../shared/notes/stiffness.md) are inside W, so the step is set by accuracy, not
+by ε.
+
+One step from (t, y) with step h, in the transformed variables u_i = Σ_{j<=i} γ_ij k_j (Hairer & Wanner,
+Solving ODEs II, §IV.7, (7.25)) so that no product J u is needed:
+
+    (I/(hγ) - W) u_i = f(t + α_i h, y + Σ_{j<i} a_ij u_j) + Σ_{j<i} (c_ij / h) u_j,
+    y_1 = y + Σ m_i u_i,    error = Σ (m_i - m̂_i) u_i,
+
+with a = α Γ⁻¹, c = diag(1/γ) - Γ⁻¹, m = bᵀ Γ⁻¹ (Γ the lower-triangular matrix of γ_ij, γ on its
+diagonal). Time enters only through f (the hoist law); a W-method allows leaving ∂f/∂t out of W.
+
+`RosenbrockW` is a diffrax solver: it runs inside `diffrax.diffeqsolve` with any step-size controller,
+`SaveAt`, adjoint (forward mode, checkpointed reverse mode) and under `jax.vmap`, like diffrax's own solvers.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import ClassVar
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+import numpy as np
+from diffrax import AbstractTerm
+
+from .._physics.linearise import linearise as elastic_linearise
+from ._tree import lin_comb
+
+
+class WTableau(eqx.Module):
+    """Coefficients of a Rosenbrock-W method in the transformed form used by `w_step` (see the module
+    docstring): `a` (stage states), `c` (stage couplings, divided by h), `alpha` (stage times), `m` and
+    `m_err` (solution and error weights), `gamma`, the `order` and the order of the embedded solution."""
+
+    a: tuple = eqx.field(static=True)
+    c: tuple = eqx.field(static=True)
+    alpha: tuple = eqx.field(static=True)
+    m: tuple = eqx.field(static=True)
+    m_err: tuple = eqx.field(static=True)
+    gamma: float = eqx.field(static=True)
+    order: int = eqx.field(static=True)
+    embedded_order: int = eqx.field(static=True)
+
+
+def w_tableau(alpha, gamma_lower, gamma: float, b, b_hat, order: int, embedded_order: int) -> WTableau:
+    """Build a `WTableau` from a method's coefficients in the Hairer-Wanner form (α_ij, γ_ij for j < i,
+    the diagonal γ, weights b and embedded weights b̂)."""
+    alpha = np.asarray(alpha, dtype=np.float64)
+    Gam = np.asarray(gamma_lower, dtype=np.float64) + gamma * np.eye(len(b))
+    Ginv = np.linalg.inv(Gam)
+    a = alpha @ Ginv
+    c = np.diag(1.0 / np.diag(Gam)) - Ginv
+    m = np.asarray(b, dtype=np.float64) @ Ginv
+    m_hat = np.asarray(b_hat, dtype=np.float64) @ Ginv
+
+    def frozen(x):  # hashable static coefficients: nested tuples of floats
+        x = np.asarray(x, dtype=np.float64)
+        return tuple(map(frozen, x)) if x.ndim else float(x)
+
+    return WTableau(
+        a=frozen(a),  # pyright: ignore[reportArgumentType]  # frozen() of a matrix is a tuple
+        c=frozen(c),  # pyright: ignore[reportArgumentType]  # frozen() of a matrix is a tuple
+        alpha=frozen(alpha.sum(axis=1)),  # pyright: ignore[reportArgumentType]  # frozen() of a matrix is a tuple
+        m=frozen(m),  # pyright: ignore[reportArgumentType]  # frozen() of a matrix is a tuple
+        m_err=frozen(m - m_hat),  # pyright: ignore[reportArgumentType]  # frozen() of a matrix is a tuple
+        gamma=float(gamma),
+        order=order,
+        embedded_order=embedded_order,
+    )
+
+
+_G = 4.3586652150845900e-01
+#: ROS34PW2, Rang & Angermann (2005), Table 4 (γ_ij for j < i and α_ij; b and the embedded b̂).
+ROS34PW2 = w_tableau(
+    alpha=[
+        [0, 0, 0, 0],
+        [8.7173304301691801e-01, 0, 0, 0],
+        [8.4457060015369423e-01, -1.1299064236484185e-01, 0, 0],
+        [0, 0, 1.0, 0],
+    ],
+    gamma_lower=[
+        [0, 0, 0, 0],
+        [-8.7173304301691801e-01, 0, 0, 0],
+        [-9.0338057013044082e-01, 5.4180672388095326e-02, 0, 0],
+        [2.4212380706095346e-01, -1.2232505839045147e00, 5.4526025533510214e-01, 0],
+    ],
+    gamma=_G,
+    b=[2.4212380706095346e-01, -1.2232505839045147e00, 1.5452602553351020e00, _G],
+    b_hat=[3.7810903145819369e-01, -9.6042292212423178e-02, 0.5, 2.1793326075422950e-01],
+    order=3,
+    embedded_order=2,
+)
+
+
+def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None):
+    """One Rosenbrock-W step of size h from (t, y).
+
+    - `f(t, y, args)`: the vector field; `linearise(t, y, args)`: an object with `factor(hγ)` and
+      `solve(factors, r, hγ)` solving (I/(hγ) - W) u = r (e.g. `physics.linearise.Linearisation`).
+    - `f0`: f(t, y, args) if already known (the previous step's `f1`).
+    - `quadrature`: None, or `where(y)` selecting leaves that are pure quadratures ∫ g(t, y) dt of the other
+      components (they do not feed back). Those are integrated by the trapezoidal rule on the step's end
+      points instead of through the stages, and left out of the error estimate: the stage values of the
+      stiff components of a linearly implicit method are not accurate (only the step's result is), so a
+      quadrature of a nonlinear function of them (a damper's loss h ṗ²) through the stages is biased, by a
+      factor 3 for the foundation and rope dampers' loss on paper-4.2.
+
+    **Returns** `(y1, error, f1)`: the order-3 solution, the difference to the embedded solution, and
+    f(t + h, y1) when `quadrature` is given (else None).
+    """
+    # W is not differentiated: a W-method may use any W, and with W held fixed the derivative of the step is
+    # the same W-method applied to the variational equations (consistent, and as stable as the step). The
+    # derivative *of* W (the friction slope's own derivative, ~μN/ε² per corner) made forward-mode
+    # sensitivities of paper-4.2 grow to 1e77 and NaN over 25 s.
+    lin = jax.lax.stop_gradient(linearise(t, y, args))
+    hg = h * tab.gamma
+    # Barriers keep XLA from fusing (and so recomputing) the linearisation and its factors into every
+    # stage that reads them.
+    lin, lu = jax.lax.optimization_barrier((lin, lin.factor(hg)))
+    us = []
+    for i in range(len(tab.m)):
+        if i == 0 and f0 is not None:
+            fi = f0
+        else:
+            yi = lin_comb([(tab.a[i][j], us[j]) for j in range(i)], base=y)
+            fi = f(t + float(tab.alpha[i]) * h, yi, args)
+        if i == 0:
+            f_start = fi
+        if i:
+            cu = lin_comb([(tab.c[i][j], us[j]) for j in range(i)], like=y)
+            ri = jax.tree_util.tree_map(lambda fl, cl: fl + cl / h, fi, cu)
+        else:
+            ri = fi
+        us.append(jax.lax.optimization_barrier(lin.solve(lu, ri, hg)))
+    y1 = lin_comb(list(zip(tab.m, us, strict=True)), base=y)
+    err = lin_comb(list(zip(tab.m_err, us, strict=True)), like=y)
+    if quadrature is None:
+        return y1, err, None
+    f1 = f(t + h, y1, args)
+    trapezoid = jax.tree_util.tree_map(
+        lambda q, g0, g1: q + 0.5 * h * (g0 + g1), quadrature(y), quadrature(f_start), quadrature(f1)
+    )
+    y1 = eqx.tree_at(quadrature, y1, trapezoid)
+    err = eqx.tree_at(quadrature, err, jax.tree_util.tree_map(jnp.zeros_like, quadrature(err)))
+    return y1, err, f1
+
+
+def elastic_quadratures(y):
+    """The energy integrals of the elastic model's state (hoist work, damper loss, friction work [J]): pure
+    quadratures of the motion."""
+    return (y.hoist_work, y.damping_loss, y.friction_work)
+
+
+class RosenbrockW(diffrax.AbstractAdaptiveSolver):
+    """A linearly implicit Rosenbrock-W solver for diffrax that treats the stiff forces implicitly through
+    a structured approximate Jacobian (see the module docstring).
+
+    - `linearise`: `(t, y, args) -> Linearisation`; default `physics.linearise.linearise`, the elastic
+      model's contact, rope and boom forces.
+    - `quadrature`: `where(y)` selecting the state's pure quadratures (integrated by the trapezoidal rule
+      on the steps' end points, see `w_step`); default the elastic model's energy integrals; None for none.
+    - `tableau`: the method; default ROS34PW2 (order 3, embedded order 2, L-stable, stiffly accurate).
+
+    f at each step's end is kept for the next step's first stage, so a step costs four evaluations of the
+    vector field, one linearisation and one 6x6 factorisation.
+
+    Derivatives (`jax.jacfwd`, `jax.grad`) go through the steps with W held fixed. They agree with
+    differences of the solution over short spans (tests/test_rosenbrock.py), but over the full 25 s of
+    paper-4.2 at μ >= 0.5 forward-mode sensitivities grew without bound (docs/performance.md): for
+    sensitivities over long spans use `diffrax.Tsit5()`, which `scan(derivatives=True)` and
+    `locate_bifurcation` do by default. Dense output between steps is linear;
+    `numerics.solve` makes the steps land on the saved times, so saved values are the method's own.
+    """
+
+    linearise: Callable = eqx.field(static=True, default=elastic_linearise)
+    quadrature: Callable | None = eqx.field(static=True, default=elastic_quadratures)
+    tableau: WTableau = ROS34PW2
+
+    term_structure: ClassVar = AbstractTerm
+    interpolation_cls: ClassVar = diffrax.LocalLinearInterpolation
+
+    def order(self, terms):
+        return self.tableau.order
+
+    def error_order(self, terms):
+        return self.tableau.embedded_order + 1
+
+    def init(self, terms, t0, t1, y0, args):
+        return terms.vf(t0, y0, args) if self.quadrature is not None else None
+
+    def step(self, terms, t0, t1, y0, args, solver_state, made_jump):
+        # The vector field is continuous in t (no jump_ts are used), so f(t0, y0) from the previous step
+        # stays valid across `made_jump`.
+        del made_jump
+        y1, err, f1 = w_step(
+            terms.vf, self.linearise, self.tableau, t0, y0, t1 - t0, args, solver_state, self.quadrature
+        )
+        return y1, err, dict(y0=y0, y1=y1), f1, diffrax.RESULTS.successful
+
+    def func(self, terms, t0, y0, args):
+        return terms.vf(t0, y0, args)
