@@ -39,6 +39,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import subprocess
 import sys
 import time
 import traceback
@@ -58,6 +59,10 @@ ROPES = ("elastic", "inextensible")
 MUS = np.round(np.arange(0.10, 0.50 + 1e-9, 0.005), 3)
 N_SAVE = 501
 CLOSE = 1e-6  # a run closes when max |energy residual| <= CLOSE x hoist work (tests/test_rigid.py)
+#: The commit each run used (recorded per run: a resumed sweep may span commits).
+COMMIT = subprocess.run(
+    ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent
+).stdout.strip()
 CLOSE_IMPACT = 2.5e-3  # ... or <= CLOSE_IMPACT x impact losses (paper-2.3 before issue 15: 0.027 J / 11 J)
 
 
@@ -171,6 +176,7 @@ def one_run(r: dict) -> dict:
             traceback=traceback.format_exc()[-2000:],
         )
     out["wall_s"] = time.perf_counter() - t0
+    out["commit"] = COMMIT
     return out
 
 
