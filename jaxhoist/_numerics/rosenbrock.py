@@ -173,7 +173,7 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
     - `tangent_weight`: the weight w of the sensitivities' error in the step-size control of forward-mode
       derivatives (`jax.jvp`, `jax.jacfwd`, `scan(derivatives=True)` with `adjoint=diffrax.ForwardMode()`):
       a step is accepted when max(‖e_y‖, w ‖e_s‖) <= 1, so a sensitivity may carry 1/w times the
-      relative local error of the state (`_numerics/sensitivity.py`). Default 0.01.
+      relative local error of the state (`_numerics/sensitivity.py`). Default 0.1.
 
     f at each step's end is kept for the next step's first stage, so a step costs four evaluations of the
     vector field, one linearisation and one 6x6 factorisation.
@@ -189,7 +189,7 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
     linearise: Callable = eqx.field(static=True, default=elastic_linearise)
     quadrature: Callable | None = eqx.field(static=True, default=elastic_quadratures)
     tableau: WTableau = ROS34PW2
-    tangent_weight: float = eqx.field(static=True, default=0.01)
+    tangent_weight: float = eqx.field(static=True, default=0.1)
 
     term_structure: ClassVar = AbstractTerm
     interpolation_cls: ClassVar = diffrax.LocalLinearInterpolation

@@ -17,7 +17,7 @@ direction θ̇ (Hairer, Nørsett & Wanner I, §I.14; the "staggered-direct" forw
 by the same W-method with the same W for both blocks (one factorisation serves both: W approximates the
 Jacobian of the variational block as well as of f), and with the step-size controller seeing the error of
 s too: a step is accepted when max(‖e_y‖, w ‖e_s‖) ≤ 1 in the controller's scaled norm (its own rtol,
-atol). The weight w = `RosenbrockW.tangent_weight` (default 0.01) lets a sensitivity carry 1/w times the
+atol). The weight w = `RosenbrockW.tangent_weight` (default 0.1) lets a sensitivity carry 1/w times the
 relative local error of the state; w = 1 controls both alike. Measured on paper-4.2, 25 s, default
 tolerances, against central differences (h = 1e-4) of Tsit5 solves at rtol 1e-10 (`python
 experiments/w_sensitivity.py`): see docs/performance.md.
@@ -144,6 +144,7 @@ def _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, sta
         tangent_weight=solver.tangent_weight,
     )
     sc = eqx.combine(dyn, static)
+    weighted = _weighted(options.stepsize_controller, solver.tangent_weight)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(field),
         aug_solver,
@@ -153,9 +154,7 @@ def _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, sta
         y0=(y0, dy0),
         args=((dyn, c), (ddyn, dc)),
         saveat=diffrax.SaveAt(ts=ts),
-        stepsize_controller=controller(
-            options.replace(stepsize_controller=_weighted(options.stepsize_controller, solver.tangent_weight)), ts
-        ),
+        stepsize_controller=controller(options.replace(stepsize_controller=weighted), ts),
         max_steps=options.max_steps,
         progress_meter=options.progress_meter,
         throw=False,
