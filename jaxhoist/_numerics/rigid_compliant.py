@@ -60,6 +60,14 @@ class ChatterRule:
     - `samples`: contact samples per chunk (the steadiness test).
     - `min_switches`: ... or at least this many contact changes without impact within `window` (a load
       see-sawing between two configurations every few µs, e.g. about the diagonal EF).
+    - `max_regularised`: ... or no consistent contact configuration, the least-violating one chosen as a
+      regularised phase (fallback 3 of `_Driver._select`) this many times in a row. In the sweep such a
+      fallback either stood alone (the next choice was consistent again) or repeated at microsecond
+      intervals until the switching detection took over, 47 or 48 times (the load on the edge F-H with both
+      corners sticking; docs/rigid-model.md, "Resolution"): 4 separates the two with a margin on both sides.
+      Whatever triggered it, a compliant phase is not left while the rigid model would need fallback 3 at
+      its end: it is extended (from the compliant state, no hand-back in between) until a configuration is
+      consistent again, or to `t1`.
     """
 
     window: float = 0.05
@@ -74,10 +82,12 @@ class ChatterRule:
     load_fraction: float = 1e-3
     samples: int = 65
     min_switches: int = 48
+    max_regularised: int = 4
 
     def check(self) -> None:
         """Raise `ScenarioError` naming the first field that is not a positive finite number (`decay` may
-        be 0, `min_impacts` and `samples` are integers >= 1 and >= 2)."""
+        be 0, `min_impacts`, `min_switches`, `max_regularised` and `samples` are integers >= 1, >= 1, >= 1 and
+        >= 2)."""
         for name in (
             "window",
             "stiffness",
@@ -98,6 +108,10 @@ class ChatterRule:
         if not (isinstance(self.min_switches, int) and self.min_switches >= 1):
             raise ScenarioError(
                 f"ChatterRule.min_switches must be an integer >= 1, got {self.min_switches!r}"
+            )
+        if not (isinstance(self.max_regularised, int) and self.max_regularised >= 1):
+            raise ScenarioError(
+                f"ChatterRule.max_regularised must be an integer >= 1, got {self.max_regularised!r}"
             )
         if not (isinstance(self.samples, int) and self.samples >= 2):
             raise ScenarioError(f"ChatterRule.samples must be an integer >= 2, got {self.samples!r}")
