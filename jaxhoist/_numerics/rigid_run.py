@@ -95,6 +95,15 @@ class _Run:
         self.t, self.y, self.phase, self.choice = t, y, phase, drv.take_notes()
         self.count_regularised()
 
+    def resume(self, t: float, y: State):
+        """The first phase at (t [s], y), a state of an earlier run (tests and experiments that start near
+        a known event; `tests/data/make_rigid_edge_state.py`): chosen as after any event, with no start
+        jerk (the inextensible rope's `_Driver.rope_taut` is the caller's to set)."""
+        phase, y, loss = self.drv.select_or_jam(t, y, "resumed")
+        self.impact_total += loss
+        self.t, self.y, self.phase, self.choice = t, y, phase, self.drv.take_notes()
+        self.count_regularised()
+
     def count_regularised(self):
         """After a choice of the next phase: how many in a row were fallback 3 (`_Driver.regularised`)."""
         self.n_regularised = self.n_regularised + 1 if self.drv.regularised else 0
@@ -364,8 +373,8 @@ class _Run:
         )
         if extended:
             how += (
-                f"; extended {len(extended)} times: no consistent configuration at its end (first at "
-                f"{extended[0]}; last at {extended[-1]})"
+                f"; extended {len(extended)} time{'s' if len(extended) > 1 else ''}: no consistent "
+                f"configuration at its end (first at {extended[0]}; last at {extended[-1]})"
             )
         modes = cast(tuple[str, str, str, str], tuple("spring" if on else "free" for on in ep.loaded))
         self.log(
