@@ -18,7 +18,13 @@ Detection (`ChatterRule.detect`): at least `min_impacts` impacts (corner impacts
 the last `window` seconds, whose losses do not decay (the mean of the later half at least `decay` times
 the mean of the earlier half). A decaying train (a rocking load settling) is left to the rigid model,
 whose settling rule (`Settings.rest_velocity`) ends it. A phase that stalls twice (its mean step below
-`StallRule.min_step`, or `max_steps` reached) is passed the same way.
+`StallRule.min_step`, or `max_steps` reached) is passed the same way, and so is a state where no contact
+configuration is consistent `ChatterRule.max_regularised` times in a row (the least-violating one chosen as
+a regularised phase again and again: two sticking corners on an edge whose minimum-norm friction split
+breaks one cone, a Painlevé-type situation with no rigid phase to continue with). The compliant phase is
+not left while the rigid model would have no consistent configuration at its end: it goes on from its own
+state, episode after episode (`rigid_run._Run.compliant`); the stiff foundation it integrates is the limit
+the rigid model stands for, and it has a motion where the rigid contact problem has none.
 """
 
 from __future__ import annotations
