@@ -101,6 +101,8 @@ def test_chatter_rule_detects_dense_non_decaying_impacts_only():
     # Bad settings: one clear line naming the field.
     with pytest.raises(jh.ScenarioError, match="ChatterRule.stiffness"):
         jh.RigidOptions(chatter=ChatterRule(stiffness=-1.0))
+    with pytest.raises(jh.ScenarioError, match="ChatterRule.max_regularised"):
+        jh.RigidOptions(chatter=ChatterRule(max_regularised=0))
 
 
 def test_compliant_phase_passes_a_rocking_train_and_hands_back_at_rest():
