@@ -99,10 +99,11 @@ class _Driver:
         self.rejected = 0
         self.debug = False
         self.allow_jam = True  # fallback 2 of the configuration choice (off while choosing after a jam)
-        # Fallback 3 (off at the end of a compliant phase: `_Inconsistent` instead), and whether the last
-        # `select` took it (`_Run` counts such choices in a row: `ChatterRule.max_regularised`).
+        # Fallback 3 (off at the end of a compliant phase: `_Inconsistent` instead), and its least violation
+        # if the last `select` took it, else "" (`_Run` counts such choices in a row:
+        # `ChatterRule.max_regularised`).
         self.allow_regularised = True
-        self.regularised = False
+        self.regularised = ""
         self.exclude: np.ndarray | None = None  # contact modes not to choose again at once (`_transition`)
         self.notes: list[str] = []  # how ambiguous or inconsistent contact choices were resolved (phase log)
         self.inextensible = False
@@ -216,9 +217,9 @@ class _Driver:
     def select(self, t, y, where: str, previous: Phase | None = None) -> Phase:
         """Choose the contact configuration at (t, y) (see the module docstring). With the inextensible
         rope at its length, the taut rope (S >= 0) is tried first, then the slack rope. Sets
-        `regularised` when the choice is fallback 3; raises `_Inconsistent` instead where that fallback is
-        switched off (`allow_regularised`)."""
-        self.regularised = False
+        `regularised` to the least violation when the choice is fallback 3 ("" otherwise); raises
+        `_Inconsistent` instead where that fallback is switched off (`allow_regularised`)."""
+        self.regularised = ""
         if not self.inextensible:
             return self._select(t, y, where, previous, rigid.ROPE_ELASTIC)
         if self.rope_taut:
@@ -314,14 +315,12 @@ class _Driver:
                 #    Chosen `ChatterRule.max_regularised` times in a row, a compliant phase takes over
                 #    (`_Run.step`), and it is not left while this fallback would be needed (`_Run.compliant`).
                 k = int(np.argmin(violation))
+                least = f"least violation {violation[k]:.2g} ({reasons[k]})"
                 if not self.allow_regularised:
-                    raise _Inconsistent(f"least violation {violation[k]:.2g} ({reasons[k]})")
-                self.regularised = True
+                    raise _Inconsistent(least)
+                self.regularised = least
                 consistent = [k]
-                self.notes.append(
-                    f"regularised: no consistent configuration, least violation "
-                    f"{violation[k]:.2g} ({reasons[k]})"
-                )
+                self.notes.append(f"regularised: no consistent configuration, {least}")
         if previous is not None and int(previous.rope) != rope:
             previous = eqx.tree_at(lambda p: p.rope, previous, jnp.asarray(rope, dtype=jnp.int32))
         if previous is not None:

@@ -157,10 +157,9 @@ class _Run:
         consistent configuration (fallback 3), else "" (`ChatterRule.max_regularised`)."""
         if self.n_regularised < rule.max_regularised:
             return ""
-        last = self.choice.split("least violation ")[-1] if "least violation" in self.choice else self.choice
         return (
             f"no consistent configuration {self.n_regularised} times in a row (least-violation fallback; "
-            f"last: {last})"
+            f"last: {self.drv.regularised})"
         )
 
     def save(self, t: float, t_end: float, phase: Phase, sys_):
@@ -223,7 +222,7 @@ class _Run:
         """The guards of `phase` fired at (t_end, y_end): log the phase, resolve an impact or rope jerk, and
         choose the next phase. Returns `(next phase, state)`."""
         drv = self.drv
-        drv.regularised = False  # set again only if the choice below is fallback 3
+        drv.regularised = ""  # set again only if the choice below is fallback 3
         g = drv.guards(t_end, y_end, phase) + _np(phase.guard_offset)
         # Fired: near zero now, and well below where the guard started (a guard that started at its small
         # offset and stayed there has not fired).
