@@ -69,8 +69,9 @@ class ChatterRule:
     - `max_regularised`: ... or no consistent contact configuration, the least-violating one chosen as a
       regularised phase (fallback 3 of `_Driver._select`) this many times in a row. In the sweep such a
       fallback either stood alone (the next choice was consistent again) or repeated at microsecond
-      intervals until the switching detection took over, 47 or 48 times (the load on the edge F-H with both
-      corners sticking; docs/rigid-model.md, "Resolution"): 4 separates the two with a margin on both sides.
+      intervals until the switching detection took over, 47 or 48 times (the load on an edge, E-F or F-H,
+      with both corners sticking; docs/rigid-model.md, "Resolution"): 4 separates the two with a margin on
+      both sides.
       Whatever triggered it, a compliant phase is not left while the rigid model would need fallback 3 at
       its end: it is extended (from the compliant state, no hand-back in between) until a configuration is
       consistent again, or to `t1`.
