@@ -5,6 +5,7 @@ corrector (`SearchOptions`); and the conversion of the keywords of earlier versi
 
 from __future__ import annotations
 
+import sys
 import warnings
 from typing import ClassVar
 
@@ -12,6 +13,7 @@ import diffrax
 import equinox as eqx
 import numpy as np
 
+from .._deprecated import _caller
 from .._errors import ScenarioError
 from .._numerics.options import DEFAULT_MAX_STEPS, SolverOptions
 
@@ -179,7 +181,7 @@ def settings(
             f"{who}: the keywords {', '.join(moved_times + moved_search + moved_solver)} are deprecated; "
             "pass " + " and ".join(new) + " (jaxhoist.Times, jaxhoist.SearchOptions, jaxhoist.SolverOptions)",
             DeprecationWarning,
-            stacklevel=3,
+            stacklevel=_caller(sys._getframe(0), 3)[1],  # who called `who`, past run-time type checkers
         )
     if search is None:
         search = _search_from_keywords(legacy, trace)

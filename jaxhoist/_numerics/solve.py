@@ -187,7 +187,7 @@ def simulate(
     throw: bool = True,
     **deprecated,
 ) -> Trajectory:
-    """Simulate a lift from rest at t = 0 to `t1`.
+    """Simulate a lift from rest at t = 0 to the end time t1 [s] of `times`.
 
     Works under `jax.jit`, `jax.vmap` over any scenario leaf, `jax.grad` (the default adjoint) and
     `jax.jacfwd` (`SolverOptions(adjoint=diffrax.ForwardMode())`), for the elastic model. For derivatives
@@ -208,10 +208,10 @@ def simulate(
       The rigid model reads only its tolerances and step budget.
     - `throw`: raise if the solve fails (max steps, non-finite state); with False, read `Trajectory.status`.
     - `**deprecated`: the earlier keywords `t1`, `ts`, `n_save` (converted to `Times`: the same saved
-      times), `solver`, `rtol`, `atol`, `dt0`, `max_steps`,
-      `adjoint`, `progress`, `fixed_step` (converted to `SolverOptions` exactly as before; not together with
-      `options`) and `rope` ("elastic" or "inextensible", rigid model only; converted to `RigidGround`)
-      still work, with one `DeprecationWarning` naming the new spelling.
+      times), `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`, `progress`, `fixed_step` (converted
+      to `SolverOptions` exactly as before; not together with `options`) and `rope` ("elastic" or
+      "inextensible", rigid model only; converted to `RigidGround`) still work, with one
+      `DeprecationWarning` naming the new spelling.
 
     **Returns** a `Trajectory`: for the rigid model its subclass `RigidTrajectory`, which adds `impact_loss`
     and the phase log.
