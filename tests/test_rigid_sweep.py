@@ -20,7 +20,7 @@ N_SAVE = 201
 
 def _run(mu: float, t1: float):
     sc = jh.load_scenario("paper-2.3").replace(**{"foundation.friction_coefficient": mu})
-    return simulate_rigid(sc, t1, n_save=N_SAVE)
+    return simulate_rigid(sc, jh.Times(t1, n=N_SAVE))
 
 
 def _closes(tr) -> bool:
@@ -125,7 +125,7 @@ def test_compliant_phase_passes_a_rocking_train_and_hands_back_at_rest():
         t1=1.5,
     )
     rule = ChatterRule(window=1.0, min_impacts=1, decay=0.0)
-    tr = simulate_rigid(sc, 1.5, n_save=61, options=jh.RigidOptions(chatter=rule))
+    tr = simulate_rigid(sc, jh.Times(1.5, n=61), options=jh.RigidOptions(chatter=rule))
     ph = tr.phases
     comp = [k for k, p in enumerate(ph) if p.choice.startswith("compliant phase")]
     assert len(comp) == 1, tr.phase_log()
@@ -173,8 +173,8 @@ def test_stall_rule_finds_a_stalled_phase_after_thousands_of_steps():
     that configuration, so the trajectory is the same sample for sample and only the steps spent differ."""
     sc = jh.load_scenario("paper-4.2")
     t1 = 0.1
-    fast = simulate_rigid(sc, t1, n_save=N_SAVE, options=jh.RigidOptions(max_steps=30_000))
-    slow = simulate_rigid(sc, t1, n_save=N_SAVE, options=jh.RigidOptions(max_steps=30_000, stall=None))
+    fast = simulate_rigid(sc, jh.Times(t1, n=N_SAVE), options=jh.RigidOptions(max_steps=30_000))
+    slow = simulate_rigid(sc, jh.Times(t1, n=N_SAVE), options=jh.RigidOptions(max_steps=30_000, stall=None))
     notes = [p.choice for p in fast.phases if "stalled" in p.choice]
     assert len(notes) == 1 and "stalled (mean step < 2e-07 s over 5000 steps)" in notes[0], fast.phase_log()
     assert any("stalled at max_steps" in p.choice for p in slow.phases), slow.phase_log()

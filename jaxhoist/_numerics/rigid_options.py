@@ -75,12 +75,17 @@ _OPTIONS_KW = ("rtol", "atol", "max_steps", "max_phases", "settings", "chatter")
 
 
 def convert_legacy(
-    old: dict[str, Any], model: RigidGround | None, options: RigidOptions | None, stacklevel: int = 4
+    old: dict[str, Any],
+    model: RigidGround | None,
+    options: RigidOptions | None,
+    stacklevel: int = 4,
+    moved: dict[str, str] | None = None,
 ) -> tuple[RigidGround, RigidOptions]:
     """`(model, options)` from `simulate_rigid`'s earlier keywords in `old` (`restitution`, `rope` ->
     `RigidGround`; `rtol`, `atol`, `max_steps`, `max_phases`, `settings`, `chatter` -> `RigidOptions`),
-    with one `DeprecationWarning` naming the new spelling (`stacklevel` as in `warn_moved`, from the caller
-    of this function); the defaults where neither is given.
+    with one `DeprecationWarning` naming the new spelling of these and of `moved` (old name -> new
+    spelling: the saved times' keywords, converted by the caller; `stacklevel` as in `warn_moved`, from the
+    caller of this function); the defaults where neither is given.
 
     **Raises** `TypeError` for an unknown keyword, `ScenarioError` for an old keyword given with the object
     that replaces it, an unknown rope name or a restitution outside [0, 1].
@@ -90,7 +95,8 @@ def convert_legacy(
         raise TypeError(f"simulate_rigid() got unexpected keyword argument(s): {', '.join(unknown)}")
     model_kw = {k: old[k] for k in _MODEL_KW if k in old}
     options_kw = {k: old[k] for k in _OPTIONS_KW if k in old}
-    moved = {k: f"model=RigidGround({k}=...)" for k in model_kw}
+    moved = dict(moved or {})
+    moved.update({k: f"model=RigidGround({k}=...)" for k in model_kw})
     moved.update({k: f"options=RigidOptions({k}=...)" for k in options_kw})
     if model_kw:
         if model is not None:
