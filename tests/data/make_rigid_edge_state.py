@@ -52,7 +52,7 @@ def main() -> None:
 
     rigid_run._Run.step = watching
     try:
-        simulate_rigid(scenario(), T1, n_save=501)
+        simulate_rigid(scenario(), jh.Times(T1, n=501))
     except _Found:
         pass
     finally:
