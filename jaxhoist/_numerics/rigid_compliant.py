@@ -387,3 +387,30 @@ def handback(drv, sc_c: Scenario, t: float, y: elastic.State, loaded: np.ndarray
 def _rigid_mechanical(t, y, scenario, c, inextensible):
     ld = rigid.loads(t, y, scenario, c, inextensible)
     return rigid.energy(y, ld, scenario, c).mechanical
+
+
+def with_compliant_outputs(out, ts, states, mask, drv, rule):
+    """`out` (a `rigid.Output` with a leading n_t axis) with the samples `mask` replaced by the outputs of
+    the compliant model (this module): its corner spring forces, friction, rope and energies
+    (ground spring and stiff rope included)."""
+    k = np.nonzero(mask)[0]
+    sel = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x)[k]), states)
+    el = elastic_outputs(jnp.asarray(ts[k]), sel, compliant_scenario(drv.sc, rule, drv.inextensible), drv.c)
+
+    def put(a, b):
+        a = np.array(a)
+        a[k] = np.asarray(b)
+        return jnp.asarray(a)
+
+    return eqx.tree_at(
+        lambda o: (o.corners, o.normal, o.friction, o.rope_tension, o.energy, o.euler),
+        out,
+        (
+            put(out.corners, el["corners"]),
+            put(out.normal, el["normal"]),
+            put(out.friction, el["friction"]),
+            put(out.rope_tension, el["rope_tension"]),
+            jax.tree_util.tree_map(put, out.energy, el["energy"]),
+            put(out.euler, el["euler"]),
+        ),
+    )

@@ -31,23 +31,8 @@ from .rigid_compiled import (
     _RopeWouldPush,
 )
 from .rigid_coulomb import coulomb_pattern
+from .rigid_options import DRIVER_TOLERANCES as _DEFAULT_TOL  # noqa: F401  (rigid_solve and tests read it here)
 from .rigid_records import _fmt
-
-_DEFAULT_TOL = dict(
-    z=1e-7,  # a corner is on the ground if Z < z L
-    v=1e-6,  # ... and |v_z| < v V; it rests if also |v_h| < v V
-    force=1e-7,  # consistency tolerance on forces [G]
-    accel=1e-7,  # consistency tolerance on accelerations [g]
-    rest=1e-9,  # tolerance of the rest conditions (dimensionless guards)
-    guard_start=1e-9,  # every guard starts at least this positive (offsets)
-    min_phase=1e-6,  # [s] a phase shorter than this is merged into the previous record (`_merge`)
-    trigger=1e-6,  # guards within this of zero at an event count as fired
-    lookahead=1e-5,  # the look-ahead runs until the fired guards are below -lookahead
-    align=1e-2,  # a corner sliding from rest must accelerate along its sliding direction (relative)
-    jump=1e-3,  # normal-force jumps closer than this [G] count as equally continuous
-    bounce=1e-4,  # impacts slower than bounce V are plastic (no restitution): avoids Zeno bouncing
-    relax=1e3,  # fallback 1 of the configuration choice: tolerances times this (degenerate contacts)
-)
 
 
 class _Inconsistent(Exception):

@@ -1,6 +1,6 @@
 """The phase loop of the rigid model (paper §2) behind `simulate_rigid` (`rigid_solve`): `_Run` solves
 phase after phase, resolves impacts and contact changes, passes sustained cycles by compliant phases and
-assembles the `RigidTrajectory`; `_transition` and `_with_compliant_outputs` are its helpers."""
+assembles the `RigidTrajectory`; `_transition` is its helper."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ from .rigid_compiled import (
     _RopeWouldPush,
     _tree_index,
 )
-from .rigid_compliant import ChatterRule, compliant_scenario, elastic_outputs, run_episode
+from .rigid_compliant import ChatterRule, run_episode, with_compliant_outputs
 from .rigid_driver import _Driver, _Inconsistent
 from .rigid_impacts import _rope_jerk
 from .rigid_records import PhaseRecord, RigidContactError, RigidTrajectory, _fmt, _merge
@@ -410,7 +410,7 @@ class _Run:
             ts, saved_states, self.saved_phase, self.phases, drv.sc, c, settings, drv.inextensible
         )
         if np.any(self.compliant_mask):
-            out = _with_compliant_outputs(out, ts, saved_states, self.compliant_mask, drv, self.chatter)
+            out = with_compliant_outputs(out, ts, saved_states, self.compliant_mask, drv, self.chatter)
         euler = out.euler.at[:, :2].set(jnp.unwrap(out.euler[:, :2], axis=0))
         return RigidTrajectory(
             ts=jnp.asarray(ts),
@@ -436,33 +436,6 @@ class _Run:
             phase_index=jnp.asarray(np.asarray(self.record_of, dtype=np.int64)[self.saved_phase]),
             phases=tuple(self.records),
         )
-
-
-def _with_compliant_outputs(out, ts, states, mask, drv, rule):
-    """`out` (a `rigid.Output` with a leading n_t axis) with the samples `mask` replaced by the outputs of
-    the compliant model (`numerics.rigid_compliant`): its corner spring forces, friction, rope and energies
-    (ground spring and stiff rope included)."""
-    k = np.nonzero(mask)[0]
-    sel = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x)[k]), states)
-    el = elastic_outputs(jnp.asarray(ts[k]), sel, compliant_scenario(drv.sc, rule, drv.inextensible), drv.c)
-
-    def put(a, b):
-        a = np.array(a)
-        a[k] = np.asarray(b)
-        return jnp.asarray(a)
-
-    return eqx.tree_at(
-        lambda o: (o.corners, o.normal, o.friction, o.rope_tension, o.energy, o.euler),
-        out,
-        (
-            put(out.corners, el["corners"]),
-            put(out.normal, el["normal"]),
-            put(out.friction, el["friction"]),
-            put(out.rope_tension, el["rope_tension"]),
-            jax.tree_util.tree_map(put, out.energy, el["energy"]),
-            put(out.euler, el["euler"]),
-        ),
-    )
 
 
 def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[int], ts):
