@@ -265,7 +265,7 @@ def api_cases(paper42):
         def f(x):
             sc = paper42.replace(**{mu: x})
             return jh.simulate(
-                sc, 0.05, n_save=3, options=jh.SolverOptions(max_steps=10), throw=False
+                sc, jh.Times(0.05, n=3), options=jh.SolverOptions(max_steps=10), throw=False
             ).position[-1]
 
         import jaxhoist._numerics.solve as solve_mod
@@ -288,7 +288,7 @@ def api_cases(paper42):
         ("simulate, mass 1e300", lambda: sim({"load.mass": 1e300}), True),
         (
             "simulate(t1=1, ts ending at 0.05)",
-            lambda: jh.simulate(paper42, 1.0, ts=np.array([0, 0.02, 0.05])),
+            lambda: jh.simulate(paper42, jh.Times(1.0, ts=np.array([0, 0.02, 0.05]))),
             True,
         ),
         ("jacfwd through the default adjoint", jacfwd, True),

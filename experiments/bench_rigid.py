@@ -49,7 +49,7 @@ def main(argv=None) -> int:
     times = []
     for _ in range(2):
         t0 = time.perf_counter()
-        tr = simulate_rigid(sc, t1, n_save=args.n_save, model=_model(args.rope))
+        tr = simulate_rigid(sc, jaxhoist.Times(t1, n=args.n_save), model=_model(args.rope))
         times.append(time.perf_counter() - t0)
         if len(times) == 1:
             compile_s = {k.rsplit("/", 1)[-1]: v for k, v in durations.items() if "/compile/" in k}

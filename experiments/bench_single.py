@@ -48,12 +48,12 @@ def main(argv=None):
     sc = jh.load_scenario(args.scenario)
     t1 = 5.0 if args.quick else sc.t1
     t0 = time.perf_counter()
-    tr = jax.block_until_ready(jh.simulate(sc, t1, n_save=251))
+    tr = jax.block_until_ready(jh.simulate(sc, jh.Times(t1, n=251)))
     compile_s = time.perf_counter() - t0
     walls = []
     for _ in range(args.repeats):
         t0 = time.perf_counter()
-        tr = jax.block_until_ready(jh.simulate(sc, t1, n_save=251))
+        tr = jax.block_until_ready(jh.simulate(sc, jh.Times(t1, n=251)))
         walls.append(time.perf_counter() - t0)
     law = sc.foundation.friction
     rec = {

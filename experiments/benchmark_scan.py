@@ -9,8 +9,8 @@ memory.
 
 What it runs (all in one process, so every ratio is against a baseline measured under the same load):
 
-1. **the scan, as a user calls it**: `scan(load_scenario("paper-4.2"), {μ: linspace(0.1, 0.6, n)}, t1,
-   observables=[final_position, final_euler], n_save=2)`: the preset's physics (regularised Coulomb,
+1. **the scan, as a user calls it**: `scan(load_scenario("paper-4.2"), {μ: linspace(0.1, 0.6, n)},
+   Times(t1, n=2), observables=[final_position, final_euler])`: the preset's physics (regularised Coulomb,
    ε = 1e-3 m/s) and the default solver (Rosenbrock-W, rtol 1e-3, atol 1e-5, lock-step groups); compile
    time, wall time per trajectory (compute / n), steps, peak RSS;
 2. **accuracy**: the final mass-centre position against adaptive Tsit5 at rtol --ref-rtol (atol 1e-2 rtol)
@@ -83,8 +83,8 @@ def scipy_baseline(sc, t1, method, rtol, atol):
     return wall, int(sol.nfev), np.asarray(unravel(sol.y[:, -1]).position), bool(sol.success)
 
 
-def _timed_scan(sc, mus, t1, **kw):
-    r = scan(sc, {MU: mus}, t1, **kw)
+def _timed_scan(sc, mus, times, **kw):
+    r = scan(sc, {MU: mus}, times, **kw)
     t = r.attrs["timings_s"]
     return r, {
         "members": int(len(mus)),
@@ -170,7 +170,8 @@ def main(argv=None):
     deriv_n = min(n, args.deriv_n if args.deriv_n is not None else n)
     sc = jh.load_scenario("paper-4.2")  # as shipped: ε = 1e-3 m/s
     mus = np.linspace(0.1, 0.6, n)
-    obs = dict(observables=OBS, n_save=2)
+    obs = dict(observables=OBS)
+    times = jh.Times(t1, n=2)  # the saved times 0 and t1
     rec = {
         "scenario": sc.name,
         "friction_law": "RegularisedCoulomb, eps = "
@@ -188,7 +189,7 @@ def main(argv=None):
     )
 
     # 1. The scan, as a user calls it.
-    r, run = _timed_scan(sc, mus, t1, progress=True, **obs)
+    r, run = _timed_scan(sc, mus, times, progress=True, **obs)
     run["peak_rss_mb"] = peak_rss_mb()
     rec["scan"] = run
     per = run["compute_s"] / n
@@ -207,7 +208,7 @@ def main(argv=None):
     ref = scan(
         sc,
         {MU: mus[idx]},
-        t1,
+        times,
         options=jh.SolverOptions(
             diffrax.Tsit5(), rtol=args.ref_rtol, atol=1e-2 * args.ref_rtol, max_steps=5_000_000
         ),
@@ -314,8 +315,8 @@ def main(argv=None):
     # 5. ε = 1e-4 against the preset's ε on the same members.
     if eps_n:
         sub = mus[np.linspace(0, n - 1, eps_n).round().astype(int)]
-        _, base = _timed_scan(sc, sub, t1, **obs)
-        r4, stiff = _timed_scan(sc.replace(**{EPS: 1e-4}), sub, t1, **obs)
+        _, base = _timed_scan(sc, sub, times, **obs)
+        r4, stiff = _timed_scan(sc.replace(**{EPS: 1e-4}), sub, times, **obs)
         rec["eps_1e-4"] = {
             "preset_eps": base,
             "eps_1e-4": stiff,
@@ -331,8 +332,8 @@ def main(argv=None):
     # 6. Forward sensitivities.
     if deriv_n:
         sub = mus[np.linspace(0, n - 1, deriv_n).round().astype(int)]
-        plain = run if deriv_n == n else _timed_scan(sc, sub, t1, **obs)[1]
-        der, d = _timed_scan(sc, sub, t1, derivatives=True, progress=True, **obs)
+        plain = run if deriv_n == n else _timed_scan(sc, sub, times, **obs)[1]
+        der, d = _timed_scan(sc, sub, times, derivatives=True, progress=True, **obs)
         rec["derivatives"] = {"plain": plain, "forward": d, "ratio": d["compute_s"] / plain["compute_s"]}
         print(
             f"  forward sensitivities on {deriv_n} members: {d['ms_per_trajectory']:.2f} vs plain "
@@ -348,7 +349,7 @@ def main(argv=None):
         _, x = _timed_scan(
             sc2,
             mus,
-            t1,
+            times,
             options=jh.SolverOptions(
                 diffrax.Bosh3(), diffrax.ConstantStepSize(), dt0=1.5e-3, max_steps=10**7
             ),

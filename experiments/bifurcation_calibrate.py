@@ -48,7 +48,7 @@ XI = "load.mass_centre[0]"
 EPS = "foundation.friction.regularisation_velocity"
 OBS = "final_theta"
 LEVEL = float(np.radians(15.0))
-KW = dict(t1=25.0, n_save=2501, level=LEVEL)
+KW = dict(times=jh.Times(25.0, n=2501), level=LEVEL)
 MU_PAPER = 0.3635
 
 
@@ -109,8 +109,7 @@ def _ift(sc, mu_star):
     r = jh.scan(
         sc,
         jh.Points({p: np.array(v) for p, v in pts.items()}),
-        25.0,
-        n_save=2501,
+        jh.Times(25.0, n=2501),
         observables=[OBS],
         batch=jh.BatchOptions(sort=False),
     )
@@ -201,8 +200,7 @@ def main(argv=None) -> int:
             observable=OBS,
             half_window=6e-3,
             n_window=49,
-            t1=25.0,
-            n_save=2501,
+            times=jh.Times(25.0, n=2501),
         )
         print("classified:", c.summary(), flush=True)
         rec["classified"] = c.to_dict()

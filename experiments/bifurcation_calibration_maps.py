@@ -58,7 +58,8 @@ OBS = [
     "impacts",
 ]
 FIXTURES = [(0.0, 0.0), (2.5, 0.0), (0.0, 6.0), (2.5, 6.0)]  # top corners above D, E, H, F (body axes)
-KW = dict(n_save=2501, observables=OBS, progress=True)
+KW = dict(observables=OBS, progress=True)
+TIMES = jh.Times(25.0, n=2501)  # every 10 ms over the 25 s lift
 
 
 def step_size(res, n_mu):
@@ -91,13 +92,13 @@ def run(which, out, base):
                 for k, v in zip(pts, (m, x, e, z, fa, fb), strict=True):
                     pts[k].append(v)
         return jh.scan(
-            base, jh.Points({k: np.array(v) for k, v in pts.items()}), 25.0, out_dir=out / which, **KW
+            base, jh.Points({k: np.array(v) for k, v in pts.items()}), TIMES, out_dir=out / which, **KW
         )
     if which == "xi-ramp":
         return jh.scan(
             base,
             jh.Grid({MU: np.linspace(0.30, 0.45, 151), f"{C}[0]": np.linspace(1.0, 1.25, 21)}),
-            25.0,
+            TIMES,
             out_dir=out / which,
             **KW,
         )
@@ -106,7 +107,7 @@ def run(which, out, base):
         return jh.scan(
             sc,
             jh.Grid({MU: np.linspace(0.345, 0.38, 71), f"{C}[0]": np.linspace(1.05, 1.30, 26)}),
-            25.0,
+            TIMES,
             out_dir=out / which,
             **KW,
         )
@@ -125,7 +126,7 @@ def run(which, out, base):
             f"{A}[0]": np.repeat(np.array(FIXTURES)[f, 0], m),
             f"{A}[1]": np.repeat(np.array(FIXTURES)[f, 1], m),
         }
-        return jh.scan(base, jh.Points(pts), 25.0, out_dir=out / which, **KW)
+        return jh.scan(base, jh.Points(pts), TIMES, out_dir=out / which, **KW)
     raise SystemExit(f"unknown map {which!r}")
 
 

@@ -49,8 +49,7 @@ def main(argv=None) -> int:
             observable=obs,
             half_window=half,
             n_window=n,
-            t1=25.0,
-            n_save=2501,
+            times=jh.Times(25.0, n=2501),
         )
         print(f"{preset}: {c.summary()}", flush=True)
         rows.append({"preset": preset, **c.to_dict()})

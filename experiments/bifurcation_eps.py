@@ -306,12 +306,14 @@ def main(argv=None):
     t1, tol = args.t1, args.tol
     n_save = int(round(t1 / args.dt_save)) + 1
     ts = np.linspace(0.0, t1, n_save)
-    scan_kw = dict(ts=ts, options=jh.SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=400_000))
+    scan_kw = dict(
+        times=jh.Times(ts=ts), options=jh.SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=400_000)
+    )
 
     def locator_kw(ts=ts, rtol=args.rtol, atol=args.atol) -> dict:
         """The locator's settings: `args.method` to `tol`; Tsit5 at the scans' tolerances."""
         options = jh.SolverOptions(diffrax.Tsit5(), rtol=rtol, atol=atol, max_steps=400_000)
-        return dict(ts=ts, search=jh.SearchOptions(args.method, tol), options=options)
+        return dict(times=jh.Times(ts=ts), search=jh.SearchOptions(args.method, tol), options=options)
 
     base = jh.load_scenario("paper-4.2")
     bristle = jh.BristleFriction(deflection=delta_list[0], breakaway_ratio=0.5, relaxation_time=0.01)

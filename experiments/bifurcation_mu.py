@@ -68,10 +68,12 @@ LABELS = {
 }
 
 
-def _scan_kw(kw: dict, lanes: int | None, sort: bool = True) -> dict:
-    """`scan`'s objects for the solver keywords `kw` (n_save, rtol, atol) that the locator takes."""
+def _scan_kw(kw: dict, t1: float, lanes: int | None, sort: bool = True) -> dict:
+    """`scan`'s objects for the solver keywords `kw` (n_save, rtol, atol) that the locator takes, to `t1`
+    [s]."""
     options = jh.SolverOptions(rtol=kw["rtol"], atol=kw["atol"])
-    return dict(n_save=kw["n_save"], options=options, batch=jh.BatchOptions(lanes=lanes, sort=sort))
+    times = jh.Times(t1, n=kw["n_save"])
+    return dict(times=times, options=options, batch=jh.BatchOptions(lanes=lanes, sort=sort))
 
 
 def _plot_observables(sc, mus, res, jumps, located, ramp, out, t1):
@@ -202,11 +204,10 @@ def main(argv=None):
     res = scan(
         sc,
         {MU: mus},
-        t1,
         observables=OBSERVABLES,
         out_dir=out / f"scan-s{n_save}",
         progress=True,
-        **_scan_kw(solve_kw, args.lanes),
+        **_scan_kw(solve_kw, t1, args.lanes),
     )
     rec["scan"] = {
         "wall_s": time.perf_counter() - t0,
@@ -268,8 +269,7 @@ def main(argv=None):
                 (j.lo, j.hi),
                 search=jh.SearchOptions(args.method, tol),  # multisection: 16 points per round, 16 lanes
                 options=locator_options,
-                t1=t1,
-                n_save=refine_n_save,
+                times=jh.Times(t1, n=refine_n_save),
             )
         except BifurcationError as e:
             print(f"  {j.observable} jump at μ in [{j.lo:.6f}, {j.hi:.6f}]: not refined ({e})", flush=True)
@@ -296,8 +296,7 @@ def main(argv=None):
         (mus[steep], mus[steep + 1]),
         search=jh.SearchOptions(args.method, tol),
         options=locator_options,
-        t1=t1,
-        n_save=refine_n_save,
+        times=jh.Times(t1, n=refine_n_save),
     )
     slope = np.abs(np.diff(psi)) / np.diff(mus)
     big = slope > 0.5 * slope[steep]
@@ -343,9 +342,8 @@ def main(argv=None):
         zoom = scan(
             sc,
             {MU: np.linspace(b.value - half, b.value + half, 32)},
-            t1,
             observables=[name],
-            **_scan_kw(refine_kw, 16),
+            **_scan_kw(refine_kw, t1, 16),
         )
         fig, ax = plt.subplots(figsize=(7, 4))
         ax.plot(zoom.coords[MU], zoom[name] * scale, "o-", ms=3)
@@ -362,10 +360,9 @@ def main(argv=None):
         hist = scan(
             sc,
             {MU: across},
-            t1,
             observables=["final_psi"],
             histories=("position", "euler"),
-            **_scan_kw(solve_kw, 4, sort=False),
+            **_scan_kw(solve_kw, t1, 4, sort=False),
         )
         ts = hist.ts
         fig, axes = plt.subplots(5, 1, figsize=(8, 11), sharex=True)
@@ -414,8 +411,7 @@ def main(argv=None):
             b0.observable,
             search=jh.SearchOptions(jh.Bisection(), tol, initial_half_width=max(10 * tol, 0.002)),
             options=locator_options,
-            t1=t1,
-            n_save=n_save,
+            times=jh.Times(t1, n=n_save),
         )
         rec["trace"] = {
             "observable": b0.observable,

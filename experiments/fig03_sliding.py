@@ -103,10 +103,10 @@ def main(argv=None) -> int:
     t1, n_save = (3.0, 61) if args.quick else (sc.t1, 401)
 
     t0 = time.perf_counter()
-    tr = simulate_rigid(sc, t1, n_save=n_save)
+    tr = simulate_rigid(sc, jaxhoist.Times(t1, n=n_save))
     t_first = time.perf_counter() - t0
     t0 = time.perf_counter()
-    tr = simulate_rigid(sc, t1, n_save=n_save)
+    tr = simulate_rigid(sc, jaxhoist.Times(t1, n=n_save))
     t_second = time.perf_counter() - t0
     d = _arrays(tr)
     print(

@@ -92,8 +92,10 @@ def main(argv=None) -> int:
     sc = jaxhoist.load_scenario("paper-4.1")
     t1, n_save = (5.0, 101) if args.quick else (sc.t1, 701)
 
-    rig_tr, rig_first, rig_second = _timed(lambda: simulate_rigid(sc, t1, n_save=n_save))
-    ela_tr, ela_first, ela_second = _timed(lambda: jaxhoist.simulate(sc, t1, n_save=n_save, throw=False))
+    rig_tr, rig_first, rig_second = _timed(lambda: simulate_rigid(sc, jaxhoist.Times(t1, n=n_save)))
+    ela_tr, ela_first, ela_second = _timed(
+        lambda: jaxhoist.simulate(sc, jaxhoist.Times(t1, n=n_save), throw=False)
+    )
     rig, ela = _arrays(rig_tr), _arrays(ela_tr)
     print(f"paper-4.1, t1 = {t1:g} s, {n_save} saved times")
     print(

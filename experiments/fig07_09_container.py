@@ -48,11 +48,11 @@ def main(argv=None) -> int:
 
     scenario = jaxhoist.load_scenario("paper-4.2")
     t0 = time.perf_counter()
-    traj = jaxhoist.simulate(scenario, t1, n_save=n_save, throw=False)
+    traj = jaxhoist.simulate(scenario, jaxhoist.Times(t1, n=n_save), throw=False)
     jax.block_until_ready(traj)
     t_first = time.perf_counter() - t0
     t0 = time.perf_counter()
-    traj = jax.block_until_ready(jaxhoist.simulate(scenario, t1, n_save=n_save, throw=False))
+    traj = jax.block_until_ready(jaxhoist.simulate(scenario, jaxhoist.Times(t1, n=n_save), throw=False))
     t_second = time.perf_counter() - t0
     d = trajectory_arrays(traj)
     status = jaxhoist.SolveStatus(int(d["status"]))

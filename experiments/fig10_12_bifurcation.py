@@ -45,8 +45,7 @@ def histories(sc, mus, t1, n_save):
     res = jh.scan(
         sc,
         {MU: np.asarray(mus)},
-        t1,
-        n_save=n_save,
+        jh.Times(t1, n=n_save),
         batch=jh.BatchOptions(sort=False),
         observables=["liftoff_time", "last_contact_time", "final_position", "final_euler"],
         histories=["position", "euler"],

@@ -52,9 +52,9 @@ def main(argv=None):
         ("BristleFriction()", jh.BristleFriction()),
     ]:
         sc = scenario(law, t1)
-        jax.block_until_ready(jh.simulate(sc, ts=ts))
+        jax.block_until_ready(jh.simulate(sc, jh.Times(ts=ts)))
         t0 = time.perf_counter()
-        tr = jax.block_until_ready(jh.simulate(sc, ts=ts))
+        tr = jax.block_until_ready(jh.simulate(sc, jh.Times(ts=ts)))
         wall = time.perf_counter() - t0
         y = np.asarray(tr.position[:, 1])
         r = np.asarray(tr.rope_tension) / (MU * np.asarray(tr.ground_reaction))

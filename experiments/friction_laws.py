@@ -27,10 +27,10 @@ def run(scenario, law, t1, rtol=1e-6, atol=1e-8):
     sc = eqx.tree_at(lambda s: s.foundation.friction, scenario, law)
     ts = np.linspace(0.0, t1, int(round(t1 * 10)) + 1)
     opts = jh.SolverOptions(rtol=rtol, atol=atol, max_steps=2_000_000)
-    tr = jh.simulate(sc, ts=ts, options=opts)  # compile
+    tr = jh.simulate(sc, jh.Times(ts=ts), options=opts)  # compile
     jax.block_until_ready(tr)
     t0 = time.perf_counter()
-    tr = jax.block_until_ready(jh.simulate(sc, ts=ts, options=opts))
+    tr = jax.block_until_ready(jh.simulate(sc, jh.Times(ts=ts), options=opts))
     return tr, time.perf_counter() - t0
 
 

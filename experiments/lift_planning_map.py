@@ -231,9 +231,9 @@ def main(argv=None) -> int:
                 sc = base.replace(**{"foundation.friction_coefficient": mu, "boom.tip_position": A})
                 t_end = 1.5 * s / rate + 0.5
                 c0 = time.perf_counter()
-                rig, t_rig = rigid_first(simulate_rigid(sc, t_end, n_save=2))
+                rig, t_rig = rigid_first(simulate_rigid(sc, jaxhoist.Times(t_end, n=2)))
                 c1 = time.perf_counter()
-                ela, t_ela = elastic_first(jaxhoist.simulate(sc, t_end, n_save=2001))
+                ela, t_ela = elastic_first(jaxhoist.simulate(sc, jaxhoist.Times(t_end, n=2001)))
                 c2 = time.perf_counter()
                 rec = dict(
                     mu=mu,

@@ -100,7 +100,10 @@ def main(argv=None) -> int:
     ts = np.linspace(0.0, args.t1, int(round(args.t1 / args.dt_save)) + 1)
     kw = dict(ts=ts, rtol=1e-8, atol=1e-10, max_steps=400_000)
     # the locator's solves: Tsit5 (its default solver) at the same tolerances
-    lkw = dict(ts=ts, options=jh.SolverOptions(diffrax.Tsit5(), rtol=1e-8, atol=1e-10, max_steps=400_000))
+    lkw = dict(
+        times=jh.Times(ts=ts),
+        options=jh.SolverOptions(diffrax.Tsit5(), rtol=1e-8, atol=1e-10, max_steps=400_000),
+    )
     sc = jh.load_scenario("paper-4.2")
     rec: dict = {
         "scenario": sc.name,
@@ -123,7 +126,7 @@ def main(argv=None) -> int:
         observables={"g": MARGIN, "t_detach_E": "detachment_times[E]"},
         out_dir=out / "scan",
         progress=True,
-        ts=kw["ts"],
+        times=jh.Times(ts=ts),
         options=jh.SolverOptions(rtol=kw["rtol"], atol=kw["atol"], max_steps=kw["max_steps"]),
     )
     g = np.asarray(res["g"])  # (n_mu, n_v)

@@ -133,7 +133,9 @@ def variant_scenario(sc, k, eps, p0):
 def run_elastic(sc, ts, max_steps):
     t0 = time.perf_counter()
     tr = jax.block_until_ready(
-        jaxhoist.simulate(sc, ts=ts, throw=False, options=jaxhoist.SolverOptions(max_steps=max_steps))
+        jaxhoist.simulate(
+            sc, jaxhoist.Times(ts=ts), throw=False, options=jaxhoist.SolverOptions(max_steps=max_steps)
+        )
     )
     return tr, time.perf_counter() - t0
 
@@ -246,7 +248,7 @@ def main(argv=None) -> int:
     print("damping ratios for h = sqrt(k m): " + ", ".join(f"{n}: {z:.3g}" for n, z in _named(zetas)))
 
     t0 = time.perf_counter()
-    rig = simulate_rigid(sc0, t1, ts=ts, options=jaxhoist.RigidOptions(max_steps=1_000_000))
+    rig = simulate_rigid(sc0, jaxhoist.Times(t1, ts=ts), options=jaxhoist.RigidOptions(max_steps=1_000_000))
     rig_wall = time.perf_counter() - t0
     r_rig = np.asarray(rig.position)
     t_lift_rig = rigid_liftoff(rig)

@@ -41,7 +41,7 @@ def run() -> dict:
         sc = jaxhoist.load_scenario(preset)
         if mu is not None:
             sc = sc.replace(**{"foundation.friction_coefficient": mu})
-        tr = simulate_rigid(sc, t1, n_save=2001, model=_model(rope))
+        tr = simulate_rigid(sc, jaxhoist.Times(t1, n=2001), model=_model(rope))
         key = f"{preset}_{mu}_{rope}"
         out[key + "/position"] = np.asarray(tr.position)
         out[key + "/velocity"] = np.asarray(tr.velocity)

@@ -142,7 +142,7 @@ def one_run(r: dict) -> dict:
     t0 = time.perf_counter()
     out = dict(r, t1=t1)
     try:
-        tr = simulate_rigid(sc, t1, n_save=N_SAVE, model=_model(r["rope"]))
+        tr = simulate_rigid(sc, jaxhoist.Times(t1, n=N_SAVE), model=_model(r["rope"]))
         resid = float(np.max(np.abs(np.asarray(tr.energy_residual()))))
         hoist = float(np.asarray(tr.hoist_work)[-1])
         choices = [p.choice for p in tr.phases if p.choice]
@@ -330,7 +330,7 @@ def elastic_check(
         ts = np.linspace(0.0, t1, int(round(t1 / dt)) + 1)
         sc = preset.replace(**{"foundation.friction_coefficient": mu})
         G = float(sc.load.mass) * float(sc.gravity)
-        rig = simulate_rigid(sc, t1, ts=ts)
+        rig = simulate_rigid(sc, jaxhoist.Times(t1, ts=ts))
         el_sc = sc.replace(
             **{
                 "foundation.stiffness": k,
@@ -341,7 +341,9 @@ def elastic_check(
         )
         t0 = time.perf_counter()
         el = jax.block_until_ready(
-            jaxhoist.simulate(el_sc, ts=ts, throw=False, options=jaxhoist.SolverOptions(max_steps=4_000_000))
+            jaxhoist.simulate(
+                el_sc, jaxhoist.Times(ts=ts), throw=False, options=jaxhoist.SolverOptions(max_steps=4_000_000)
+            )
         )
         wall = time.perf_counter() - t0
         d = np.linalg.norm(np.asarray(el.position) - np.asarray(rig.position), axis=-1)

@@ -41,7 +41,6 @@ def main(argv=None) -> int:
     worst = 0.0
     for label, solver in (("default (Rosenbrock-W)", None), ("Tsit5", diffrax.Tsit5())):
         kw = dict(
-            n_save=31,
             observables=["final_position", "final_euler"],
             histories=("position",),
             options=jh.SolverOptions(solver),
@@ -50,7 +49,7 @@ def main(argv=None) -> int:
         for n_dev, chunk in ((1, None), (2, None), (4, None), (2, 2 * a.lanes)):
             t = time.perf_counter()
             batch = jh.BatchOptions(lanes=a.lanes, devices=jax.devices()[:n_dev], chunk_size=chunk)
-            r = jh.scan(sc, {MU: mus}, a.t1, batch=batch, **kw)
+            r = jh.scan(sc, {MU: mus}, jh.Times(a.t1, n=31), batch=batch, **kw)
             tm = r.attrs["timings_s"]
             runs[(n_dev, chunk)] = r
             print(

@@ -27,11 +27,11 @@ def main(argv=None):
     for mu in (float(x) for x in args.mu.split(",")):
         sc = jh.load_scenario("paper-4.2").replace(**{"foundation.friction_coefficient": mu})
         tight = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-10, atol=1e-12, max_steps=10**6)
-        ref = jh.simulate(sc, args.t1, n_save=11, options=tight)
+        ref = jh.simulate(sc, jh.Times(args.t1, n=11), options=tight)
         row = []
         for dt in (float(x) for x in args.dt.split(",")):
             opts = jh.SolverOptions(jh.RosenbrockW(), diffrax.ConstantStepSize(), dt0=dt, max_steps=10**6)
-            tr = jh.simulate(sc, args.t1, n_save=11, options=opts, throw=False)
+            tr = jh.simulate(sc, jh.Times(args.t1, n=11), options=opts, throw=False)
             err = 100 * float(np.max(np.abs(np.asarray(tr.position[-1] - ref.position[-1]))))
             row.append(
                 f"dt {1e3 * dt:g} ms: "

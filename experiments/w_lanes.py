@@ -62,7 +62,9 @@ def main() -> None:
         for w in widths if rnd % 2 == 0 else widths[::-1]:
             t0 = time.perf_counter()
             batch = jh.BatchOptions(lanes=w, devices=dev)
-            r = jh.scan(sc, jh.Sweep(MU, mus), a.t1, observables=["final_position"], n_save=2, batch=batch)
+            r = jh.scan(
+                sc, jh.Sweep(MU, mus), jh.Times(a.t1, n=2), observables=["final_position"], batch=batch
+            )
             wall = time.perf_counter() - t0
             t = r.attrs["timings_s"]
             row = rows[w]

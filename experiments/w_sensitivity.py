@@ -31,7 +31,9 @@ MU = "foundation.friction_coefficient"
 
 
 def timed(sc, mus, t1, **kw):
-    r = jh.scan(sc, jh.Grid({MU: mus}), t1, observables=["final_position"], n_save=2, progress=False, **kw)
+    r = jh.scan(
+        sc, jh.Grid({MU: mus}), jh.Times(t1, n=2), observables=["final_position"], progress=False, **kw
+    )
     t = r.attrs["timings_s"]
     return r, t["compute"], t["compile"]
 
@@ -53,7 +55,9 @@ def main(argv=None) -> int:
 
     tight = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-10, atol=1e-12, max_steps=10_000_000)
     ts = np.array([0.0, args.t1])
-    ref_fn = jax.jit(lambda m: jh.simulate(jh.set_param(sc, MU, m), ts=ts, options=tight).position[-1])
+    ref_fn = jax.jit(
+        lambda m: jh.simulate(jh.set_param(sc, MU, m), jh.Times(ts=ts), options=tight).position[-1]
+    )
     h = 1e-4
     t0 = time.perf_counter()
     cd = np.stack([(np.asarray(ref_fn(mus[k] + h)) - np.asarray(ref_fn(mus[k] - h))) / (2 * h) for k in pick])

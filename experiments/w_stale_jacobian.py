@@ -93,12 +93,15 @@ def main(argv=None) -> int:
     a = p.parse_args(argv)
     sc = jh.load_scenario("paper-4.2")
     mus = np.linspace(0.1, 0.6, a.n)
-    kw = dict(observables=["final_position"], n_save=2)
-    ref = jh.scan(sc, {MU: mus}, a.t1, options=jh.SolverOptions(diffrax.Tsit5(), rtol=1e-9, atol=1e-11), **kw)
+    kw = dict(observables=["final_position"])
+    times = jh.Times(a.t1, n=2)
+    ref = jh.scan(
+        sc, {MU: mus}, times, options=jh.SolverOptions(diffrax.Tsit5(), rtol=1e-9, atol=1e-11), **kw
+    )
     for _ in range(a.rounds):
         for k in (int(x) for x in a.refresh.split(",")):
             extra = {} if k == 1 else dict(options=jh.SolverOptions(StaleW(refresh=k), rtol=1e-3, atol=1e-5))
-            r = jh.scan(sc, {MU: mus}, a.t1, **kw, **extra)
+            r = jh.scan(sc, {MU: mus}, times, **kw, **extra)
             tm, st = r.attrs["timings_s"], r.num_accepted_steps + r.num_rejected_steps
             err = np.linalg.norm(r["final_position"] - ref["final_position"], axis=-1)
             rej = r.num_rejected_steps.sum() / st.sum()

@@ -55,6 +55,7 @@ from ._numerics.rigid_solve import simulate_rigid as simulate_rigid
 from ._numerics.rosenbrock import RosenbrockW as RosenbrockW
 from ._numerics.solve import Trajectory as Trajectory
 from ._numerics.solve import simulate as simulate
+from ._numerics.times import Times as Times
 from ._physics.elastic import State as State
 from ._physics.elastic import vector_field as vector_field
 from ._physics.energy import Energy as Energy

@@ -48,7 +48,7 @@ SOLVE_OPTIONS = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-8, atol=1e-9)
 
 def run(scenario: jh.Scenario, ts, **kw) -> jh.Trajectory:
     """`simulate` with the shared solver settings on the given saved times (len(ts) should be N_SAVE)."""
-    return jh.simulate(scenario, ts=jnp.asarray(ts, dtype=jnp.float64), options=SOLVE_OPTIONS, **kw)
+    return jh.simulate(scenario, jh.Times(ts=jnp.asarray(ts, dtype=jnp.float64)), options=SOLVE_OPTIONS, **kw)
 
 
 def with_bristle(scenario: jh.Scenario, **kw) -> jh.Scenario:

@@ -33,7 +33,7 @@ T1 = 1.0  # [s]: corners D and H of paper-4.2 leave the ground within 0.3 s
 def result_dir(tmp_path_factory):
     """A saved paper-4.2 result over T1 (N_SAVE saved times), as `jaxhoist simulate` writes it."""
     scenario = jh.load_scenario("paper-4.2")
-    traj = jh.simulate(scenario, ts=jnp.linspace(0.0, T1, N_SAVE), options=SOLVE_OPTIONS)
+    traj = jh.simulate(scenario, jh.Times(ts=jnp.linspace(0.0, T1, N_SAVE)), options=SOLVE_OPTIONS)
     out = tmp_path_factory.mktemp("anim") / "paper-4.2"
     results.save_trajectory(out / "trajectory", traj, scenario, options={"model": "elastic"})
     return out

@@ -28,7 +28,7 @@ from jaxhoist._physics import kinematics  # noqa: E402
 
 XI = "load.mass_centre[0]"
 E_MINUS_D = O.detachment_time_difference("E", "D")
-SYM_KW = dict(t1=0.2, n_save=101)
+SYM_KW = dict(times=jh.Times(0.2, n=101))
 
 
 def symmetric_lift(xi_c: float = 0.45) -> jh.Scenario:
@@ -252,8 +252,7 @@ def test_slide_or_tip_first_flips_at_the_static_friction_coefficient():
         (0.514, 0.521),
         level=0.0,
         search=SearchOptions("bisection", tol=1e-6),
-        t1=3.0,
-        n_save=301,
+        times=jh.Times(3.0, n=301),
     )
     assert b.converged and b.width <= 1e-6
     assert b.y_lo > 0.0 > b.y_hi  # slides first below μ*, tips first above
@@ -491,9 +490,9 @@ def test_trace_reports_a_vanished_jump_as_lost(monkeypatch):
 
 
 def test_old_keywords_warn_once_and_give_the_same_result():
-    """The keywords of earlier versions (`tol=`, `method=`, `max_solves=`, `rtol=`, ...) map exactly onto
-    `SearchOptions` and `SolverOptions` (Tsit5 when no solver is given): one DeprecationWarning naming the
-    new spelling, and the same evaluations to the last bit."""
+    """The keywords of earlier versions (`tol=`, `method=`, `max_solves=`, `rtol=`, ..., `t1=`, `n_save=`)
+    map exactly onto `SearchOptions`, `SolverOptions` (Tsit5 when no solver is given) and `Times`: one
+    DeprecationWarning naming the new spelling, and the same evaluations to the last bit."""
     import diffrax
 
     kw = dict(level=0.0, **SYM_KW)
@@ -502,12 +501,14 @@ def test_old_keywords_warn_once_and_give_the_same_result():
     new = locate_bifurcation(
         symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), search=search, options=options, **kw
     )
-    with pytest.warns(DeprecationWarning, match=r"search=SearchOptions\(.*options=SolverOptions") as caught:
+    with pytest.warns(
+        DeprecationWarning, match=r"times=Times\(.*search=SearchOptions\(.*options=SolverOptions"
+    ) as caught:
         old = locate_bifurcation(
             symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), tol=1e-3, method="bisection", max_solves=40,
-            rtol=1e-7, **kw,
+            rtol=1e-7, level=0.0, t1=0.2, n_save=101,
         )  # fmt: skip
-    assert len(caught) == 1
+    assert len(caught) == 1 and caught[0].filename == __file__
     assert old.history == new.history and old.bracket == new.bracket and old.value == new.value
     assert (old.steps, old.n_solves, old.method) == (new.steps, new.n_solves, "bisection")
     with pytest.raises(jh.ScenarioError, match="either search= or tol"):
@@ -541,9 +542,9 @@ def test_trace_boundary_old_keywords_map_onto_the_settings(monkeypatch):
     search = SearchOptions(
         Multisection(points_per_round=4, lanes=4), 1e-5, initial_half_width=0.01, max_expansions=3
     )
-    trace_boundary(*args, search=search, options=jh.SolverOptions(diffrax.Tsit5(), atol=1e-9), t1=0.2)
+    trace_boundary(*args, search=search, options=jh.SolverOptions(diffrax.Tsit5(), atol=1e-9), times=0.2)
     assert len(seen) == 4
     for s, o, kw in seen:
-        assert s == search and o == seen[2][1] and kw["t1"] == 0.2
+        assert s == search and o == seen[2][1] and kw["times"] == jh.Times(0.2)
     assert seen[0][1] == seen[2][1]
     assert (seen[0][1].solver, seen[0][1].rtol, seen[0][1].atol) == (diffrax.Tsit5(), 1e-6, 1e-9)

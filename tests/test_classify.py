@@ -151,8 +151,7 @@ def test_classify_change_real_case():
         observable="final_x",
         half_window=0.02,
         n_window=9,
-        t1=0.2,
-        n_save=201,
+        times=jh.Times(0.2, n=201),
     )
     assert c.kind == "continuous crossing", c.summary()
     # 9 window points less the midpoint (inside the bracket), plus the bracket's two ends
@@ -161,6 +160,49 @@ def test_classify_change_real_case():
     # odd, materially changing ones say anything; none changes by 1 cm / 1° inside the bracket
     assert not any("jumping" in n for n in c.notes)
     assert c.jump_fractions["final_x"] < 0.01
+
+
+def test_classify_change_earlier_time_keywords(monkeypatch):
+    """`classify_change`'s earlier `t1=`, `n_save=` (and `ts=`, through the scan keywords) reach `scan` as
+    the same `Times` as the new spelling, with one `DeprecationWarning` (the scan replaced by a recorder:
+    no solves); the default is 2501 saved times."""
+    import diffrax
+
+    from jaxhoist._apps import scan as scan_mod
+
+    seen = []
+
+    class Recorded(Exception):
+        pass
+
+    def record(scenario, sweep, times, **kw):
+        seen.append((times, kw["options"]))
+        raise Recorded
+
+    monkeypatch.setattr(scan_mod, "scan", record)
+    sc = jh.load_scenario("paper-4.2")
+    args = dict(param="foundation.friction_coefficient", bracket=(0.3, 0.31))
+    options = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-7)
+    ts = np.linspace(0.0, 0.2, 5)
+    calls = [
+        (dict(times=jh.Times(0.2, n=201), options=options), None),
+        (dict(t1=0.2, n_save=201, rtol=1e-7, solver=diffrax.Tsit5()), "t1 -> times"),
+        (dict(times=jh.Times(ts=ts), options=options), None),
+        (dict(ts=ts, options=options), "ts -> times"),
+        (dict(options=options), None),
+    ]
+    for kw, warned in calls:
+        if warned is None:
+            with pytest.raises(Recorded):
+                classify_change(sc, **args, **kw)
+        else:
+            with pytest.warns(DeprecationWarning, match=warned) as rec:
+                with pytest.raises(Recorded):
+                    classify_change(sc, **args, **kw)
+            assert len(rec) == 1
+    assert seen[0] == seen[1] and seen[0][0] == jh.Times(0.2, n=201)
+    assert seen[2][0].ts is ts and seen[3][0].ts is ts
+    assert seen[4][0] == jh.Times(n=2501)
 
 
 def test_paper_43_preset_is_paper_42_with_the_fitted_mass_centre():

@@ -83,9 +83,8 @@ def test_scan_sensitivities_match_differences_of_the_same_steps(sc):
     res = scan(
         sc,
         {MU: [0.3 - h, 0.3, 0.3 + h]},
-        T1,
+        jh.Times(T1, n=2),
         observables=["final_x"],
-        n_save=2,
         options=jh.SolverOptions(diffrax.Bosh3(), diffrax.ConstantStepSize(), dt0=DT),
         derivatives=True,
         batch=jh.BatchOptions(lanes=4),

@@ -28,7 +28,7 @@ def _scenario(law):
 @pytest.fixture(scope="module", params=["bristle", "coulomb"])
 def held(request):
     law = jh.BristleFriction() if request.param == "bristle" else jh.RegularisedCoulomb(1e-3)
-    tr = jh.simulate(_scenario(law), ts=TS)
+    tr = jh.simulate(_scenario(law), jh.Times(ts=TS))
     return request.param, tr
 
 

@@ -127,7 +127,7 @@ def test_covariance_matches_scatter(scenario, clean):
     assert fits[0].correlation.shape == (1, 1)
     m = _noisy(clean, 0)
     m_unknown = Measurement(m.t, m.signals, {}, "no noise levels")
-    u = identify(scenario, m_unknown, ["mu"], weights={"position": 1.0 / SIGMA})
+    u = identify(scenario, m_unknown, ["mu"], fit=jh.FitOptions(weights={"position": 1.0 / SIGMA}))
     assert not u.noise_known
     assert u.values[0] == pytest.approx(fits[0].values[0], rel=1e-6)
     assert u.std_errors[0] == pytest.approx(fits[0].std_errors[0] * math.sqrt(fits[0].chi2_reduced), rel=1e-4)
@@ -357,7 +357,9 @@ def test_bad_arguments_rejected_before_compiling(scenario, clean, no_compile):
     with pytest.raises(MeasurementError, match=r"'rope_tension' selects no measured signal"):
         identify(scenario, clean, ["mu"], signals=["rope_tension"])
     with pytest.raises(jh.ScenarioError, match=r"not both"):
-        identify(scenario, clean, ["mu"], noise={"position_x": 0.01}, weights={"position": 1.0})
+        identify(
+            scenario, clean, ["mu"], noise={"position_x": 0.01}, fit=jh.FitOptions(weights={"position": 1.0})
+        )
 
 
 def test_plot_fit_shows_angles_in_degrees():
@@ -406,6 +408,28 @@ def test_earlier_keywords_warn_and_give_the_same_fit(scenario, clean):
     assert old.cost == new.cost and old.iterations == new.iterations
 
 
+def test_earlier_weights_keyword_moves_into_fit_options():
+    """`identify(weights=...)` (before 0.2) is `FitOptions(weights=...)` now: converted exactly, beside a
+    `fit` without weights too (the two were separate arguments), with one `DeprecationWarning`."""
+    from jaxhoist._apps.identify_options import convert_legacy
+
+    w = {"position": 100.0}
+    with pytest.warns(DeprecationWarning, match=r"weights -> fit=FitOptions\(weights=...\)") as rec:
+        _, fit = convert_legacy("identify", dict(weights=w, n_starts=2), None, None, stacklevel=3)
+    assert len(rec) == 1 and rec[0].filename == __file__
+    assert fit == jh.FitOptions(n_starts=2, weights=w)
+    with pytest.warns(DeprecationWarning, match="weights"):
+        _, fit = convert_legacy("identify", dict(weights=w), None, jh.FitOptions(seed=3))
+    assert fit == jh.FitOptions(seed=3, weights=w)
+    with pytest.raises(jh.ScenarioError, match="either fit or weights"):
+        convert_legacy("identify", dict(weights=w), None, jh.FitOptions(weights=w))
+    with pytest.warns(DeprecationWarning, match="weights"):
+        _, fit = convert_legacy("residual_function", dict(weights=w), None, None, allow_fit=("weights",))
+    assert fit == jh.FitOptions(weights=w)
+    with pytest.raises(TypeError, match="n_starts"):
+        convert_legacy("residual_function", dict(n_starts=2), None, None, allow_fit=("weights",))
+
+
 def test_fit_and_solver_options_checked_before_compiling(scenario, clean, no_compile):
     with pytest.raises(jh.ScenarioError, match="n_starts must be >= 1, got 0"):
         jh.FitOptions(n_starts=0)
@@ -415,5 +439,7 @@ def test_fit_and_solver_options_checked_before_compiling(scenario, clean, no_com
         identify(scenario, clean, ["mu"], options=jh.SolverOptions())
     with pytest.raises(jh.ScenarioError, match="either fit or n_starts"):
         identify(scenario, clean, ["mu"], fit=jh.FitOptions(), n_starts=2)
+    with pytest.raises(jh.ScenarioError, match="weights must be a mapping"):
+        jh.FitOptions(weights=[1.0])
     with pytest.raises(TypeError, match="unexpected keyword argument.*n_start"):
         identify(scenario, clean, ["mu"], n_start=2)

@@ -27,7 +27,7 @@ T1 = 1.0  # [s]: corners D and H of paper-4.2 leave the ground within 0.3 s, so 
 def traj42():
     scenario = jh.load_scenario("paper-4.2")
     ts = jnp.linspace(0.0, T1, N_SAVE)
-    return scenario, jh.simulate(scenario, ts=ts, options=SOLVE_OPTIONS)
+    return scenario, jh.simulate(scenario, jh.Times(ts=ts), options=SOLVE_OPTIONS)
 
 
 def test_npz_round_trip_preserves_arrays_units_and_scenario(traj42, tmp_path):

@@ -128,7 +128,7 @@ def _reference_slide(ts, m, mu, g, c_l, b_l, v, m0, k, c):
 @pytest.fixture(scope="module")
 def slide_run():
     sc = _scenario()
-    return sc, simulate_rigid(sc, T1, n_save=N_SAVE)
+    return sc, simulate_rigid(sc, jh.Times(T1, n=N_SAVE))
 
 
 def test_sliding_under_steady_pull_matches_analytic_motion(slide_run):
@@ -173,7 +173,7 @@ def test_outputs_of_any_size(slide_run):
     one-dimensional reference, and the per-sample forces and the energy balance are those of sliding."""
     sc, ref = slide_run
     n = 100_001
-    tr = simulate_rigid(sc, T1, n_save=n)
+    tr = simulate_rigid(sc, jh.Times(T1, n=n))
     ts = np.asarray(tr.ts)
     assert ts.shape == (n,) and np.asarray(tr.normal_forces).shape == (n, 4)
     assert [(p.contact, p.rest) for p in tr.phases] == [(p.contact, p.rest) for p in ref.phases]
@@ -206,7 +206,7 @@ def test_tipping_about_an_edge_at_the_statics_threshold():
         rope_damping=2e4,
         speed=0.05,
     )
-    tr = simulate_rigid(sc, T1, n_save=N_SAVE)
+    tr = simulate_rigid(sc, jh.Times(T1, n=N_SAVE))
     ph = tr.phases
     assert ph[0].rest and ph[0].end == "rest:tip"
     assert ph[1].contact == ("stick", "stick", "free", "free") and not ph[1].rest
@@ -245,7 +245,7 @@ def test_rocking_impacts_settle_and_the_energy_balance_closes():
     with plastic impacts (restitution 0) losing energy at each, and settles flat. The energy lost in the
     impacts closes the balance E(t) - E(0) = W_hoist - D_damping - W_friction - W_impact."""
     sc = _rocking_box()
-    tr = simulate_rigid(sc, T1, n_save=N_SAVE)
+    tr = simulate_rigid(sc, jh.Times(T1, n=N_SAVE))
     ph = tr.phases
     assert ph[0].end == "rest:tip" and ph[1].contact == ("stick", "stick", "free", "free")
     impacts = [p for p in ph if "impact" in p.end]
@@ -267,7 +267,7 @@ def test_errors_are_raised_not_guessed():
     # A phase budget too small for the rocking sequence: a clear error naming the last phases.
     sc = _rocking_box()
     with pytest.raises(RigidContactError, match="(?s)max_phases = 3.*impact:FH"):
-        simulate_rigid(sc, T1, n_save=N_SAVE, options=jh.RigidOptions(max_phases=3))
+        simulate_rigid(sc, jh.Times(T1, n=N_SAVE), options=jh.RigidOptions(max_phases=3))
 
 
 def test_model_switch_and_cli_reach_the_rigid_driver(slide_run, tmp_path):
@@ -279,7 +279,7 @@ def test_model_switch_and_cli_reach_the_rigid_driver(slide_run, tmp_path):
 
     sc, ref = slide_run
     opts = jh.SolverOptions(rtol=1e-8, atol=1e-9)
-    tr = jh.simulate(sc, T1, n_save=N_SAVE, model=jh.RigidGround(), options=opts)
+    tr = jh.simulate(sc, jh.Times(T1, n=N_SAVE), model=jh.RigidGround(), options=opts)
     assert isinstance(tr, jh.RigidTrajectory)
     assert isinstance(tr, jh.Trajectory) and bool(tr.ok)  # one trajectory type: the rigid one is a subclass
     np.testing.assert_array_equal(np.asarray(tr.position), np.asarray(ref.position))
@@ -368,7 +368,9 @@ def test_earlier_keywords_give_the_same_run(slide_run):
     """The sliding run of `slide_run` again through the earlier keywords (defaults spelled out): the same
     trajectory bit for bit."""
     sc, ref = slide_run
-    with pytest.warns(DeprecationWarning, match="rtol -> options=RigidOptions"):
+    with pytest.warns(DeprecationWarning, match="rtol -> options=RigidOptions") as rec:
         tr = simulate_rigid(sc, T1, n_save=N_SAVE, restitution=0.0, rtol=1e-8, atol=1e-9, rope="elastic")
+    assert len(rec) == 1 and rec[0].filename == __file__
+    assert "n_save -> times=Times(t1, n=...)" in str(rec[0].message)
     np.testing.assert_array_equal(np.asarray(tr.position), np.asarray(ref.position))
     np.testing.assert_array_equal(np.asarray(tr.normal_forces), np.asarray(ref.normal_forces))

@@ -60,7 +60,7 @@ def _hand_tension(sc: jh.Scenario):
 @pytest.fixture(scope="module")
 def ramped_lift():
     sc = _scenario()
-    return sc, simulate_rigid(sc, T1, n_save=N_SAVE, model=INEXTENSIBLE)
+    return sc, simulate_rigid(sc, jh.Times(T1, n=N_SAVE), model=INEXTENSIBLE)
 
 
 def test_inextensible_lift_off_matches_the_hand_derivation(ramped_lift):
@@ -101,7 +101,7 @@ def test_elastic_rope_converges_to_the_inextensible_one(ramped_lift):
     dt, dS, dz = [], [], []
     c_ls = (1e7, 1e8, 1e9)
     for c_l in c_ls:
-        tr = simulate_rigid(_scenario(rope_stiffness=c_l), T1, n_save=N_SAVE)
+        tr = simulate_rigid(_scenario(rope_stiffness=c_l), jh.Times(T1, n=N_SAVE))
         assert tr.phases[0].rest and tr.phases[0].end == "rest:tip" and len(tr.phases) == 2
         dt.append(tr.phases[0].t_end - t_ref)
         before = ts < t_ref  # both still resting
@@ -124,7 +124,7 @@ def jerk_runs():
         ("settle", _scenario(ramp=0.0)),
         ("slack", _scenario(ramp=0.0, speed=V_JERK, slack=0.005)),
     ]:
-        runs[key] = simulate_rigid(sc, T1, n_save=N_SAVE, model=INEXTENSIBLE)
+        runs[key] = simulate_rigid(sc, jh.Times(T1, n=N_SAVE), model=INEXTENSIBLE)
     return runs
 
 
@@ -176,7 +176,7 @@ def test_energy_balance_closes_with_the_rope_jerk_losses(jerk_runs):
 def test_rope_switch_errors():
     sc = _scenario()
     with pytest.raises(jh.ScenarioError, match="rope must be one of 'elastic', 'inextensible', got 'chain'"):
-        simulate_rigid(sc, T1, n_save=N_SAVE, rope="chain")
+        simulate_rigid(sc, jh.Times(T1, n=N_SAVE), rope="chain")
     with pytest.raises(jh.ScenarioError, match="got 'chain'"):
         jh.simulate(sc, T1, model="rigid", rope="chain")
     with pytest.raises(jh.ScenarioError, match="rope='inextensible' is available with model='rigid' only"):
@@ -195,14 +195,14 @@ def test_model_switch_reaches_the_inextensible_rope(ramped_lift):
     # simulate and simulate_rigid share their defaults (max_steps is static in the compiled solve: the same
     # value reuses it).
     model = jh.RigidGround(rope=jh.InextensibleRope())
-    tr = jh.simulate(sc, T1, n_save=N_SAVE, model=model, options=jh.SolverOptions(rtol=1e-8, atol=1e-9))
+    tr = jh.simulate(sc, jh.Times(T1, n=N_SAVE), model=model, options=jh.SolverOptions(rtol=1e-8, atol=1e-9))
     np.testing.assert_array_equal(np.asarray(tr.position), np.asarray(ref.position))
     assert [p.rope for p in tr.phases] == [p.rope for p in ref.phases]
     assert math.isfinite(float(tr.rope_tension[-1]))
     # The earlier spelling: one DeprecationWarning, the same lift bit for bit.
     with pytest.warns(DeprecationWarning, match="rope -> model=RigidGround") as rec:
         old = jh.simulate(sc, T1, n_save=N_SAVE, model="rigid", rope="inextensible", rtol=1e-8, atol=1e-9)
-    assert len(rec) == 1
+    assert len(rec) == 1 and "n_save -> times=Times(t1, n=...)" in str(rec[0].message)
     np.testing.assert_array_equal(np.asarray(old.position), np.asarray(tr.position))
     np.testing.assert_array_equal(np.asarray(old.impact_loss), np.asarray(tr.impact_loss))
 
@@ -263,7 +263,7 @@ def test_no_phase_shorter_than_a_microsecond():
         name="rigid-test",
         t1=T1,
     )
-    tr = simulate_rigid(sc, T1, n_save=N_SAVE, model=INEXTENSIBLE)
+    tr = simulate_rigid(sc, jh.Times(T1, n=N_SAVE), model=INEXTENSIBLE)
     ph = tr.phases
     assert min(p.t_end - p.t_start for p in ph) >= 1e-6
     lift = [k for k, p in enumerate(ph) if p.rest and "rest:tip" in p.end]

@@ -7,6 +7,8 @@ The full sweep (μ = 0.10-0.50, both presets, both ropes, v_l and the rope point
 so the compiled phase solve is shared.
 """
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -18,7 +20,7 @@ N_SAVE = 201
 
 def _run(mu: float, t1: float):
     sc = jh.load_scenario("paper-2.3").replace(**{"foundation.friction_coefficient": mu})
-    return simulate_rigid(sc, t1, n_save=N_SAVE)
+    return simulate_rigid(sc, jh.Times(t1, n=N_SAVE))
 
 
 def _closes(tr) -> bool:
@@ -99,6 +101,8 @@ def test_chatter_rule_detects_dense_non_decaying_impacts_only():
     # Bad settings: one clear line naming the field.
     with pytest.raises(jh.ScenarioError, match="ChatterRule.stiffness"):
         jh.RigidOptions(chatter=ChatterRule(stiffness=-1.0))
+    with pytest.raises(jh.ScenarioError, match="ChatterRule.max_regularised"):
+        jh.RigidOptions(chatter=ChatterRule(max_regularised=0))
 
 
 def test_compliant_phase_passes_a_rocking_train_and_hands_back_at_rest():
@@ -121,7 +125,7 @@ def test_compliant_phase_passes_a_rocking_train_and_hands_back_at_rest():
         t1=1.5,
     )
     rule = ChatterRule(window=1.0, min_impacts=1, decay=0.0)
-    tr = simulate_rigid(sc, 1.5, n_save=61, options=jh.RigidOptions(chatter=rule))
+    tr = simulate_rigid(sc, jh.Times(1.5, n=61), options=jh.RigidOptions(chatter=rule))
     ph = tr.phases
     comp = [k for k, p in enumerate(ph) if p.choice.startswith("compliant phase")]
     assert len(comp) == 1, tr.phase_log()
@@ -169,8 +173,8 @@ def test_stall_rule_finds_a_stalled_phase_after_thousands_of_steps():
     that configuration, so the trajectory is the same sample for sample and only the steps spent differ."""
     sc = jh.load_scenario("paper-4.2")
     t1 = 0.1
-    fast = simulate_rigid(sc, t1, n_save=N_SAVE, options=jh.RigidOptions(max_steps=30_000))
-    slow = simulate_rigid(sc, t1, n_save=N_SAVE, options=jh.RigidOptions(max_steps=30_000, stall=None))
+    fast = simulate_rigid(sc, jh.Times(t1, n=N_SAVE), options=jh.RigidOptions(max_steps=30_000))
+    slow = simulate_rigid(sc, jh.Times(t1, n=N_SAVE), options=jh.RigidOptions(max_steps=30_000, stall=None))
     notes = [p.choice for p in fast.phases if "stalled" in p.choice]
     assert len(notes) == 1 and "stalled (mean step < 2e-07 s over 5000 steps)" in notes[0], fast.phase_log()
     assert any("stalled at max_steps" in p.choice for p in slow.phases), slow.phase_log()
@@ -189,3 +193,68 @@ def test_stall_rule_rejects_invalid_values():
     for bad in (StallRule(window=0), StallRule(min_step=0.0), StallRule(min_step=float("nan"))):
         with pytest.raises(jh.ScenarioError, match="StallRule"):
             jh.RigidOptions(stall=bad)
+
+
+# ------------------------------------------------------------------- no consistent configuration, repeatedly
+
+EDGE_STATE = Path(__file__).parent / "data" / "rigid_edge_state.npz"
+
+
+def _edge_run(chatter, max_phases: int, span: float):
+    """The rigid model (elastic rope, `RigidOptions()` otherwise) from the stored state of paper-4.1 with the
+    rope point B at ξ = 0.25 m, resting on its edge F-H at t0 = 47.976 s (`tests/data/
+    make_rigid_edge_state.py`), for `span` seconds, with the `ChatterRule` `chatter` and `max_phases`."""
+    import jax.numpy as jnp
+
+    from jaxhoist._numerics.rigid_compiled import _Options
+    from jaxhoist._numerics.rigid_driver import _DEFAULT_TOL, _Driver
+    from jaxhoist._numerics.rigid_run import _Run
+    from jaxhoist._physics import rigid
+    from jaxhoist._physics.elastic import State
+
+    sc = jh.load_scenario("paper-4.1").replace(**{"rope.attachment": [0.25, 0.0, 2.5]})
+    with np.load(EDGE_STATE) as z:
+        t0 = float(z["t"])
+        y0 = State(**{k: jnp.asarray(z[k]) for k in z.files if k != "t"})
+    _, c = rigid.initial_state(sc)
+    o, settings = jh.RigidOptions(), rigid.Settings()
+    assert o.stall is not None
+    opt = _Options(o.rtol, o.atol, o.max_steps, 1e-10, o.stall.window, o.stall.min_step)  # as simulate_rigid
+    drv = _Driver(sc, c, settings, opt, 0.0, dict(_DEFAULT_TOL))
+    run = _Run(drv, np.linspace(t0, t0 + span, 21), t0 + span, max_phases, o.max_steps, chatter, False)
+    run.resume(t0, y0)
+    while run.step():
+        pass
+    return run.result(c, settings)
+
+
+def test_repeated_least_violation_choice_goes_compliant_until_a_configuration_is_consistent():
+    """paper-4.1, B at ξ = 0.25 m, on the edge F-H: no configuration passes the consistency check (F and H
+    sticking need |T_H| = 4.4 kN > μN_H = 2.6 kN with the minimum-norm split of their tangential forces), so
+    fallback 3 runs F:stick H:stick as a regularised phase; H's friction guard ends it within microseconds
+    and the same choice follows. Without the rule this went on (48 times, then 40 ms compliant, then again)
+    until `max_phases` (the sweep, at 47.2 s); with it, the fourth such choice in a row hands over to the
+    compliant phase, which is extended while its end would need the fallback again. The log says why; the
+    energy balance closes."""
+    from jaxhoist._numerics.rigid_compliant import ChatterRule
+    from jaxhoist._numerics.rigid_records import RigidContactError
+
+    with pytest.raises(RigidContactError, match="max_phases = 20"):
+        _edge_run(ChatterRule(max_regularised=10**6), max_phases=20, span=0.1)
+
+    tr = _edge_run(ChatterRule(), max_phases=20, span=0.1)
+    ph = tr.phases
+    comp = [k for k, p in enumerate(ph) if p.choice.startswith("compliant phase")]
+    assert comp == [1], tr.phase_log()
+    # Three regularised F:stick H:stick phases of about 1 µs (one record: sub-µs phases are merged).
+    first = ph[0]
+    assert first.choice.startswith("regularised: no consistent configuration"), tr.phase_log()
+    assert first.contact == ("free", "free", "stick", "stick") and "=> 2 phases < 1 µs" in first.end
+    p = ph[1]
+    assert "no consistent configuration 4 times in a row" in p.choice and "|T_H|" in p.choice
+    assert "extended 1 time:" in p.choice and p.contact == ("free", "free", "spring", "spring")
+    assert p.t_end - p.t_start > 0.07  # s: two episodes (each >= 30 ms steady, in 10 ms chunks)
+    # Then a consistent configuration: H slides, F sticks, to t1.
+    assert ph[2].contact == ("free", "free", "stick", "slide") and ph[2].choice == "" and ph[2].end == "t1"
+    resid = np.abs(np.asarray(tr.energy_residual()))
+    assert resid.max() < 1e-6 * float(np.asarray(tr.hoist_work)[-1]), resid.max()

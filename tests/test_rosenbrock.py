@@ -132,7 +132,7 @@ def test_linearisation_matches_the_model_derivatives(paper42):
 
 @pytest.fixture(scope="module")
 def default_run(paper42):
-    return jh.simulate(paper42, ts=TS)
+    return jh.simulate(paper42, jh.Times(ts=TS))
 
 
 def test_default_solver_is_rosenbrock_w():
@@ -145,7 +145,7 @@ def test_default_solver_is_rosenbrock_w():
 def test_default_agrees_with_tight_reference(paper42, default_run):
     """The default solve of paper-4.2 over 2 s (corner lift, drag) is within 0.1 mm and 1e-4 rad of Tsit5 at
     rtol 1e-8, and within 0.1 % of its rope tension, at every saved time."""
-    ref = jh.simulate(paper42, ts=TS, options=SOLVE_OPTIONS)
+    ref = jh.simulate(paper42, jh.Times(ts=TS), options=SOLVE_OPTIONS)
     assert int(default_run.status) == 0
     assert float(jnp.max(jnp.abs(default_run.position - ref.position))) < 1e-4
     assert float(jnp.max(jnp.abs(default_run.euler - ref.euler))) < 1e-4
@@ -165,7 +165,7 @@ def test_vmap_equals_single_solves(paper42):
 
     def final(mu):
         sc = eqx.tree_at(lambda s: s.foundation.friction_coefficient, paper42, mu)
-        return jh.simulate(sc, ts=ts).position[-1]
+        return jh.simulate(sc, jh.Times(ts=ts)).position[-1]
 
     batched = jax.vmap(final)(mus)
     # The vmapped and the single solves are different compiled programs, which round differently (1e-14 m
@@ -185,7 +185,7 @@ def test_forward_and_reverse_derivatives_match_central_differences(paper42):
 
     def x_end(mu, opts):
         sc = eqx.tree_at(lambda s: s.foundation.friction_coefficient, paper42, mu)
-        return jh.simulate(sc, ts=ts, options=opts).position[-1, 0]
+        return jh.simulate(sc, jh.Times(ts=ts), options=opts).position[-1, 0]
 
     mu0 = jnp.asarray(0.3)
     d_fwd = float(jax.jacfwd(lambda m: x_end(m, opts_f))(mu0))
@@ -209,7 +209,7 @@ def test_forward_sensitivities_through_stick_slip(paper42):
 
     def x_end(mu, opts):
         sc = eqx.tree_at(lambda s: s.foundation.friction_coefficient, paper42, mu)
-        return jh.simulate(sc, ts=ts, options=opts).position[-1]
+        return jh.simulate(sc, jh.Times(ts=ts), options=opts).position[-1]
 
     mu0 = jnp.asarray(0.55)
     d_fwd = np.asarray(jax.jacfwd(lambda m: x_end(m, opts_f))(mu0))
@@ -229,10 +229,14 @@ def test_stiff_member_solves(paper42):
     stiff = paper42.replace(**{"foundation.stiffness": 1.5e9})
     stiff = eqx.tree_at(lambda s: s.foundation.friction, stiff, jh.RegularisedCoulomb(1e-5))
     ts = jnp.asarray(np.linspace(0.0, 1.0, 11))
-    w = jh.simulate(stiff, ts=ts, throw=False)  # the default step budget: shares test_vmap's compiled solve
+    w = jh.simulate(
+        stiff, jh.Times(ts=ts), throw=False
+    )  # the default step budget: shares test_vmap's compiled solve
     assert int(w.status) == 0
-    base = jh.simulate(paper42, ts=ts)
+    base = jh.simulate(paper42, jh.Times(ts=ts))
     steps_w = int(w.num_accepted_steps + w.num_rejected_steps)
     assert steps_w < 4 * int(base.num_accepted_steps + base.num_rejected_steps)
-    t5 = jh.simulate(stiff, ts=ts, options=jh.SolverOptions(diffrax.Tsit5(), max_steps=20_000), throw=False)
+    t5 = jh.simulate(
+        stiff, jh.Times(ts=ts), options=jh.SolverOptions(diffrax.Tsit5(), max_steps=20_000), throw=False
+    )
     assert steps_w < 0.1 * int(t5.num_accepted_steps + t5.num_rejected_steps)

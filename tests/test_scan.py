@@ -26,6 +26,7 @@ from jaxhoist._numerics.paths import get_param, parse_path, set_param  # noqa: E
 MU = "foundation.friction_coefficient"
 MUS = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
 T1 = 0.3
+TIMES = jh.Times(T1, n=31)
 KW = dict(
     observables=[
         "final_position",
@@ -37,7 +38,6 @@ KW = dict(
         "configuration_time",
         "max_tilt",
     ],
-    n_save=31,
     batch=jh.BatchOptions(lanes=2),
     # Tsit5: these tests are about the scan machinery (layout, failures, store, sensitivities), and its poison
     # member below (μ = 1e4) must exhaust its steps (the default Rosenbrock-W solver, whose friction is
@@ -71,7 +71,7 @@ def box():
 @pytest.fixture(scope="module")
 def clean(box):
     """The reference scan: 6 μ, groups of 2 lanes, one group per device per chunk (2 chunks)."""
-    return scan(box, {MU: MUS}, T1, **kw(chunk_size=4))
+    return scan(box, {MU: MUS}, TIMES, **kw(chunk_size=4))
 
 
 def test_scan_physics(clean):
@@ -120,8 +120,8 @@ def test_scan_physics(clean):
 
 def test_identical_for_any_chunk_size_and_device_count(box, clean):
     assert len(jax.devices()) >= 2, "tests/conftest.py should provide two CPU devices"
-    one_chunk = scan(box, {MU: MUS}, T1, **kw(chunk_size=8))
-    one_device = scan(box, {MU: MUS}, T1, **kw(chunk_size=2, devices=jax.devices()[:1]))
+    one_chunk = scan(box, {MU: MUS}, TIMES, **kw(chunk_size=8))
+    one_device = scan(box, {MU: MUS}, TIMES, **kw(chunk_size=2, devices=jax.devices()[:1]))
     assert clean.attrs["chunk_size"] == 4 and one_chunk.attrs["chunk_size"] == 8
     for other in (one_chunk, one_device):
         for k in clean.data:
@@ -143,14 +143,20 @@ def test_layout_independent_and_failing_group_mate_isolated(paper42, solver):
     base["boom.tip_mass"] = np.full(n, tip_m)
     bad = {k: v.copy() for k, v in base.items()}
     bad["rope.stiffness"][1], bad["boom.tip_mass"][1] = 1e16, 1e-12
-    kw = dict(observables=["final_position"], n_save=11, options=jh.SolverOptions(solver, max_steps=2000))
+    kw = dict(observables=["final_position"], options=jh.SolverOptions(solver, max_steps=2000))
 
     def batch(**b):
         return jh.BatchOptions(lanes=4, sort=False, **b)
 
-    two = scan(paper42, jh.Points(bad), 0.5, batch=batch(chunk_size=8), **kw)
-    one = scan(paper42, jh.Points(bad), 0.5, batch=batch(chunk_size=4, devices=jax.devices()[:1]), **kw)
-    clean = scan(paper42, jh.Points(base), 0.5, batch=batch(chunk_size=8), **kw)
+    two = scan(paper42, jh.Points(bad), jh.Times(0.5, n=11), batch=batch(chunk_size=8), **kw)
+    one = scan(
+        paper42,
+        jh.Points(bad),
+        jh.Times(0.5, n=11),
+        batch=batch(chunk_size=4, devices=jax.devices()[:1]),
+        **kw,
+    )
+    clean = scan(paper42, jh.Points(base), jh.Times(0.5, n=11), batch=batch(chunk_size=8), **kw)
     assert two.status[1] == ScanStatus.MAX_STEPS and np.all(np.delete(two.status, 1) == ScanStatus.OK)
     np.testing.assert_array_equal(two.num_accepted_steps, one.num_accepted_steps)
     keep = [0, 2, 3, 4, 5, 6, 7]
@@ -167,7 +173,7 @@ def test_poisoned_members_are_marked_and_the_rest_unchanged(box, clean):
     shares its vmapped lock-step group with a healthy one (μ = 0.4 and 0.6), which must not notice."""
     mus = MUS.copy()
     mus[2], mus[4] = np.nan, 1e4
-    res = scan(box, {MU: mus}, T1, **kw(chunk_size=4, sort=False))
+    res = scan(box, {MU: mus}, TIMES, **kw(chunk_size=4, sort=False))
     assert res.status[2] == ScanStatus.INVALID_PARAMETER and res.status[4] == ScanStatus.MAX_STEPS
     assert "friction_coefficient" in res.reason(2) and "must be finite" in res.reason(2)
     assert "max_steps" in res.reason(4)
@@ -187,8 +193,8 @@ def test_a_blown_up_member_is_marked_nonfinite_and_its_group_mate_kept(box):
     k = "boom.stiffness[2]"
     fixed = jh.SolverOptions(diffrax.Bosh3(), diffrax.ConstantStepSize(), dt0=2e-4, max_steps=3000)
     kw = dict(KW, options=fixed, batch=jh.BatchOptions(lanes=2, sort=False))
-    bad = scan(box, jh.Sweep(k, [5e6, 1e14, 6e6, 7e6]), T1, **kw)
-    ref = scan(box, jh.Sweep(k, [5e6, 5.5e6, 6e6, 7e6]), T1, **kw)
+    bad = scan(box, jh.Sweep(k, [5e6, 1e14, 6e6, 7e6]), TIMES, **kw)
+    ref = scan(box, jh.Sweep(k, [5e6, 5.5e6, 6e6, 7e6]), TIMES, **kw)
     assert list(bad.status) == [ScanStatus.OK, ScanStatus.NONFINITE, ScanStatus.OK, ScanStatus.OK]
     assert "non-finite" in bad.reason(1) and np.all(np.isnan(bad["final_position"][1]))
     assert np.all(ref.ok)
@@ -207,13 +213,13 @@ def test_resume_after_interruption(box, clean, tmp_path):
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        scan(box, {MU: MUS}, T1, out_dir=tmp_path, progress=stop_after_first, **kw(chunk_size=4))
+        scan(box, {MU: MUS}, TIMES, out_dir=tmp_path, progress=stop_after_first, **kw(chunk_size=4))
     manifest = json.loads((tmp_path / "manifest.json").read_text())
     assert list(manifest["chunks"]) == ["0"] and (tmp_path / "chunk_00000.npz").exists()
     assert not (tmp_path / "scan.npz").exists()
 
     reports.clear()
-    res = scan(box, {MU: MUS}, T1, out_dir=tmp_path, progress=reports.append, **kw(chunk_size=4))
+    res = scan(box, {MU: MUS}, TIMES, out_dir=tmp_path, progress=reports.append, **kw(chunk_size=4))
     assert [p.loaded for p in reports] == [True, False]
     assert reports[-1].done == reports[-1].total == 6 and reports[-1].eta == 0.0
     for k in clean.data:
@@ -228,7 +234,7 @@ def test_resume_after_interruption(box, clean, tmp_path):
     assert side["scan"]["components"]["detachment_times"] == ["D", "E", "F", "H"]
 
     with pytest.raises(jh.ScenarioError, match="different scan"):
-        scan(box, {MU: MUS[:3]}, T1, out_dir=tmp_path, **kw(chunk_size=4))
+        scan(box, {MU: MUS[:3]}, TIMES, out_dir=tmp_path, **kw(chunk_size=4))
 
 
 def test_netcdf_file_reads_back_with_an_independent_reader(clean, tmp_path):
@@ -258,7 +264,7 @@ def test_grid_mode_with_time_histories(box, tmp_path):
     res = scan(
         box,
         jh.Grid({MU: [0.2, 0.5], "hoist.speed": [0.2, 0.3]}),
-        T1,
+        TIMES,
         histories=("position",),
         **{**KW, "observables": ["final_position"]},
     )
@@ -290,7 +296,7 @@ def test_forward_sensitivities_match_differences(box, tmp_path):
     res = scan(
         box,
         {MU: [0.29, 0.3, 0.31]},
-        T1,
+        TIMES,
         derivatives=True,
         **{
             **KW,
@@ -359,7 +365,7 @@ def test_invalid_requests_fail_before_compiling(box):
     with pytest.raises(jh.ScenarioError, match="every member"):
         scan(box, {MU: [-1.0, np.nan]}, T1)
     with pytest.raises(jh.ScenarioError, match="unknown observable"):
-        scan(box, {MU: [0.2]}, T1, observables=["final_yaw"])
+        scan(box, {MU: [0.2]}, TIMES, observables=["final_yaw"])
 
 
 def test_first_down_crossing_is_interpolated():
@@ -390,10 +396,10 @@ jax.distributed.initialize(coordinator_address=f"127.0.0.1:{port}", num_processe
                            initialization_timeout=120)
 import numpy as np
 sys.path.insert(0, sys.argv[4])
-from test_scan import KW, MU, MUS, T1, kw, oblique_box
+from test_scan import KW, MU, MUS, TIMES, kw, oblique_box
 from jaxhoist._apps.scan import scan
 assert jax.process_count() == 2 and len(jax.local_devices()) == 1
-res = scan(oblique_box(), {MU: MUS}, T1, out_dir=out, **kw(chunk_size=4, wait_timeout=300))
+res = scan(oblique_box(), {MU: MUS}, TIMES, out_dir=out, **kw(chunk_size=4, wait_timeout=300))
 np.savez(f"{out}/process{pid}.npz", **{k: res[k] for k in res.data}, status=res.status)
 """
 
@@ -449,23 +455,23 @@ sys.path.insert(0, here)
 # library's bytecode, which the scan's fingerprint hashes for its observables
 from jaxtyping import install_import_hook
 install_import_hook("jaxhoist", "beartype.beartype")
-from test_scan import KW, MU, MUS, T1, kw, oblique_box
+from test_scan import KW, MU, MUS, TIMES, kw, oblique_box
 from jaxhoist._apps.scan import scan
 assert len(jax.devices()) == 4
 save = lambda name, r: np.savez(f"{tmp}/{name}.npz", **{k: r[k] for k in r.data}, status=r.status)
-res = scan(oblique_box(), {MU: MUS}, T1, **kw(chunk_size=4))
+res = scan(oblique_box(), {MU: MUS}, TIMES, **kw(chunk_size=4))
 assert len(res.attrs["devices"]) == 4, res.attrs["devices"]
 save("four", res)
 # resume on four devices what two devices began (chunks of 4 members: 2 groups for 4 devices)
-save("resumed_on_four", scan(oblique_box(), {MU: MUS}, T1, out_dir=f"{tmp}/begun", **kw(chunk_size=4)))
+save("resumed_on_four", scan(oblique_box(), {MU: MUS}, TIMES, out_dir=f"{tmp}/begun", **kw(chunk_size=4)))
 mus12 = np.linspace(0.1, 0.6, 12)
-save("twelve", scan(oblique_box(), {MU: mus12}, T1, **kw(chunk_size=8)))  # the compiled call of the next
+save("twelve", scan(oblique_box(), {MU: mus12}, TIMES, **kw(chunk_size=8)))  # the compiled call of the next
 
 def kill_after_first_chunk(p):
     if p.chunk == 0:
         os.kill(os.getpid(), signal.SIGKILL)  # no clean-up, no flush: as if the machine went away
 
-scan(oblique_box(), {MU: mus12}, T1, out_dir=f"{tmp}/killed", progress=kill_after_first_chunk,
+scan(oblique_box(), {MU: mus12}, TIMES, out_dir=f"{tmp}/killed", progress=kill_after_first_chunk,
      **kw(chunk_size=8))
 """
 
@@ -488,7 +494,7 @@ def test_four_devices_and_resumes_across_device_counts(clean, tmp_path):
             raise KeyboardInterrupt
 
     with pytest.raises(KeyboardInterrupt):
-        scan(oblique_box(), {MU: MUS}, T1, out_dir=tmp_path / "begun", progress=stop, **kw(chunk_size=4))
+        scan(oblique_box(), {MU: MUS}, TIMES, out_dir=tmp_path / "begun", progress=stop, **kw(chunk_size=4))
     env = {k: v for k, v in os.environ.items() if k != "XLA_FLAGS"}
     run = subprocess.run(
         [sys.executable, "-c", _FOUR_DEVICES, str(tmp_path), str(Path(__file__).parent)],
@@ -509,7 +515,7 @@ def test_four_devices_and_resumes_across_device_counts(clean, tmp_path):
     assert list(manifest["chunks"]) == ["0"] and manifest["chunk_size"] == 8
     reports = []
     res = scan(
-        oblique_box(), {MU: np.linspace(0.1, 0.6, 12)}, T1, out_dir=killed, progress=reports.append, **KW
+        oblique_box(), {MU: np.linspace(0.1, 0.6, 12)}, TIMES, out_dir=killed, progress=reports.append, **KW
     )
     assert [p.loaded for p in reports] == [True, False]
     with np.load(tmp_path / "twelve.npz") as want:
@@ -557,14 +563,14 @@ def test_a_damaged_or_foreign_store_is_recomputed_with_a_warning(box, clean, tmp
     from jaxhoist._io.scan_store import ScanStoreWarning
 
     out = tmp_path / "store"
-    first = scan(box, {MU: MUS}, T1, out_dir=out, **kw(chunk_size=4))  # 2 chunks (4 and 2 members)
+    first = scan(box, {MU: MUS}, TIMES, out_dir=out, **kw(chunk_size=4))  # 2 chunks (4 and 2 members)
     for k in clean.data:
         np.testing.assert_array_equal(first[k], clean[k], err_msg=k)
     c0, c1 = (out / f"chunk_{i:05d}.npz" for i in range(2))
 
     def resume_expecting(match):
         with pytest.warns(ScanStoreWarning, match=match):
-            again = scan(box, {MU: MUS}, T1, out_dir=out, **kw(chunk_size=4))
+            again = scan(box, {MU: MUS}, TIMES, out_dir=out, **kw(chunk_size=4))
         for k in clean.data:
             np.testing.assert_array_equal(again[k], clean[k], err_msg=k)
 
@@ -644,10 +650,10 @@ def test_every_chunk_records_the_devices_it_ran_on(box, tmp_path):
     read back from an earlier run on other devices."""
     out = tmp_path / "devs"
     one = jax.devices()[:1]
-    first = scan(box, {MU: MUS}, T1, out_dir=out, **kw(chunk_size=4, devices=one))
+    first = scan(box, {MU: MUS}, TIMES, out_dir=out, **kw(chunk_size=4, devices=one))
     assert first.attrs["chunk_devices"] == {"0": [str(one[0])], "1": [str(one[0])]}
     (out / "chunk_00001.npz").unlink()  # resumed on two devices: chunk 1 is computed again there
-    again = scan(box, {MU: MUS}, T1, out_dir=out, **kw(chunk_size=4))
+    again = scan(box, {MU: MUS}, TIMES, out_dir=out, **kw(chunk_size=4))
     # two host CPU devices: their shares ran in two threads on the first (numerics.batch.execution_targets)
     both = [f"{jax.devices()[0]} (2 threads)"]
     assert again.attrs["chunk_devices"] == {"0": [str(one[0])], "1": both}
@@ -658,18 +664,22 @@ def test_every_chunk_records_the_devices_it_ran_on(box, tmp_path):
 
 
 def test_earlier_keywords_warn_once_and_give_the_same_scan(box, clean):
-    """Issue 11: the keywords that moved into `SolverOptions`, `BatchOptions` and the sweep objects still
-    work, with one `DeprecationWarning` naming the new spelling at the caller's line, and give the clean
-    scan bit for bit."""
+    """Issue 11: the keywords that moved into `SolverOptions`, `BatchOptions`, `Times` and the sweep objects
+    still work, with one `DeprecationWarning` naming the new spelling at the caller's line, and give the
+    clean scan bit for bit."""
     old_kw = dict(observables=KW["observables"], n_save=31, lanes=2, max_steps=3000, solver=diffrax.Tsit5())
     with pytest.warns(DeprecationWarning, match=r"lanes -> batch=BatchOptions\(lanes=...\)") as rec:
         old = scan(box, {MU: MUS}, T1, mode="sweep", chunk_size=4, **old_kw)
     assert len(rec) == 1 and rec[0].filename == __file__
     assert "mode -> sweep=Sweep(path, values)" in str(rec[0].message)
     assert "max_steps -> options=SolverOptions(max_steps=...)" in str(rec[0].message)
+    assert "n_save -> times=Times(t1, n=...)" in str(rec[0].message)
     with pytest.warns(DeprecationWarning, match="params -> sweep"):
-        renamed = scan(box, params={MU: MUS}, t1=T1, **kw(chunk_size=4))
-    for res in (old, renamed):
+        renamed = scan(box, params={MU: MUS}, times=TIMES, **kw(chunk_size=4))
+    with pytest.warns(DeprecationWarning, match=r"t1 -> times=Times\(t1\).*n_save -> times") as rec:
+        timed = scan(box, {MU: MUS}, t1=T1, n_save=31, **kw(chunk_size=4))
+    assert len(rec) == 1 and rec[0].filename == __file__
+    for res in (old, renamed, timed):
         assert res.mode == clean.mode == "sweep"
         np.testing.assert_array_equal(res.num_accepted_steps, clean.num_accepted_steps)
         for k in clean.data:

@@ -26,7 +26,9 @@ def final_x(scenario, x, t1, adjoint="reverse", throw=True):
     """X_C(t1) [m] of paper-4.2 with (μ, k, c_l) = x."""
     sc = scenario.replace(**{p: x[i] for i, p in enumerate(PATHS)})
     ts = jnp.stack([jnp.zeros(()), jnp.asarray(t1)])
-    tr = jh.simulate(sc, ts=ts, options=TIGHT_FORWARD if adjoint == "forward" else TIGHT, throw=throw)
+    tr = jh.simulate(
+        sc, jh.Times(ts=ts), options=TIGHT_FORWARD if adjoint == "forward" else TIGHT, throw=throw
+    )
     return tr.position[-1, 0]
 
 
@@ -61,7 +63,7 @@ def test_vmap_over_mu_equals_single_solves(paper42):
 
     def one(mu):
         sc = paper42.replace(**{"foundation.friction_coefficient": mu})
-        return jh.simulate(sc, ts=ts, throw=False, options=TIGHT)
+        return jh.simulate(sc, jh.Times(ts=ts), throw=False, options=TIGHT)
 
     batch = jax.vmap(one)(mus)
     assert np.all(np.asarray(batch.status) == jh.SolveStatus.OK)
@@ -129,8 +131,8 @@ def _mu(s):
 def test_no_recompile_when_leaf_values_change(paper42, guarded_core):
     """One trace serves every call that changes only values: leaves through `Scenario.replace` and
     `eqx.tree_at` (float64 arrays), t1 as a float, numpy or JAX scalar, saved times of the same length."""
-    kw = dict(n_save=3, options=LOOSE)
-    jh.simulate(paper42, 0.05, **kw)
+    kw = dict(options=LOOSE)
+    jh.simulate(paper42, jh.Times(0.05, n=3), **kw)
     jh.simulate(
         paper42.replace(
             **{
@@ -139,24 +141,24 @@ def test_no_recompile_when_leaf_values_change(paper42, guarded_core):
                 "load.mass_centre": [1.1, 2.4, 1.0],
             }
         ),
-        0.05,
+        jh.Times(0.05, n=3),
         **kw,
     )
-    jh.simulate(eqx.tree_at(_mu, paper42, jnp.asarray(0.35, dtype=jnp.float64)), 0.05, **kw)
-    jh.simulate(eqx.tree_at(_mu, paper42, np.asarray(0.35)), 0.05, **kw)
-    jh.simulate(paper42, np.float64(0.04), **kw)
-    jh.simulate(paper42, jnp.asarray(0.06), **kw)
-    jh.simulate(paper42, ts=np.array([0.0, 0.01, 0.03]), options=LOOSE)
+    jh.simulate(eqx.tree_at(_mu, paper42, jnp.asarray(0.35, dtype=jnp.float64)), jh.Times(0.05, n=3), **kw)
+    jh.simulate(eqx.tree_at(_mu, paper42, np.asarray(0.35)), jh.Times(0.05, n=3), **kw)
+    jh.simulate(paper42, jh.Times(np.float64(0.04), n=3), **kw)
+    jh.simulate(paper42, jh.Times(jnp.asarray(0.06), n=3), **kw)
+    jh.simulate(paper42, jh.Times(ts=np.array([0.0, 0.01, 0.03])), options=LOOSE)
     # The guard is live: a new shape of the saved times must retrace, and does.
     with pytest.raises(RuntimeError, match="traced"):
-        jh.simulate(paper42, 0.05, n_save=4, options=LOOSE)
+        jh.simulate(paper42, jh.Times(0.05, n=4), options=LOOSE)
 
 
 @pytest.mark.parametrize("value", [0.35, jnp.asarray(0.35)], ids=["python-float", "weak-f64"])
 def test_no_recompile_for_float_or_weak_leaf(paper42, guarded_core, value):
-    kw = dict(n_save=3, options=LOOSE)
-    jh.simulate(paper42, 0.05, **kw)
-    jh.simulate(eqx.tree_at(_mu, paper42, value), 0.05, **kw)
+    kw = dict(options=LOOSE)
+    jh.simulate(paper42, jh.Times(0.05, n=3), **kw)
+    jh.simulate(eqx.tree_at(_mu, paper42, value), jh.Times(0.05, n=3), **kw)
 
 
 # ------------------------------------------------------------------------------------ failures
@@ -165,12 +167,12 @@ def test_no_recompile_for_float_or_weak_leaf(paper42, guarded_core, value):
 def test_max_steps_reported_or_raised(paper42):
     """A step budget of 16 cannot reach t1 = 0.5 s (thousands of steps): status MAX_STEPS with throw=False,
     an error naming max_steps with throw=True."""
-    kw = dict(n_save=3, options=jh.SolverOptions(max_steps=16))
-    tr = jh.simulate(paper42, 0.5, throw=False, **kw)
+    kw = dict(options=jh.SolverOptions(max_steps=16))
+    tr = jh.simulate(paper42, jh.Times(0.5, n=3), throw=False, **kw)
     assert int(tr.status) == jh.SolveStatus.MAX_STEPS
     assert not bool(tr.ok)
     with pytest.raises(eqx.EquinoxRuntimeError, match="max_steps"):
-        jh.simulate(paper42, 0.5, throw=True, **kw)
+        jh.simulate(paper42, jh.Times(0.5, n=3), throw=True, **kw)
 
 
 def test_nan_leaf_rejected_before_compiling(paper42, monkeypatch):
@@ -189,16 +191,33 @@ def test_nan_leaf_rejected_before_compiling(paper42, monkeypatch):
 
 
 def test_earlier_keywords_warn_once_and_match(paper42):
-    """`simulate`'s earlier solver keywords and model strings still work: one `DeprecationWarning` that
-    names the new spelling and points at the caller, and the same result bit for bit."""
-    new = jh.simulate(paper42, 0.05, n_save=3, options=LOOSE)
+    """`simulate`'s earlier solver and time keywords and model strings still work: one `DeprecationWarning`
+    that names the new spelling and points at the caller, and the same result bit for bit."""
+    new = jh.simulate(paper42, jh.Times(0.05, n=3), options=LOOSE)
     with pytest.warns(DeprecationWarning) as rec:
         old = jh.simulate(paper42, 0.05, n_save=3, model="elastic", rtol=1e-4, atol=1e-6)
     assert len(rec) == 1
     assert rec[0].filename == __file__
     msg = str(rec[0].message)
     assert "rtol -> options=SolverOptions(rtol=...)" in msg and "model -> model=ElasticFoundation()" in msg
+    assert "n_save -> times=Times(t1, n=...)" in msg
     assert bool(eqx.tree_equal(old, new))
+    # The time keywords alone, and the earlier positional t1 with ts= (checked against each other).
+    ts = np.array([0.0, 0.02, 0.05])
+    for old_kw in (dict(t1=0.05, n_save=3), dict(ts=ts), dict(t1=0.05, ts=ts)):
+        with pytest.warns(DeprecationWarning, match="times=Times") as rec:
+            old = jh.simulate(paper42, options=LOOSE, **old_kw)
+        assert len(rec) == 1 and rec[0].filename == __file__
+        want = new if "n_save" in old_kw else jh.simulate(paper42, jh.Times(ts=ts), options=LOOSE)
+        assert bool(eqx.tree_equal(old, want))
+    with pytest.warns(DeprecationWarning, match="ts -> times"):
+        assert bool(eqx.tree_equal(jh.simulate(paper42, 0.05, ts=ts, options=LOOSE), want))
+    with pytest.raises(jh.ScenarioError, match=r"t1 = 0.04 s contradicts ts"):
+        jh.simulate(paper42, 0.04, ts=ts, options=LOOSE)
+    with pytest.raises(TypeError, match="t1 twice"):
+        jh.simulate(paper42, 0.05, t1=0.05, options=LOOSE)
+    with pytest.raises(jh.ScenarioError, match="either times"):
+        jh.simulate(paper42, jh.Times(0.05), n_save=3, options=LOOSE)
     # The conversion itself, keyword by keyword (no solve): the same options as the new spelling.
     conv = solve_mod.convert_legacy
     model, opts, moved = conv("rigid", None, dict(rope="inextensible", rtol=1e-8, max_steps=10))

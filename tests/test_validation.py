@@ -315,18 +315,21 @@ def test_without_x64_a_clear_error(paper42):
 def test_bad_times_and_options(paper42):
     with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
         for kw, word in [
-            (dict(t1=-1.0), "t1"),
-            (dict(t1=float("nan")), "t1"),
-            (dict(ts=np.array([0.1, 0.2])), "ts"),
-            (dict(ts=np.array([0.0, 0.2, 0.1])), "ts"),
-            (dict(t1=1.0, options=dict(rtol=-1e-6)), "rtol"),
-            (dict(t1=1.0, options=dict(max_steps=0)), "max_steps"),
-            (dict(t1=1.0, options=dict(adjoint="backward")), "adjoint"),
-            (dict(t1=1.0, n_save=1), "n_save"),
+            (dict(times=-1.0), "t1"),
+            (dict(times=float("nan")), "t1"),
+            (dict(times=np.array([0.1, 0.2])), "ts"),
+            (dict(times=np.array([0.0, 0.2, 0.1])), "ts"),
+            (dict(times=1.0, options=dict(rtol=-1e-6)), "rtol"),
+            (dict(times=1.0, options=dict(max_steps=0)), "max_steps"),
+            (dict(times=1.0, options=dict(adjoint="backward")), "adjoint"),
+            (dict(times=dict(t1=1.0, n=1)), "n "),
+            (dict(times=dict(t1=1.0, n=2.0)), "n "),
         ]:
             with pytest.raises(jh.ScenarioError, match=word):
                 if "options" in kw:
                     kw = {**kw, "options": jh.SolverOptions(**kw["options"])}
+                if isinstance(kw["times"], dict):
+                    kw = {**kw, "times": jh.Times(**kw["times"])}
                 jh.simulate(paper42, **kw)
 
 
@@ -548,7 +551,7 @@ def test_replace_refuses_wrong_shapes_and_types(paper42):
 
 
 def test_t1_contradicting_ts_is_refused():
-    from jaxhoist._numerics.solve import check_times
+    from jaxhoist._numerics.times import check_times
 
     with pytest.raises(jh.ScenarioError, match=r"t1.*ts"):
         check_times(1.0, [0.0, 0.02, 0.05])
@@ -560,7 +563,7 @@ def test_t1_contradicting_ts_is_refused():
 def test_simulate_refuses_t1_contradicting_ts(paper42):
     with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
         with pytest.raises(jh.ScenarioError, match=r"t1.*ts"):
-            jh.simulate(paper42, 1.0, ts=np.array([0.0, 0.02, 0.05]))
+            jh.simulate(paper42, jh.Times(1.0, ts=np.array([0.0, 0.02, 0.05])))
 
 
 def test_forward_mode_through_a_reverse_adjoint_says_what_to_do():
@@ -584,9 +587,9 @@ def test_forward_mode_through_a_reverse_adjoint_says_what_to_do():
 def test_jacfwd_through_simulate_says_adjoint_forward(paper42):
     def final_x(mu):
         sc = paper42.replace(**{"foundation.friction_coefficient": mu})
-        return jh.simulate(sc, 0.05, n_save=3, options=jh.SolverOptions(max_steps=10), throw=False).position[
-            -1
-        ]
+        return jh.simulate(
+            sc, jh.Times(0.05, n=3), options=jh.SolverOptions(max_steps=10), throw=False
+        ).position[-1]
 
     with pytest.raises(TypeError, match='adjoint="forward"'):
         jax.jacfwd(final_x)(0.3)

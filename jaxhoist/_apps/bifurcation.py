@@ -14,7 +14,7 @@ hold them:
     import jaxhoist as jh
     from jaxhoist import observables as obs
     b = jh.locate_bifurcation(sc, "load.mass_centre[0]", obs.detachment_time_difference("E", "D"),
-                              (0.4, 0.6), search=jh.SearchOptions(tol=1e-6), t1=0.2, n_save=101)
+                              (0.4, 0.6), search=jh.SearchOptions(tol=1e-6), times=jh.Times(0.2, n=101))
     print(b.summary())
 """
 

@@ -15,6 +15,7 @@ import numpy as np
 from .._errors import ScenarioError
 from .._numerics import observables as obs_mod
 from .._numerics.options import SolverOptions
+from .._numerics.times import Times
 from .._physics.paths import set_param
 from .bifurcation_eval import resolve_one
 from .bifurcation_jumps import find_crossings, find_jumps
@@ -135,8 +136,7 @@ def run_cli(args) -> int:
     observable = _cli_observable(args.observable)
     # the settings of the --scan and --classify solves (scan's default solver at --rtol/--atol/--max-steps)
     kw = dict(
-        t1=args.t1,
-        n_save=args.n_save,
+        times=Times(args.t1, n=args.n_save),
         options=SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps),
     )
     out = Path(args.out) if args.out else None
@@ -183,8 +183,7 @@ def _locator_settings(args) -> dict:
     return dict(
         search=SearchOptions(args.method, args.tol),
         options=SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps),
-        t1=args.t1,
-        n_save=args.n_save,
+        times=Times(args.t1, n=args.n_save),
     )
 
 

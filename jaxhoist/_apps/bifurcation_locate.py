@@ -32,7 +32,8 @@ import numpy as np
 
 from .._errors import ScenarioError, require_x64
 from .._numerics.options import SolverOptions
-from .._numerics.solve import saved_times
+from .._numerics.times import TimesLike
+from .._numerics.times import convert_legacy as convert_legacy_times
 from .._physics.params import Scenario
 from .._physics.paths import check_path, param_unit, set_param
 from .bifurcation_eval import Evaluator, Problem, indicator, level_from_ends, resolve_one
@@ -41,6 +42,9 @@ from .bifurcation_multisection import multisection
 from .bifurcation_options import Multisection, Newton, SearchOptions, settings
 from .bifurcation_result import Bifurcation, BifurcationError
 from .scan_result import ScanResult
+
+#: The number of saved times of `locate_bifurcation` and `trace_boundary` when `Times.n` is None.
+DEFAULT_N = 201
 
 
 def locate_bifurcation(
@@ -52,9 +56,7 @@ def locate_bifurcation(
     level: float | None = None,
     search: SearchOptions | None = None,
     options: SolverOptions | None = None,
-    t1: float | None = None,
-    ts=None,
-    n_save: int = 201,
+    times: TimesLike = None,
     progress: Callable[[dict], None] | None = None,
     **deprecated,
 ) -> Bifurcation:
@@ -77,23 +79,25 @@ def locate_bifurcation(
     - `options`: `SolverOptions`; default `SolverOptions(diffrax.Tsit5())` (rtol 1e-6, atol 1e-8): Newton
       steps need forward-mode sensitivities, which through the default Rosenbrock-W solver are not reliable
       yet at high friction.
-    - `t1`, `ts`, `n_save`: the saved times [s], as in `simulate` (default `n_save` = 201 over the
-      scenario's t1).
+    - `times`: the saved times, a `Times(t1, n, ts)` as in `simulate` (a number is t1 [s], a 1-D array ts
+      [s]); default `Times()`: 201 equally spaced times from 0 to the scenario's t1.
     - `progress`: called on the host after every evaluation (every round for multisection) with a dict:
       `iteration` (1, 2, ...: evaluations, or rounds), `param` (the value just solved; the round's values
       for multisection), `value` (the observable there), `indicator` (g), `kind` ("end", "newton",
       "bisect", "multisection"), `bracket` (lo, hi) after the update, `width`, `tol`, `n_solves`,
       `elapsed` [s]. Default None: silent.
-    - `**deprecated`: the keywords of earlier versions, `tol`, `method` (a name), `max_solves`,
-      `points_per_round`, `lanes` (into `search`) and `solver`, `rtol`, `atol`, `dt0`, `max_steps` (into
-      `options`, with Tsit5 when no solver is given): the same result, with a `DeprecationWarning`.
+    - `**deprecated`: the keywords of earlier versions, `t1`, `ts`, `n_save` (into `times`), `tol`,
+      `method` (a name), `max_solves`, `points_per_round`, `lanes` (into `search`) and `solver`, `rtol`,
+      `atol`, `dt0`, `max_steps` (into `options`, with Tsit5 when no solver is given): the same result,
+      with a `DeprecationWarning`.
 
     **Returns** a `Bifurcation`.
 
     **Raises** `ScenarioError` on invalid input (before compiling); `BifurcationError` if g has the same
     sign at both ends, or a solve fails.
     """
-    search, options = settings("locate_bifurcation", search, options, deprecated)
+    times, moved_times = convert_legacy_times("locate_bifurcation", times, deprecated)
+    search, options = settings("locate_bifurcation", search, options, deprecated, moved=moved_times)
     require_x64()
     wall0 = time.perf_counter()
     if not isinstance(scenario, Scenario):
@@ -106,7 +110,7 @@ def locate_bifurcation(
     for v in (lo, hi):
         set_param(scenario, param, v).check()
     obs = resolve_one(observable)
-    ts = jnp.asarray(saved_times(scenario, t1, ts, n_save)[1], dtype=jnp.float64)
+    ts = jnp.asarray(times.resolve(scenario, DEFAULT_N)[1], dtype=jnp.float64)
     n_uniform = int(math.ceil((hi - lo) / search.tol)) + 1
     unit = param_unit(scenario, param)
     p = Problem(scenario, param, obs, lo, hi, level, search, ts, options, unit, n_uniform, wall0, progress)

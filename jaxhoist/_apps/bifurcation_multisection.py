@@ -8,6 +8,7 @@ import time
 import numpy as np
 
 from .._numerics.options import SolverOptions
+from .._numerics.times import Times
 from .bifurcation_eval import Problem, indicator, level_from_ends
 from .bifurcation_options import Multisection
 from .bifurcation_result import Bifurcation, BifurcationError
@@ -28,7 +29,7 @@ def _round(p: Problem, method: Multisection, xs) -> ScanResult:
         p.scenario,
         {p.param: xs},
         observables={p.obs.name: p.obs},
-        ts=p.ts,
+        times=Times(ts=p.ts),
         options=SolverOptions(
             solver=p.options.solver,
             rtol=p.options.rtol,

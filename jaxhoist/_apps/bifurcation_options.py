@@ -5,6 +5,7 @@ corrector (`SearchOptions`); and the conversion of the keywords of earlier versi
 
 from __future__ import annotations
 
+import sys
 import warnings
 from typing import ClassVar
 
@@ -12,6 +13,7 @@ import diffrax
 import equinox as eqx
 import numpy as np
 
+from .._deprecated import _caller
 from .._errors import ScenarioError
 from .._numerics.options import DEFAULT_MAX_STEPS, SolverOptions
 
@@ -143,10 +145,16 @@ def _options_from_keywords(kw: dict) -> SolverOptions:
 
 
 def settings(
-    who: str, search: SearchOptions | None, options: SolverOptions | None, legacy: dict, trace: bool = False
+    who: str,
+    search: SearchOptions | None,
+    options: SolverOptions | None,
+    legacy: dict,
+    trace: bool = False,
+    moved: dict[str, str] | None = None,
 ) -> tuple[SearchOptions, SolverOptions]:
     """(search, options) for `who`, from the objects or, with one `DeprecationWarning`, from the keywords of
-    earlier versions in `legacy` (mapped exactly: the same `SolverOptions`, Tsit5 when no solver is given).
+    earlier versions in `legacy` (mapped exactly: the same `SolverOptions`, Tsit5 when no solver is given);
+    the warning also names `moved` (the saved times' earlier keywords, converted by the caller).
 
     **Raises** `TypeError` for an unknown keyword; `ScenarioError` when a keyword comes with the object it
     moved into."""
@@ -156,22 +164,24 @@ def settings(
         raise TypeError(f"{who}() got unexpected keyword argument(s): {', '.join(unknown)}")
     moved_search = [k for k in search_kw if k in legacy]
     moved_solver = [k for k in _SOLVER_KW if k in legacy]
+    moved_times = list(moved or {})
     if moved_search and search is not None:
         raise ScenarioError(f"{who}: give either search= or {', '.join(moved_search)}, not both")
     if moved_solver and options is not None:
         raise ScenarioError(f"{who}: give either options= or {', '.join(moved_solver)}, not both")
-    if legacy:
+    if legacy or moved_times:
         new = []
+        if moved_times:
+            new.append(f"times=Times(t1, n=..., ts=...) for {', '.join(moved_times)}")
         if moved_search:
             new.append(f"search=SearchOptions(...) for {', '.join(moved_search)}")
         if moved_solver:
             new.append(f"options=SolverOptions(diffrax.Tsit5(), ...) for {', '.join(moved_solver)}")
         warnings.warn(
-            f"{who}: the keywords {', '.join(moved_search + moved_solver)} are deprecated; pass "
-            + " and ".join(new)
-            + " (jaxhoist._apps.bifurcation.SearchOptions, jaxhoist.SolverOptions)",
+            f"{who}: the keywords {', '.join(moved_times + moved_search + moved_solver)} are deprecated; "
+            "pass " + " and ".join(new) + " (jaxhoist.Times, jaxhoist.SearchOptions, jaxhoist.SolverOptions)",
             DeprecationWarning,
-            stacklevel=3,
+            stacklevel=_caller(sys._getframe(0), 3)[1],  # who called `who`, past run-time type checkers
         )
     if search is None:
         search = _search_from_keywords(legacy, trace)

@@ -10,6 +10,8 @@ import numpy as np
 
 from .._errors import ScenarioError
 from .._numerics.options import SolverOptions
+from .._numerics.times import TimesLike
+from .._numerics.times import convert_legacy as convert_legacy_times
 from .._physics.params import Scenario
 from .._physics.paths import check_path, set_param
 from .bifurcation_eval import resolve_one
@@ -29,9 +31,7 @@ def trace_boundary(
     level: float | None = None,
     search: SearchOptions | None = None,
     options: SolverOptions | None = None,
-    t1: float | None = None,
-    ts=None,
-    n_save: int = 201,
+    times: TimesLike = None,
     progress: Callable[[dict], None] | None = None,
     **deprecated,
 ) -> Boundary:
@@ -53,16 +53,18 @@ def trace_boundary(
     - `along`, `along_values`: the continuation parameter's path and its values q [its unit].
     - `search`: `SearchOptions` (method, tol, max_solves of each point; the corrector's bracketing).
     - `options`: `SolverOptions` (default `SolverOptions(diffrax.Tsit5())`, as in `locate_bifurcation`).
-    - `t1`, `ts`, `n_save`: the saved times [s], as in `locate_bifurcation`.
+    - `times`: the saved times, a `Times(t1, n, ts)` (a number is t1 [s], a 1-D array ts [s]), as in
+      `locate_bifurcation` (default 201 equally spaced times from 0 to the scenario's t1).
     - `progress` (default None: silent) receives every report of the inner `locate_bifurcation` calls, with
       `point` (index k of q), `n_points` and `along_value` (q) added.
-    - The keywords of earlier versions (`tol`, `method`, `initial_half_width`, `max_expansions`,
-      `min_jump_fraction`, `max_solves`, `points_per_round`, `lanes`; `solver`, `rtol`, `atol`, `dt0`,
-      `max_steps`) still work, with a `DeprecationWarning`.
+    - The keywords of earlier versions (`t1`, `ts`, `n_save`; `tol`, `method`, `initial_half_width`,
+      `max_expansions`, `min_jump_fraction`, `max_solves`, `points_per_round`, `lanes`; `solver`, `rtol`,
+      `atol`, `dt0`, `max_steps`) still work, with a `DeprecationWarning`.
 
     **Returns** a `Boundary`.
     """
-    search, options = settings("trace_boundary", search, options, deprecated, trace=True)
+    times, moved_times = convert_legacy_times("trace_boundary", times, deprecated)
+    search, options = settings("trace_boundary", search, options, deprecated, trace=True, moved=moved_times)
     qs = np.asarray(along_values, dtype=np.float64)
     if qs.ndim != 1 or qs.size < 1:
         raise ScenarioError("along_values must be a non-empty 1-D sequence")
@@ -96,9 +98,7 @@ def trace_boundary(
                     level=level,
                     search=search,
                     options=options,
-                    t1=t1,
-                    ts=ts,
-                    n_save=n_save,
+                    times=times,
                     progress=inner,
                 )
                 break

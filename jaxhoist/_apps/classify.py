@@ -21,8 +21,8 @@ event-definition test comes before the count, and `facets` lists every one that 
 
     import jaxhoist as jh
     b = jh.locate_bifurcation(sc, "foundation.friction_coefficient", "liftoff_time", (0.4721, 0.4723),
-                              t1=25.0, n_save=2501)
-    c = jh.classify_change(sc, b, t1=25.0, n_save=2501)
+                              times=jh.Times(25.0, n=2501))
+    c = jh.classify_change(sc, b, times=jh.Times(25.0, n=2501))
     print(c.summary())
 
 `classify_samples` is the pure part (arrays in, `ChangeClass` out), for samples you already have.
@@ -38,6 +38,8 @@ import numpy as np
 
 from .._errors import ScenarioError
 from .._numerics.options import SolverOptions
+from .._numerics.times import Times, TimesLike
+from .._numerics.times import convert_legacy as convert_legacy_times
 from .scan_layout import BatchOptions
 
 FINAL_STATE = ("final_x", "final_y", "final_phi", "final_theta", "final_psi")
@@ -52,6 +54,9 @@ _MATERIAL = {
     "final_theta": np.radians(1.0),
     "final_psi": np.radians(1.0),
 }
+
+#: The number of saved times of `classify_change` when `Times.n` is None (every ~10 ms over 25 s).
+DEFAULT_N = 2501
 
 KINDS = (
     "final-state jump",
@@ -342,8 +347,7 @@ def classify_change(
     observable: str | None = None,
     half_window: float | None = None,
     n_window: int = 41,
-    t1: float | None = None,
-    n_save: int = 2501,
+    times: TimesLike = None,
     options: SolverOptions | None = None,
     batch: BatchOptions | None = None,
     **scan_kw,
@@ -357,11 +361,12 @@ def classify_change(
     - `half_window`: the window p* ± `half_window` sampled with `n_window` uniform points besides the two
       bracket ends (points inside the bracket are dropped; default: 100 bracket widths, at least 1 % of
       |p*|).
-    - `t1` [s], `n_save`, `options` (`SolverOptions`), `batch` (`BatchOptions`; the members are always
-      solved in the order given) and further keyword arguments go to `scan`; save every ~10 ms (the
-      default 2501 over 25 s) so event times and counts are read reliably. The earlier solver and layout
-      keywords (`solver`, `rtol`, `atol`, `dt0`, `max_steps`, `fixed_step`, `lanes`, ...) still work, with
-      a `DeprecationWarning`.
+    - `times` (`Times(t1, n, ts)`, a number t1 [s] or an array ts [s]; default 2501 equally spaced times
+      from 0 to the scenario's t1), `options` (`SolverOptions`), `batch` (`BatchOptions`; the members are
+      always solved in the order given) and further keyword arguments go to `scan`; save every ~10 ms (the
+      default 2501 over 25 s) so event times and counts are read reliably. The earlier keywords `t1`, `ts`,
+      `n_save` (now `times`) and the solver and layout keywords (`solver`, `rtol`, `atol`, `dt0`,
+      `max_steps`, `fixed_step`, `lanes`, ...) still work, with a `DeprecationWarning`.
 
     **Returns** a `ChangeClass` (`classify_samples` on the solves).
     """
@@ -382,15 +387,17 @@ def classify_change(
         half_window = max(100 * (hi - lo), 0.01 * abs(mid), 1e-6)
     xs = np.linspace(mid - half_window, mid + half_window, n_window)
     xs = np.unique(np.concatenate([xs[(xs < lo) | (xs > hi)], [lo, hi]]))  # the bracket's ends are neighbours
+    times, moved = convert_legacy_times("classify_change", times, scan_kw)
+    if times.n is None and times.ts is None:
+        times = Times(times.t1, n=DEFAULT_N)
     legacy = {k: scan_kw.pop(k) for k in list(scan_kw) if k in LEGACY_KW}
     derivatives = bool(scan_kw.get("derivatives", False))
-    _, options, batch = convert_legacy("classify_change", legacy, options, batch, derivatives)
+    _, options, batch = convert_legacy("classify_change", legacy, options, batch, derivatives, moved)
     batch = dataclasses.replace(BatchOptions() if batch is None else batch, sort=False)
     res = scan(
         scenario,
         Sweep(param, xs),
-        t1,
-        n_save=n_save,
+        times,
         observables=list(OBSERVABLES),
         options=options,
         batch=batch,

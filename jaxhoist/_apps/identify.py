@@ -50,6 +50,7 @@ from .._io.measurement import (
 from .._io.scenario import load_scenario
 from .._numerics.options import SolverOptions
 from .._numerics.solve import simulate
+from .._numerics.times import Times
 from .._physics.params import Scenario
 from .._physics.paths import param_unit
 from .identify_core import _REPORTER, _compiled_core, _Config, _FitReporter, _model
@@ -148,22 +149,33 @@ def _model_jit(cfg: _Config, z, args):
     return _model(cfg, z, args)
 
 
-_DATA_KW = ("signals", "noise", "weights", "start", "bounds", "t1")
+_DATA_KW = ("signals", "noise", "start", "bounds", "t1")
 
 
-def residual_function(scenario, measurement, params, *, options: SolverOptions | None = None, **kwargs):
+def residual_function(
+    scenario,
+    measurement,
+    params,
+    *,
+    options: SolverOptions | None = None,
+    fit: FitOptions | None = None,
+    **kwargs,
+):
     """The whitened residual vector of `identify`'s problem as a plain numpy function of θ (flat, in the
     order of `IdentificationResult.names`), for comparisons with other optimisers (e.g. scipy with finite
-    differences). Takes `identify`'s `signals`, `noise`, `weights`, `start`, `bounds`, `t1` and `options`
-    (the earlier `rtol`, `atol`, `max_steps` still work, with a `DeprecationWarning`). A failed solve gives
-    non-finite residuals.
+    differences). Takes `identify`'s `signals`, `noise`, `start`, `bounds`, `t1`, `options` and `fit` (only
+    its `weights` are read); the earlier `weights`, `rtol`, `atol`, `max_steps` still work, with a
+    `DeprecationWarning`. A failed solve gives non-finite residuals.
 
     **Returns** `(fn, theta0)`: `fn(theta) -> r` (n_residuals,) and the start θ0.
     """
     require_x64()
     data_kw = {k: kwargs.pop(k) for k in _DATA_KW if k in kwargs}
-    options, _ = convert_legacy("residual_function", kwargs, options, None, allow_fit=False)
-    prob = _setup(scenario, measurement, params, options=fit_solver_options(options), **data_kw)
+    options, fit = convert_legacy("residual_function", kwargs, options, fit, allow_fit=("weights",))
+    weights = None if fit is None else fit.weights
+    prob = _setup(
+        scenario, measurement, params, weights=weights, options=fit_solver_options(options), **data_kw
+    )
     reverse = prob.cfg.options.replace(adjoint=diffrax.RecursiveCheckpointAdjoint())
     cfg = dataclasses.replace(prob.cfg, options=reverse)
 
@@ -183,7 +195,6 @@ def identify(
     *,
     signals: Sequence[str] | None = None,
     noise: Mapping[str, float | str] | None = None,
-    weights: Mapping[str, float] | None = None,
     start: Mapping[str, Any] | None = None,
     bounds: Mapping[str, tuple[float, float]] | None = None,
     t1: float | None = None,
@@ -202,9 +213,6 @@ def identify(
     - `signals`: the measured signals to fit (names or groups like `"position"`); default all.
     - `noise`: signal or group -> noise standard deviation [SI unit of the signal] or "x%" (of the signal's
       RMS value). Overrides noise levels from the measurement's side file.
-    - `weights`: signal or group -> residual weight [1/unit] for signals without a known noise level.
-      Signals with neither are scaled by their spread. Unless every fitted signal has a noise level, the
-      covariance uses the residual variance estimate RSS/(n - p).
     - `start`: parameter -> start value [SI unit of the leaf] (default: the scenario's value). `bounds`:
       parameter -> (low, high) [SI]; bounded parameters are fitted through a scaled logit; positive leaves
       (stiffness, damping, μ, mass, ...) through a log; `load.mass_centre` is bounded by the box by default.
@@ -214,7 +222,10 @@ def identify(
       `SolverOptions(diffrax.Tsit5())` (rtol 1e-6, atol 1e-8). Forward mode is always used; the
       Rosenbrock-W solver is refused (the state is integrated with its sensitivities as one system).
     - `fit`: `FitOptions` (extra random starts, Levenberg-Marquardt termination and step budget,
-      identifiability thresholds); default `FitOptions()`.
+      identifiability thresholds, and `weights`: signal or group -> residual weight [1/unit] for signals
+      without a known noise level); default `FitOptions()`. Signals with neither a noise level nor a weight
+      are scaled by their spread; unless every fitted signal has a noise level, the covariance uses the
+      residual variance estimate RSS/(n - p).
     - `progress`: called on the host (through `jax.debug.callback` from the compiled fit) after every
       Levenberg-Marquardt evaluation, accepted or rejected, with a dict: `start` (0-based) and `n_starts`,
       `iteration` (1, 2, ... within the start), `cost` (0.5 Σ r² of the whitened residuals there),
@@ -222,8 +233,8 @@ def identify(
       such steps), `step` (|Δz| from the best point so far, in the fit variables z: log θ for positive
       leaves), `solve_ok`, `solver_steps` (of that simulation) and `elapsed` [s] since the call. Default
       None: silent.
-    - `**deprecated`: the earlier keywords `rtol`, `atol`, `max_steps` (now `options`) and `n_starts`,
-      `start_spread`, `seed`, `lm_rtol`, `lm_atol`, `max_iterations`, `max_relative_se`,
+    - `**deprecated`: the earlier keywords `rtol`, `atol`, `max_steps` (now `options`) and `weights`,
+      `n_starts`, `start_spread`, `seed`, `lm_rtol`, `lm_atol`, `max_iterations`, `max_relative_se`,
       `condition_limit` (now `fit`) still work, converted to the same objects, with a
       `DeprecationWarning`.
 
@@ -245,7 +256,7 @@ def identify(
         params,
         signals=signals,
         noise=noise,
-        weights=weights,
+        weights=fit.weights,
         start=start,
         bounds=bounds,
         t1=t1,
@@ -449,7 +460,7 @@ def synthetic_measurement(
     Measurement(t, {n: np.zeros_like(t) for n in names})  # validates the times
     drop = bool(t[0] > 0)
     ts = np.concatenate([[0.0], t]) if drop else t
-    traj = simulate(scenario, ts=jnp.asarray(ts), options=options)
+    traj = simulate(scenario, Times(ts=jnp.asarray(ts)), options=options)
     clean = {}
     for n in names:
         spec = SIGNALS[n]

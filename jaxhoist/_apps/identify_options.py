@@ -4,6 +4,8 @@ identifiability thresholds), the fit's `SolverOptions`, and the conversion of th
 
 from __future__ import annotations
 
+import dataclasses
+from collections.abc import Mapping
 from typing import Any
 
 import diffrax
@@ -16,8 +18,14 @@ from .._numerics.options import DEFAULT_MAX_STEPS, SolverOptions
 from .._numerics.rosenbrock import RosenbrockW
 
 
+def _as_weights(weights):
+    """A copy of a weights mapping: a later change of the caller's dict does not reach the options."""
+    return dict(weights) if isinstance(weights, Mapping) else weights
+
+
 class FitOptions(eqx.Module):
-    """How `identify` fits: starts, the Levenberg-Marquardt termination and the identifiability thresholds.
+    """How `identify` fits: starts, the Levenberg-Marquardt termination, the identifiability thresholds and
+    the weights of signals without a noise level.
 
     - `n_starts`, `start_spread`, `seed`: `n_starts - 1` extra starts drawn around the start (relative
       spread s [-]: θ·(1+s)^U(-1,1) for positive leaves) from `numpy.random.default_rng(seed)`; the lowest
@@ -28,9 +36,14 @@ class FitOptions(eqx.Module):
     - `max_relative_se`: a parameter whose standard error exceeds this fraction of its value [-] is not
       identifiable; `condition_limit`: nor are the parameters when the condition number of JᵀJ (in relative
       units) exceeds this [-].
+    - `weights`: signal or group -> residual weight [1/unit of the signal] for signals without a known noise
+      level (e.g. `{"position": 100.0}`: 1 cm counts as 1); signals with neither are scaled by their
+      spread. Unless every fitted signal has a noise level, the covariance uses the residual variance
+      estimate RSS/(n - p). Default None: no weights. (Before 0.2 an argument of `identify`.)
 
-    **Raises** `ScenarioError` for `n_starts` or `max_iterations` below 1, a negative spread or a
-    non-positive tolerance or threshold.
+    **Raises** `ScenarioError` for `n_starts` or `max_iterations` below 1, a negative spread, a
+    non-positive tolerance or threshold, or `weights` that is not a mapping from signal names (the weights'
+    values and names are checked against the measurement by `identify`).
     """
 
     n_starts: int = 1
@@ -41,6 +54,7 @@ class FitOptions(eqx.Module):
     max_iterations: int = 100
     max_relative_se: float = 0.5
     condition_limit: float = 1e12
+    weights: Mapping[str, float | int] | None = eqx.field(default=None, converter=_as_weights)
 
     def __check_init__(self):
         for name in ("n_starts", "max_iterations"):
@@ -52,6 +66,12 @@ class FitOptions(eqx.Module):
             v = getattr(self, name)
             if not (np.isfinite(v) and v > 0):
                 raise ScenarioError(f"{name} must be a positive number, got {v}")
+        if self.weights is not None and (
+            not isinstance(self.weights, Mapping) or not all(isinstance(k, str) for k in self.weights)
+        ):
+            raise ScenarioError(
+                f"weights must be a mapping from signal names to weights [1/unit], got {self.weights!r}"
+            )
 
 
 def fit_solver_options(options: SolverOptions | None) -> SolverOptions:
@@ -82,12 +102,13 @@ def convert_legacy(
     old: dict[str, Any],
     options: SolverOptions | None,
     fit: FitOptions | None,
-    allow_fit: bool = True,
+    allow_fit: bool | tuple[str, ...] = True,
     forward: bool = True,
     stacklevel: int = 4,
 ) -> tuple[SolverOptions | None, FitOptions | None]:
     """`(options, fit)` from the earlier keywords of `identify` in `old` (`rtol, atol, max_steps` and,
-    with `allow_fit`, the `FitOptions` fields), built exactly as the earlier `identify` built them (forward
+    with `allow_fit` True, the `FitOptions` fields, `weights` included; a tuple of field names allows
+    those), built exactly as the earlier `identify` built them (forward
     mode if `forward`, else the default reverse adjoint, as `synthetic_measurement` had it); one
     `DeprecationWarning` naming the new spelling (`stacklevel` as in `warn_moved`, from the caller of this
     function).
@@ -95,12 +116,12 @@ def convert_legacy(
     **Raises** `TypeError` for an unknown keyword, `ScenarioError` for an old keyword given with the object
     that replaces it.
     """
-    known = _SOLVER_KW + (_FIT_KW if allow_fit else ())
-    unknown = sorted(set(old) - set(known))
+    fit_fields = _FIT_KW if allow_fit is True else tuple(allow_fit or ())
+    unknown = sorted(set(old) - set(_SOLVER_KW + fit_fields))
     if unknown:
         raise TypeError(f"{function}() got unexpected keyword argument(s): {', '.join(unknown)}")
     solver_kw = {k: old[k] for k in _SOLVER_KW if k in old}
-    fit_kw = {k: old[k] for k in _FIT_KW if k in old}
+    fit_kw = {k: old[k] for k in fit_fields if k in old}
     moved = {k: f"options=SolverOptions(diffrax.Tsit5(), {k}=...)" for k in solver_kw}
     moved.update({k: f"fit=FitOptions({k}=...)" for k in fit_kw})
     if solver_kw:
@@ -114,8 +135,11 @@ def convert_legacy(
             adjoint="forward" if forward else "reverse",
         )
     if fit_kw:
-        if fit is not None:
+        if fit is None:
+            fit = FitOptions(**fit_kw)
+        elif set(fit_kw) == {"weights"} and fit.weights is None:  # weights was an argument beside fit
+            fit = dataclasses.replace(fit, weights=fit_kw["weights"])
+        else:
             raise ScenarioError(f"give either fit or {', '.join(fit_kw)}, not both")
-        fit = FitOptions(**fit_kw)
     warn_moved(function, moved, stacklevel=stacklevel)
     return options, fit

@@ -69,7 +69,8 @@ from .._numerics.batch import (
     flatten_out,
 )
 from .._numerics.options import SolverOptions
-from .._numerics.solve import saved_times
+from .._numerics.times import Times, TimesLike
+from .._numerics.times import convert_legacy as convert_legacy_times
 from .._physics.params import Scenario
 from .._physics.paths import check_path, param_unit
 from . import progress as progress_mod
@@ -79,18 +80,19 @@ from .scan_layout import BatchOptions, convert_legacy, scan_solver_options
 from .scan_result import ScanResult
 from .sweep import AbstractSweep, Grid, Points, Sweep, as_sweep
 
+#: The number of saved times of `scan` when `Times.n` is None.
+DEFAULT_N = 201
+
 __all__ = ["BatchOptions", "Grid", "Points", "Progress", "ScanResult", "ScanStatus", "Sweep", "scan"]
 
 
 def scan(
     scenario: Scenario,
     sweep: AbstractSweep | Mapping[str, Any] | None = None,
-    t1: float | None = None,
+    times: TimesLike = None,
     *,
     observables=None,
     options: SolverOptions | None = None,
-    ts=None,
-    n_save: int = 201,
     histories: Sequence[str] = (),
     derivatives: bool = False,
     batch: BatchOptions | None = None,
@@ -109,8 +111,9 @@ def scan(
       a `Grid` for several. A path is a dotted field name, with `[i]` for one component of a vector leaf:
       `"foundation.friction_coefficient"`, `"hoist.speed"`, `"load.mass_centre[0]"`. Values are
       array-like or a string `"start:stop:num"` / `"v1,v2,..."`; units are those of the field (SI).
-    - `t1`: end time [s] (default `scenario.t1`); `ts`: saved times [s] starting at 0 (default `n_save`
-      equally spaced times; observables such as event times are interpolated on this grid).
+    - `times`: the saved times, a `Times(t1, n, ts)`: end time t1 [s] (default `scenario.t1`), `n` equally
+      spaced times from 0 to t1 (default 201) or the saved times `ts` [s] starting at 0; observables such
+      as event times are interpolated on this grid. A number is t1 [s], a 1-D array is ts [s].
     - `observables`: names of built-in observables (`jaxhoist._numerics.observables`), callables
       `fn(traj[, scenario])`, `Observable`s, or a dict name -> any of these.
     - `options`: `SolverOptions` (solver, step-size controller, dt0, step budget: one for every member);
@@ -136,9 +139,10 @@ def scan(
       arguments in each process and an `out_dir` on a shared file system; the chunks are shared out
       between the processes, and every process returns the whole result.
     - `progress`: True to print a line per chunk on stderr, or a callable receiving a `Progress`.
-    - `**deprecated`: the earlier keywords `params` (now `sweep`), `mode` (now the sweep's type), `solver`,
-      `rtol`, `atol`, `dt0`, `max_steps`, `fixed_step` (now `options`) and `lanes`, `chunk_size`,
-      `max_memory`, `devices`, `sort`, `wait_timeout` (now `batch`) still work, converted to the same
+    - `**deprecated`: the earlier keywords `t1`, `ts`, `n_save` (now `times`), `params` (now `sweep`),
+      `mode` (now the sweep's type), `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `fixed_step` (now
+      `options`) and `lanes`, `chunk_size`, `max_memory`, `devices`, `sort`, `wait_timeout` (now `batch`)
+      still work, converted to the same
       objects (the same results bit for bit), with a `DeprecationWarning`.
 
     **Returns** a `ScanResult`.
@@ -154,15 +158,15 @@ def scan(
         sweep, renamed = deprecated.pop("params"), {"params": "sweep"}
     if sweep is None:
         raise TypeError("scan() missing the sweep: Sweep(path, values), Grid({...}) or Points({...})")
+    times, moved_times = convert_legacy_times("scan", times, deprecated)
+    renamed = moved_times | renamed
     mode, options, batch = convert_legacy("scan", deprecated, options, batch, derivatives, renamed)
     return _scan(
         scenario,
         as_sweep(sweep, mode),
-        t1,
+        times,
         observables=observables,
         options=scan_solver_options(options, derivatives),
-        ts=ts,
-        n_save=n_save,
         histories=histories,
         derivatives=bool(derivatives),
         batch=BatchOptions() if batch is None else batch,
@@ -175,12 +179,10 @@ def scan(
 def _scan(
     scenario: Scenario,
     sweep: AbstractSweep,
-    t1,
+    times: Times,
     *,
     observables,
     options: SolverOptions,
-    ts,
-    n_save: int,
     histories,
     derivatives: bool,
     batch: BatchOptions,
@@ -188,8 +190,8 @@ def _scan(
     resume: bool,
     progress,
 ) -> ScanResult:
-    """`scan` with every choice an object (the sweep, the solver options with forward mode if
-    `derivatives`, the batch options): the entry point for the package's own callers."""
+    """`scan` with every choice an object (the sweep, the saved times, the solver options with forward mode
+    if `derivatives`, the batch options): the entry point for the package's own callers."""
     wall0 = time.perf_counter()
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
@@ -201,7 +203,7 @@ def _scan(
     for p in paths:
         check_path(scenario, p)
     obs, histories = _observables(observables, histories)
-    t1, ts = saved_times(scenario, t1, ts, n_save)
+    _, ts = times.resolve(scenario, DEFAULT_N)
     _check_fixed_steps(options, ts)
     ts = jnp.asarray(ts, dtype=jnp.float64)
     devs = tuple(jax.local_devices() if batch.devices is None else batch.devices)

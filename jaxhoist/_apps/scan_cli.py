@@ -13,6 +13,7 @@ from .._errors import ScenarioError
 from .._io.validate import check_out_dir, parse_values
 from .._numerics.options import SolverOptions
 from .._numerics.rosenbrock import RosenbrockW
+from .._numerics.times import Times
 from .scan import scan
 from .scan_layout import BatchOptions
 from .sweep import as_sweep
@@ -139,11 +140,10 @@ def run_cli(args) -> int:
     res = scan(
         scenario,
         as_sweep(params, args.mode),
-        args.t1,
+        Times(args.t1, n=args.n_save),
         observables=args.observable,
         options=options,
         histories=args.history,
-        n_save=args.n_save,
         batch=BatchOptions(lanes=args.lanes, chunk_size=args.chunk_size),
         out_dir=out,
         resume=not args.no_resume,

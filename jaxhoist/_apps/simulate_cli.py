@@ -135,14 +135,13 @@ def _load_checked(args: argparse.Namespace):
     from .._errors import ScenarioError
     from .._io.scenario import apply_overrides, load_scenario
     from .._numerics.options import SolverOptions
-    from .._numerics.solve import check_times
+    from .._numerics.times import Times
 
     scenario = load_scenario(args.scenario)
     scenario, overrides = apply_overrides(scenario, args.set)
-    t1 = scenario.t1 if args.t1 is None else args.t1
-    check_times(t1, None)
     if args.n_save < 2:
         raise ScenarioError(f"--n-save must be >= 2, got {args.n_save}")
+    t1, ts = Times(args.t1, n=args.n_save).resolve(scenario, args.n_save, jnp)
     if args.rope != "elastic" and args.model != "rigid":
         raise ScenarioError(
             f"--rope {args.rope} needs --model rigid (the elastic-foundation model has the elastic rope)"
@@ -156,7 +155,6 @@ def _load_checked(args: argparse.Namespace):
         options = SolverOptions(
             rtol=args.rtol, atol=args.atol, max_steps=args.max_steps, progress=not args.quiet
         )
-    ts = jnp.linspace(0.0, 1.0, args.n_save) * jnp.asarray(t1, dtype=jnp.float64)
     return scenario, overrides, t1, options, ts
 
 
@@ -167,6 +165,7 @@ def _solve_rigid(args, scenario, t1, ts, options, progress):
     from .._numerics.options import as_model
     from .._numerics.rigid_options import RigidOptions
     from .._numerics.rigid_solve import simulate_rigid
+    from .._numerics.times import Times
 
     label = "solving with the rigid-ground model (each phase compiles on first use)"
     with (
@@ -184,8 +183,7 @@ def _solve_rigid(args, scenario, t1, ts, options, progress):
         with contextlib.redirect_stdout(_LineSink(_phase_to_bar(bar))):
             traj = simulate_rigid(
                 scenario,
-                t1,
-                ts=np.asarray(ts),
+                Times(t1, ts=np.asarray(ts)),
                 model=as_model("rigid", args.rope),  # pyright: ignore[reportArgumentType]  # "rigid": a RigidGround
                 options=RigidOptions(
                     rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in

@@ -18,7 +18,13 @@ Detection (`ChatterRule.detect`): at least `min_impacts` impacts (corner impacts
 the last `window` seconds, whose losses do not decay (the mean of the later half at least `decay` times
 the mean of the earlier half). A decaying train (a rocking load settling) is left to the rigid model,
 whose settling rule (`Settings.rest_velocity`) ends it. A phase that stalls twice (its mean step below
-`StallRule.min_step`, or `max_steps` reached) is passed the same way.
+`StallRule.min_step`, or `max_steps` reached) is passed the same way, and so is a state where no contact
+configuration is consistent `ChatterRule.max_regularised` times in a row (the least-violating one chosen as
+a regularised phase again and again: two sticking corners on an edge whose minimum-norm friction split
+breaks one cone, a Painlevé-type situation with no rigid phase to continue with). The compliant phase is
+not left while the rigid model would have no consistent configuration at its end: it goes on from its own
+state, episode after episode (`rigid_run._Run.compliant`); the stiff foundation it integrates is the limit
+the rigid model stands for, and it has a motion where the rigid contact problem has none.
 """
 
 from __future__ import annotations
@@ -60,6 +66,15 @@ class ChatterRule:
     - `samples`: contact samples per chunk (the steadiness test).
     - `min_switches`: ... or at least this many contact changes without impact within `window` (a load
       see-sawing between two configurations every few µs, e.g. about the diagonal EF).
+    - `max_regularised`: ... or no consistent contact configuration, the least-violating one chosen as a
+      regularised phase (fallback 3 of `_Driver._select`) this many times in a row. In the sweep such a
+      fallback either stood alone (the next choice was consistent again) or repeated at microsecond
+      intervals until the switching detection took over, 47 or 48 times (the load on an edge, E-F or F-H,
+      with both corners sticking; docs/rigid-model.md, "Resolution"): 4 separates the two with a margin on
+      both sides.
+      Whatever triggered it, a compliant phase is not left while the rigid model would need fallback 3 at
+      its end: it is extended (from the compliant state, no hand-back in between) until a configuration is
+      consistent again, or to `t1`.
     """
 
     window: float = 0.05
@@ -74,10 +89,12 @@ class ChatterRule:
     load_fraction: float = 1e-3
     samples: int = 65
     min_switches: int = 48
+    max_regularised: int = 4
 
     def check(self) -> None:
         """Raise `ScenarioError` naming the first field that is not a positive finite number (`decay` may
-        be 0, `min_impacts` and `samples` are integers >= 1 and >= 2)."""
+        be 0, `min_impacts`, `min_switches`, `max_regularised` and `samples` are integers >= 1, >= 1, >= 1 and
+        >= 2)."""
         for name in (
             "window",
             "stiffness",
@@ -98,6 +115,10 @@ class ChatterRule:
         if not (isinstance(self.min_switches, int) and self.min_switches >= 1):
             raise ScenarioError(
                 f"ChatterRule.min_switches must be an integer >= 1, got {self.min_switches!r}"
+            )
+        if not (isinstance(self.max_regularised, int) and self.max_regularised >= 1):
+            raise ScenarioError(
+                f"ChatterRule.max_regularised must be an integer >= 1, got {self.max_regularised!r}"
             )
         if not (isinstance(self.samples, int) and self.samples >= 2):
             raise ScenarioError(f"ChatterRule.samples must be an integer >= 2, got {self.samples!r}")
@@ -366,3 +387,30 @@ def handback(drv, sc_c: Scenario, t: float, y: elastic.State, loaded: np.ndarray
 def _rigid_mechanical(t, y, scenario, c, inextensible):
     ld = rigid.loads(t, y, scenario, c, inextensible)
     return rigid.energy(y, ld, scenario, c).mechanical
+
+
+def with_compliant_outputs(out, ts, states, mask, drv, rule):
+    """`out` (a `rigid.Output` with a leading n_t axis) with the samples `mask` replaced by the outputs of
+    the compliant model (this module): its corner spring forces, friction, rope and energies
+    (ground spring and stiff rope included)."""
+    k = np.nonzero(mask)[0]
+    sel = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x)[k]), states)
+    el = elastic_outputs(jnp.asarray(ts[k]), sel, compliant_scenario(drv.sc, rule, drv.inextensible), drv.c)
+
+    def put(a, b):
+        a = np.array(a)
+        a[k] = np.asarray(b)
+        return jnp.asarray(a)
+
+    return eqx.tree_at(
+        lambda o: (o.corners, o.normal, o.friction, o.rope_tension, o.energy, o.euler),
+        out,
+        (
+            put(out.corners, el["corners"]),
+            put(out.normal, el["normal"]),
+            put(out.friction, el["friction"]),
+            put(out.rope_tension, el["rope_tension"]),
+            jax.tree_util.tree_map(put, out.energy, el["energy"]),
+            put(out.euler, el["euler"]),
+        ),
+    )

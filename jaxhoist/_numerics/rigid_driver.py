@@ -31,23 +31,14 @@ from .rigid_compiled import (
     _RopeWouldPush,
 )
 from .rigid_coulomb import coulomb_pattern
+from .rigid_options import DRIVER_TOLERANCES as _DEFAULT_TOL  # noqa: F401  (rigid_solve and tests read it here)
 from .rigid_records import _fmt
 
-_DEFAULT_TOL = dict(
-    z=1e-7,  # a corner is on the ground if Z < z L
-    v=1e-6,  # ... and |v_z| < v V; it rests if also |v_h| < v V
-    force=1e-7,  # consistency tolerance on forces [G]
-    accel=1e-7,  # consistency tolerance on accelerations [g]
-    rest=1e-9,  # tolerance of the rest conditions (dimensionless guards)
-    guard_start=1e-9,  # every guard starts at least this positive (offsets)
-    min_phase=1e-6,  # [s] a phase shorter than this is merged into the previous record (`_merge`)
-    trigger=1e-6,  # guards within this of zero at an event count as fired
-    lookahead=1e-5,  # the look-ahead runs until the fired guards are below -lookahead
-    align=1e-2,  # a corner sliding from rest must accelerate along its sliding direction (relative)
-    jump=1e-3,  # normal-force jumps closer than this [G] count as equally continuous
-    bounce=1e-4,  # impacts slower than bounce V are plastic (no restitution): avoids Zeno bouncing
-    relax=1e3,  # fallback 1 of the configuration choice: tolerances times this (degenerate contacts)
-)
+
+class _Inconsistent(Exception):
+    """No contact configuration is consistent and fallback 3 (the least-violating one as a regularised
+    phase) is switched off (`_Driver.allow_regularised`, at the end of a compliant phase): the message
+    names the least violation."""
 
 
 @dataclasses.dataclass
@@ -93,6 +84,11 @@ class _Driver:
         self.rejected = 0
         self.debug = False
         self.allow_jam = True  # fallback 2 of the configuration choice (off while choosing after a jam)
+        # Fallback 3 (off at the end of a compliant phase: `_Inconsistent` instead), and its least violation
+        # if the last `select` took it, else "" (`_Run` counts such choices in a row:
+        # `ChatterRule.max_regularised`).
+        self.allow_regularised = True
+        self.regularised = ""
         self.exclude: np.ndarray | None = None  # contact modes not to choose again at once (`_transition`)
         self.notes: list[str] = []  # how ambiguous or inconsistent contact choices were resolved (phase log)
         self.inextensible = False
@@ -205,7 +201,10 @@ class _Driver:
 
     def select(self, t, y, where: str, previous: Phase | None = None) -> Phase:
         """Choose the contact configuration at (t, y) (see the module docstring). With the inextensible
-        rope at its length, the taut rope (S >= 0) is tried first, then the slack rope."""
+        rope at its length, the taut rope (S >= 0) is tried first, then the slack rope. Sets
+        `regularised` to the least violation when the choice is fallback 3 ("" otherwise); raises
+        `_Inconsistent` instead where that fallback is switched off (`allow_regularised`)."""
+        self.regularised = ""
         if not self.inextensible:
             return self._select(t, y, where, previous, rigid.ROPE_ELASTIC)
         if self.rope_taut:
@@ -298,12 +297,15 @@ class _Driver:
                 raise _Jam(why)
             else:
                 # 3. the least inconsistent configuration, as a short regularised phase (its guards end it).
+                #    Chosen `ChatterRule.max_regularised` times in a row, a compliant phase takes over
+                #    (`_Run.step`), and it is not left while this fallback would be needed (`_Run.compliant`).
                 k = int(np.argmin(violation))
+                least = f"least violation {violation[k]:.2g} ({reasons[k]})"
+                if not self.allow_regularised:
+                    raise _Inconsistent(least)
+                self.regularised = least
                 consistent = [k]
-                self.notes.append(
-                    f"regularised: no consistent configuration, least violation "
-                    f"{violation[k]:.2g} ({reasons[k]})"
-                )
+                self.notes.append(f"regularised: no consistent configuration, {least}")
         if previous is not None and int(previous.rope) != rope:
             previous = eqx.tree_at(lambda p: p.rope, previous, jnp.asarray(rope, dtype=jnp.int32))
         if previous is not None:

@@ -16,6 +16,23 @@ from .options import ElasticRope, InextensibleRope, RigidGround
 from .rigid_compiled import StallRule
 from .rigid_compliant import ChatterRule
 
+#: The phase driver's tolerances (lengths in L, velocities in V, forces in G, accelerations in g, times in s).
+DRIVER_TOLERANCES = dict(
+    z=1e-7,  # a corner is on the ground if Z < z L
+    v=1e-6,  # ... and |v_z| < v V; it rests if also |v_h| < v V
+    force=1e-7,  # consistency tolerance on forces [G]
+    accel=1e-7,  # consistency tolerance on accelerations [g]
+    rest=1e-9,  # tolerance of the rest conditions (dimensionless guards)
+    guard_start=1e-9,  # every guard starts at least this positive (offsets)
+    min_phase=1e-6,  # [s] a phase shorter than this is merged into the previous record (`_merge`)
+    trigger=1e-6,  # guards within this of zero at an event count as fired
+    lookahead=1e-5,  # the look-ahead runs until the fired guards are below -lookahead
+    align=1e-2,  # a corner sliding from rest must accelerate along its sliding direction (relative)
+    jump=1e-3,  # normal-force jumps closer than this [G] count as equally continuous
+    bounce=1e-4,  # impacts slower than bounce V are plastic (no restitution): avoids Zeno bouncing
+    relax=1e3,  # fallback 1 of the configuration choice: tolerances times this (degenerate contacts)
+)
+
 
 class RigidOptions(eqx.Module):
     """How `simulate_rigid` integrates the rigid model (paper §2).
@@ -75,12 +92,17 @@ _OPTIONS_KW = ("rtol", "atol", "max_steps", "max_phases", "settings", "chatter")
 
 
 def convert_legacy(
-    old: dict[str, Any], model: RigidGround | None, options: RigidOptions | None, stacklevel: int = 4
+    old: dict[str, Any],
+    model: RigidGround | None,
+    options: RigidOptions | None,
+    stacklevel: int = 4,
+    moved: dict[str, str] | None = None,
 ) -> tuple[RigidGround, RigidOptions]:
     """`(model, options)` from `simulate_rigid`'s earlier keywords in `old` (`restitution`, `rope` ->
     `RigidGround`; `rtol`, `atol`, `max_steps`, `max_phases`, `settings`, `chatter` -> `RigidOptions`),
-    with one `DeprecationWarning` naming the new spelling (`stacklevel` as in `warn_moved`, from the caller
-    of this function); the defaults where neither is given.
+    with one `DeprecationWarning` naming the new spelling of these and of `moved` (old name -> new
+    spelling: the saved times' keywords, converted by the caller; `stacklevel` as in `warn_moved`, from the
+    caller of this function); the defaults where neither is given.
 
     **Raises** `TypeError` for an unknown keyword, `ScenarioError` for an old keyword given with the object
     that replaces it, an unknown rope name or a restitution outside [0, 1].
@@ -90,7 +112,8 @@ def convert_legacy(
         raise TypeError(f"simulate_rigid() got unexpected keyword argument(s): {', '.join(unknown)}")
     model_kw = {k: old[k] for k in _MODEL_KW if k in old}
     options_kw = {k: old[k] for k in _OPTIONS_KW if k in old}
-    moved = {k: f"model=RigidGround({k}=...)" for k in model_kw}
+    moved = dict(moved or {})
+    moved.update({k: f"model=RigidGround({k}=...)" for k in model_kw})
     moved.update({k: f"options=RigidOptions({k}=...)" for k in options_kw})
     if model_kw:
         if model is not None:

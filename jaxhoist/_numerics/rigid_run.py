@@ -1,6 +1,6 @@
 """The phase loop of the rigid model (paper §2) behind `simulate_rigid` (`rigid_solve`): `_Run` solves
 phase after phase, resolves impacts and contact changes, passes sustained cycles by compliant phases and
-assembles the `RigidTrajectory`; `_transition` and `_with_compliant_outputs` are its helpers."""
+assembles the `RigidTrajectory`; `_transition` is its helper."""
 
 from __future__ import annotations
 
@@ -24,8 +24,8 @@ from .rigid_compiled import (
     _RopeWouldPush,
     _tree_index,
 )
-from .rigid_compliant import ChatterRule, compliant_scenario, elastic_outputs, run_episode
-from .rigid_driver import _Driver
+from .rigid_compliant import ChatterRule, run_episode, with_compliant_outputs
+from .rigid_driver import _Driver, _Inconsistent
 from .rigid_impacts import _rope_jerk
 from .rigid_records import PhaseRecord, RigidContactError, RigidTrajectory, _fmt, _merge
 
@@ -62,6 +62,7 @@ class _Run:
         self.switch_events: list[float] = []  # times [s] of contact changes without an impact
         self.compliant_mask = np.zeros(n_t, dtype=bool)  # saved samples inside compliant phases
         self.retried_at = None  # start time of a stalled phase chosen again (once)
+        self.n_regularised = 0  # the current phase is the n-th in a row chosen by fallback 3 (`regularised`)
 
     def log(self, rec: PhaseRecord):
         """Append the record of the phase just solved, or merge it into the previous record when it lasted
@@ -92,6 +93,20 @@ class _Run:
         phase, y, loss = drv.select_or_jam(t, y, "start")
         self.impact_total += loss
         self.t, self.y, self.phase, self.choice = t, y, phase, drv.take_notes()
+        self.count_regularised()
+
+    def resume(self, t: float, y: State):
+        """The first phase at (t [s], y), a state of an earlier run (tests and experiments that start near
+        a known event; `tests/data/make_rigid_edge_state.py`): chosen as after any event, with no start
+        jerk (the inextensible rope's `_Driver.rope_taut` is the caller's to set)."""
+        phase, y, loss = self.drv.select_or_jam(t, y, "resumed")
+        self.impact_total += loss
+        self.t, self.y, self.phase, self.choice = t, y, phase, self.drv.take_notes()
+        self.count_regularised()
+
+    def count_regularised(self):
+        """After a choice of the next phase: how many in a row were fallback 3 (`_Driver.regularised`)."""
+        self.n_regularised = self.n_regularised + 1 if self.drv.regularised else 0
 
     def step(self) -> bool:
         """Solve the current phase and choose the next one. Returns False when t1 is reached."""
@@ -124,14 +139,28 @@ class _Run:
         if self.verbose:
             print(self.records[-1], f"[{drv.accepted} steps so far]", flush=True)
         self.t, self.y, self.phase, self.choice = t_end, y_end, new, drv.take_notes()
+        self.count_regularised()
         rule = self.chatter
         why = rule and (
-            rule.detect(self.impact_events, t_end) or rule.detect_switching(self.switch_events, t_end)
+            self.detect_regularised(rule)
+            or rule.detect(self.impact_events, t_end)
+            or rule.detect_switching(self.switch_events, t_end)
         )
         if why:
-            # A sustained cycle of impacts: pass it with a compliant phase, then choose again.
+            # A sustained cycle of impacts or contact changes, or no consistent configuration again and
+            # again: pass it with a compliant phase, then choose again.
             return self.compliant(t_end, y_end, new, why)
         return True
+
+    def detect_regularised(self, rule: ChatterRule) -> str:
+        """A description if the phase just chosen is the `rule.max_regularised`-th in a row without a
+        consistent configuration (fallback 3), else "" (`ChatterRule.max_regularised`)."""
+        if self.n_regularised < rule.max_regularised:
+            return ""
+        return (
+            f"no consistent configuration {self.n_regularised} times in a row (least-violation fallback; "
+            f"last: {self.drv.regularised})"
+        )
 
     def save(self, t: float, t_end: float, phase: Phase, sys_):
         """Keep the phase and its states at the saved times t <= ts <= t_end not yet filled."""
@@ -174,6 +203,7 @@ class _Run:
             choice = f"{stalled} {how_stalled}, chosen again without it"
             choice += f"; {how}" if how else ""
             self.y, self.phase, self.choice = y, phase, choice
+            self.count_regularised()
             return True
         if self.chatter is None or bool(phase.rest):
             hint = ", or pass chatter=ChatterRule() to pass it by a compliant phase"
@@ -192,6 +222,7 @@ class _Run:
         """The guards of `phase` fired at (t_end, y_end): log the phase, resolve an impact or rope jerk, and
         choose the next phase. Returns `(next phase, state)`."""
         drv = self.drv
+        drv.regularised = ""  # set again only if the choice below is fallback 3
         g = drv.guards(t_end, y_end, phase) + _np(phase.guard_offset)
         # Fired: near zero now, and well below where the guard started (a guard that started at its small
         # offset and stayed there has not fired).
@@ -285,24 +316,46 @@ class _Run:
 
     def compliant(self, t0: float, y0: State, phase0: Phase, why: str) -> bool:
         """A compliant phase from (t0, y0) (`numerics.rigid_compliant`): fill its saved samples, log it,
-        book its hand-back loss, and choose the next phase. Returns False when t1 is reached."""
+        book its hand-back loss, and choose the next phase. Returns False when t1 is reached.
+
+        The phase is not left while no contact configuration is consistent at its end (the choice would
+        need fallback 3, the least-violating configuration): it is extended from the compliant state, with
+        no hand-back in between, until one is, or to t1 (`ChatterRule.max_regularised`). Without a rigid
+        solution (a Painlevé-type or jammed contact) the stiff-foundation limit, which the compliant phase
+        integrates, is the motion; the extensions are counted in the phase log."""
         drv, chatter = self.drv, self.chatter
         assert chatter is not None  # called only with a ChatterRule (`advance`, `stalled`)
-        ep = run_episode(drv, t0, y0, self.t1, self.ts, self.filled, chatter)
-        drv.accepted += ep.accepted
-        drv.rejected += ep.rejected
         idx = len(self.phases)
         self.phases.append(phase0)  # a placeholder: these samples' outputs are the compliant model's
-        ks = ep.user_index
-        if ks.size:
-            jax.tree_util.tree_map(
-                lambda dst, src: dst.__setitem__(ks, src), self.saved_states, ep.user_states
-            )
-            self.saved_phase[ks] = idx
-            self.saved_impact[ks] = self.impact_total
-            self.filled[ks] = True
-            self.compliant_mask[ks] = True
-        self.impact_total += ep.handback_loss
+        t, y_el = t0, y0
+        extended: list[str] = []  # when and why each extension was needed (the least violation)
+        while True:
+            ep = run_episode(drv, t, y_el, self.t1, self.ts, self.filled, chatter)
+            drv.accepted += ep.accepted
+            drv.rejected += ep.rejected
+            ks = ep.user_index
+            if ks.size:
+                jax.tree_util.tree_map(
+                    lambda dst, src: dst.__setitem__(ks, src), self.saved_states, ep.user_states
+                )
+                self.saved_phase[ks] = idx
+                self.saved_impact[ks] = self.impact_total
+                self.filled[ks] = True
+                self.compliant_mask[ks] = True
+            if ep.t_end >= self.t1:
+                break
+            # Consistency at the end, before leaving (fallback 3 switched off): the state handed back.
+            drv.allow_regularised = False
+            try:
+                phase, y, loss = drv.select_or_jam(ep.t_end, ep.y_end, "after a compliant phase")
+                break
+            except _Inconsistent as err:
+                drv.take_notes()  # the notes of a choice not taken
+                extended.append(f"{ep.t_end:.6f} s: {err}")
+                t, y_el = ep.t_end, ep.y_before_handback  # go on from the compliant state
+            finally:
+                drv.allow_regularised = True
+        self.impact_total += ep.handback_loss  # only the last hand-back is applied
         loaded = "".join(c for c, on in zip(rigid.CORNERS, ep.loaded, strict=True) if on) or "none"
         end = (
             "t1"
@@ -317,6 +370,11 @@ class _Run:
             f"ε = {chatter.regularisation_velocity:g} m/s"
             + (f", rope {chatter.rope_stiffness:g} N/m" if drv.inextensible else "")
         )
+        if extended:
+            how += (
+                f"; extended {len(extended)} time{'s' if len(extended) > 1 else ''}: no consistent "
+                f"configuration at its end (first at {extended[0]}; last at {extended[-1]})"
+            )
         modes = cast(tuple[str, str, str, str], tuple("spring" if on else "free" for on in ep.loaded))
         self.log(
             PhaseRecord(
@@ -336,9 +394,9 @@ class _Run:
             print(self.records[-1], f"[{drv.accepted} steps so far]", flush=True)
         if ep.t_end >= self.t1:
             return False
-        phase, y, loss = drv.select_or_jam(ep.t_end, ep.y_end, "after a compliant phase")
         self.impact_total += loss
         self.t, self.y, self.phase, self.choice = ep.t_end, y, phase, drv.take_notes()
+        self.count_regularised()
         return True
 
     def result(self, c: Constants, settings: rigid.Settings) -> RigidTrajectory:
@@ -352,7 +410,7 @@ class _Run:
             ts, saved_states, self.saved_phase, self.phases, drv.sc, c, settings, drv.inextensible
         )
         if np.any(self.compliant_mask):
-            out = _with_compliant_outputs(out, ts, saved_states, self.compliant_mask, drv, self.chatter)
+            out = with_compliant_outputs(out, ts, saved_states, self.compliant_mask, drv, self.chatter)
         euler = out.euler.at[:, :2].set(jnp.unwrap(out.euler[:, :2], axis=0))
         return RigidTrajectory(
             ts=jnp.asarray(ts),
@@ -378,33 +436,6 @@ class _Run:
             phase_index=jnp.asarray(np.asarray(self.record_of, dtype=np.int64)[self.saved_phase]),
             phases=tuple(self.records),
         )
-
-
-def _with_compliant_outputs(out, ts, states, mask, drv, rule):
-    """`out` (a `rigid.Output` with a leading n_t axis) with the samples `mask` replaced by the outputs of
-    the compliant model (`numerics.rigid_compliant`): its corner spring forces, friction, rope and energies
-    (ground spring and stiff rope included)."""
-    k = np.nonzero(mask)[0]
-    sel = jax.tree_util.tree_map(lambda x: jnp.asarray(np.asarray(x)[k]), states)
-    el = elastic_outputs(jnp.asarray(ts[k]), sel, compliant_scenario(drv.sc, rule, drv.inextensible), drv.c)
-
-    def put(a, b):
-        a = np.array(a)
-        a[k] = np.asarray(b)
-        return jnp.asarray(a)
-
-    return eqx.tree_at(
-        lambda o: (o.corners, o.normal, o.friction, o.rope_tension, o.energy, o.euler),
-        out,
-        (
-            put(out.corners, el["corners"]),
-            put(out.normal, el["normal"]),
-            put(out.friction, el["friction"]),
-            put(out.rope_tension, el["rope_tension"]),
-            jax.tree_util.tree_map(put, out.energy, el["energy"]),
-            put(out.euler, el["euler"]),
-        ),
-    )
 
 
 def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[int], ts):

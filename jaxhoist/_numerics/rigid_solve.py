@@ -1,4 +1,4 @@
-"""The rigid model's phase driver (paper §2): `simulate_rigid(scenario, t1)`.
+"""The rigid model's phase driver (paper §2): `simulate_rigid(scenario, times)`.
 
 The motion is a sequence of phases, each a fixed contact configuration (`physics.rigid.Phase`). A phase
 is integrated by one compiled `diffrax.diffeqsolve` (the phase is an array argument, so every phase reuses
@@ -58,6 +58,8 @@ from .rigid_driver import _DEFAULT_TOL, _Driver
 from .rigid_options import RigidOptions, convert_legacy
 from .rigid_records import PhaseRecord, RigidContactError, RigidTrajectory
 from .rigid_run import _Run
+from .times import TimesLike
+from .times import convert_legacy as convert_legacy_times
 
 __all__ = [
     "ROPE_MODELS",
@@ -76,27 +78,29 @@ __all__ = [
 #: The rope models of `simulate_rigid(..., rope=...)`.
 ROPE_MODELS = ("elastic", "inextensible")
 
+#: The number of saved times when `Times.n` is None.
+DEFAULT_N = 501
+
 
 def simulate_rigid(
     scenario: Scenario,
-    t1: float | None = None,
-    *,
-    ts=None,
-    n_save: int = 501,
+    times: TimesLike = None,
     model: RigidGround | None = None,
     options: RigidOptions | None = None,
+    *,
     verbose: bool | str = False,
     **deprecated,
 ) -> RigidTrajectory:
-    """Simulate a lift with the rigid-body-on-rigid-ground model (paper §2) from rest at t = 0 to `t1`.
+    """Simulate a lift with the rigid-body-on-rigid-ground model (paper §2) from rest at t = 0 to t1.
 
     Not differentiable and not vmappable (the phase sequence is decided on the host).
 
     **Arguments**
     - `scenario`: a `Scenario`; the foundation's stiffness, damping and friction law are not used (the
       ground is rigid, friction is exact Coulomb with μ = `foundation.friction_coefficient`).
-    - `t1`: end time [s] (default `scenario.t1`); `ts` saved times [s] (start 0, end t1), default `n_save`
-      even.
+    - `times`: the saved times, a `Times(t1, n, ts)`: end time t1 [s] (default `ts[-1]` if `ts` is given,
+      else `scenario.t1`), `n` equally spaced times from 0 to t1 (default 501) or the saved times `ts` [s]
+      (start 0, end t1). A number is t1 [s], a 1-D array is ts [s]. Default `Times()`.
     - `model`: `RigidGround(rope=..., restitution=...)` (default `RigidGround()`): `restitution` is Newton's
       coefficient e [-] of corner impacts (0: plastic); `rope` is `ElasticRope()` (the rope law (2.14),
       default) or `InextensibleRope()` (the constraint (2.15) with the boom-tip motion (2.13): |AB| = l(t)
@@ -109,9 +113,9 @@ def simulate_rigid(
     - `options`: `RigidOptions` (phase tolerances and step budget, `max_phases`, contact `settings`, the
       `chatter` rule, the `stall` rule); default `RigidOptions()`.
     - `verbose`: print each phase as it ends.
-    - `**deprecated`: the earlier keywords `restitution`, `rope` (now `model`) and `rtol`, `atol`,
-      `max_steps`, `max_phases`, `settings`, `chatter` (now `options`) still work, with a
-      `DeprecationWarning`.
+    - `**deprecated`: the earlier keywords `t1`, `ts`, `n_save` (now `times`), `restitution`, `rope` (now
+      `model`) and `rtol`, `atol`, `max_steps`, `max_phases`, `settings`, `chatter` (now `options`) still
+      work, with a `DeprecationWarning`.
 
     **Returns** a `RigidTrajectory` (with the phase log in `.phases`).
 
@@ -119,7 +123,8 @@ def simulate_rigid(
     contact situations and solver failures.
     """
     require_x64()
-    model, options = convert_legacy(deprecated, model, options)
+    times, moved = convert_legacy_times("simulate_rigid", times, deprecated)
+    model, options = convert_legacy(deprecated, model, options, moved=moved)
     if not isinstance(model, RigidGround):
         raise ScenarioError(f"model must be RigidGround(...), got {type(model).__name__}")
     if not isinstance(options, RigidOptions):
@@ -127,13 +132,10 @@ def simulate_rigid(
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()
-    if t1 is None:
-        t1 = scenario.t1 if ts is None else float(np.asarray(ts)[-1])
+    t1, ts = times.resolve(scenario, DEFAULT_N)
     t1 = float(t1)
-    if not (np.isfinite(t1) and t1 > 0):
-        raise ScenarioError(f"t1 must be a positive finite time [s], got {t1}")
-    if ts is None:
-        ts = np.linspace(0.0, t1, int(n_save))
+    if times.ts is None:  # the rigid model's grid, linspace(0, t1, n): it rounds differently from resolve's
+        ts = np.linspace(0.0, t1, times.count(DEFAULT_N))
     ts = np.asarray(ts, dtype=np.float64)
     if ts.ndim != 1 or ts.size < 2 or ts[0] != 0.0 or np.any(np.diff(ts) <= 0) or abs(ts[-1] - t1) > 1e-12:
         raise ScenarioError("ts must be a 1-D, strictly increasing array from 0 to t1 [s]")

@@ -8,7 +8,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
-from jaxtyping import Array, ArrayLike, Float, Int
+from jaxtyping import Array, Float, Int
 
 from .._deprecated import warn_moved
 from .._errors import ScenarioError, SolveStatus, forward_mode_hint, require_x64
@@ -21,6 +21,8 @@ from .options import AbstractModel, ElasticFoundation, RigidGround, SolverOption
 from .rigid_options import RigidOptions
 from .rigid_solve import simulate_rigid
 from .sensitivity import solve_forward, uses_tangent_solve
+from .times import TimesLike
+from .times import convert_legacy as convert_legacy_times
 from .trajectory import Trajectory as Trajectory
 
 
@@ -130,44 +132,8 @@ def as_float64_leaves(scenario: Scenario) -> Scenario:
     return jax.tree_util.tree_map(fix, scenario)
 
 
-def _concrete_float(x):
-    return None if x is None or isinstance(x, jax.core.Tracer) else float(np.asarray(x))  # pyright: ignore[reportAttributeAccessIssue]  # jax.core is a lazily loaded submodule
-
-
-def check_times(t1, ts) -> None:
-    """Host-side checks of the time grid (concrete values only): t1 > 0 finite; ts 1-D, at least 2 times,
-    starting at 0, finite, strictly increasing; and, where both are given, ts ending at t1 (a contradiction
-    used to be resolved silently in favour of ts)."""
-    t1c = _concrete_float(t1)
-    if t1c is not None and not (np.isfinite(t1c) and t1c > 0):
-        raise ScenarioError(f"t1 must be a positive finite time [s], got {t1c}")
-    if ts is not None and not isinstance(ts, jax.core.Tracer):  # pyright: ignore[reportAttributeAccessIssue]  # jax.core is a lazily loaded submodule
-        a = np.asarray(ts)
-        if a.ndim != 1 or a.size < 2:
-            raise ScenarioError(f"ts must be a 1-D array of at least 2 times [s], got shape {a.shape}")
-        if not np.all(np.isfinite(a)) or a[0] != 0.0 or np.any(np.diff(a) <= 0):
-            raise ScenarioError("ts must start at 0 s and be finite and strictly increasing")
-        if t1c is not None and not abs(float(a[-1]) - t1c) <= 1e-12 * max(1.0, abs(t1c)):
-            raise ScenarioError(
-                f"t1 = {t1c:g} s contradicts ts, which ends at {float(a[-1]):g} s: give ts ending at t1, or "
-                "leave t1 out (it defaults to ts[-1])"
-            )
-
-
-def saved_times(scenario: Scenario, t1, ts, n_save: int, xp=np):
-    """(t1, ts) [s]: the saved times `ts` as given, else `n_save` equally spaced in [0, t1]; t1 defaults to
-    `ts[-1]`, else the scenario's. Checked on the host. `xp` (numpy or jax.numpy) builds the grid: jax.numpy
-    keeps a traced t1 traced."""
-    check_times(t1, ts)
-    if t1 is None:
-        t1 = scenario.t1 if ts is None else (ts[-1] if xp is jnp else float(np.asarray(ts)[-1]))
-        check_times(t1, ts)
-    if ts is None:
-        if int(n_save) < 2:
-            raise ScenarioError(f"n_save must be >= 2, got {n_save}")
-        ts = xp.linspace(0.0, 1.0, int(n_save)) * xp.asarray(t1, dtype=xp.float64)
-    return t1, ts
-
+#: The number of saved times of `simulate` and `simulate_rigid` when `Times.n` is None.
+DEFAULT_N = 501
 
 _LEGACY_SOLVER_KW = ("solver", "rtol", "atol", "dt0", "max_steps", "adjoint", "progress", "fixed_step")
 
@@ -224,16 +190,14 @@ def convert_legacy(
 
 def simulate(
     scenario: Scenario,
-    t1: float | Float[ArrayLike, ""] | None = None,
-    *,
-    ts: Float[ArrayLike, " n_t"] | None = None,
-    n_save: int = 501,
+    times: TimesLike = None,
     model: AbstractModel | str = ElasticFoundation(),
     options: SolverOptions | None = None,
+    *,
     throw: bool = True,
-    **solver_kw,
+    **deprecated,
 ) -> Trajectory:
-    """Simulate a lift from rest at t = 0 to `t1`.
+    """Simulate a lift from rest at t = 0 to the end time t1 [s] of `times`.
 
     Works under `jax.jit`, `jax.vmap` over any scenario leaf, `jax.grad` (the default adjoint) and
     `jax.jacfwd` (`SolverOptions(adjoint=diffrax.ForwardMode())`), for the elastic model. For derivatives
@@ -242,8 +206,9 @@ def simulate(
 
     **Arguments**
     - `scenario`: a `Scenario` (see `load_scenario`).
-    - `t1`: end time [s]; default `ts[-1]` if `ts` is given, else `scenario.t1`.
-    - `ts`: saved times [s], starting at 0 and ending at t1; default `n_save` equally spaced times.
+    - `times`: the saved times, a `Times(t1, n, ts)`: end time t1 [s] (default `ts[-1]` if `ts` is given,
+      else `scenario.t1`), `n` equally spaced times from 0 to t1 (default 501) or the saved times `ts` [s]
+      (starting at 0, ending at t1). A number is t1 [s], a 1-D array is ts [s]. Default `Times()`.
     - `model`: `ElasticFoundation()` (paper §3, the default: one compiled, differentiable solve) or
       `RigidGround(rope=ElasticRope() | InextensibleRope())` (paper §2, the event-driven reference
       `simulate_rigid`: host-side phase loop, not differentiable or vmappable; it returns a
@@ -252,10 +217,11 @@ def simulate(
     - `options`: `SolverOptions` (solver, step-size controller, adjoint, dt0, max_steps, progress meter).
       The rigid model reads only its tolerances and step budget.
     - `throw`: raise if the solve fails (max steps, non-finite state); with False, read `Trajectory.status`.
-    - `**solver_kw`: deprecated. The earlier keywords `solver`, `rtol`, `atol`, `dt0`, `max_steps`,
-      `adjoint`, `progress`, `fixed_step` (converted to `SolverOptions` exactly as before; not together with
-      `options`) and `rope` ("elastic" or "inextensible", rigid model only; converted to `RigidGround`)
-      still work, with one `DeprecationWarning` naming the new spelling.
+    - `**deprecated`: the earlier keywords `t1`, `ts`, `n_save` (converted to `Times`: the same saved
+      times), `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`, `progress`, `fixed_step` (converted
+      to `SolverOptions` exactly as before; not together with `options`) and `rope` ("elastic" or
+      "inextensible", rigid model only; converted to `RigidGround`) still work, with one
+      `DeprecationWarning` naming the new spelling.
 
     **Returns** a `Trajectory`: for the rigid model its subclass `RigidTrajectory`, which adds `impact_loss`
     and the phase log.
@@ -264,7 +230,9 @@ def simulate(
     and (with `throw=True`) an `EquinoxRuntimeError` naming the failure.
     """
     require_x64()
-    model, options, moved = convert_legacy(model, options, solver_kw)
+    times, moved_times = convert_legacy_times("simulate", times, deprecated)
+    model, options, moved = convert_legacy(model, options, deprecated)
+    moved = moved_times | moved
     if isinstance(model, RigidGround):
         if options is None:
             options = SolverOptions(diffrax.Tsit5())  # for its default tolerances 1e-6, 1e-8
@@ -274,21 +242,14 @@ def simulate(
             atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
             max_steps=options.max_steps,
         )
-        return simulate_rigid(
-            scenario,
-            t1,  # pyright: ignore[reportArgumentType]  # a float or None here (checked above)
-            ts=ts,
-            n_save=n_save,
-            model=model,
-            options=rigid_options,
-        )
+        return simulate_rigid(scenario, times, model, rigid_options)
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()
     scenario = as_float64_leaves(scenario)
     if options is None:
         options = SolverOptions()
-    t1, ts = saved_times(scenario, t1, ts, n_save, jnp)
+    _, ts = times.resolve(scenario, DEFAULT_N, jnp)
     warn_moved("simulate", moved)
     ts = jnp.asarray(ts, dtype=jnp.float64)
     with forward_mode_hint():  # jacfwd through the reverse adjoint: say to pass adjoint="forward"

@@ -65,7 +65,7 @@ def leaf_getter(dotted: str) -> Callable[[Any], Any]:
 
 _STATIC_HINTS = {
     "t1": "the scenario's end time, a static setting: give it with --t1 T on the command line or "
-    "simulate(scenario, t1=T), or as t1 in the scenario file",
+    "simulate(scenario, Times(T)), or as t1 in the scenario file",
     "name": "a static label (the scenario file's name)",
     "description": "static free text (the scenario file's description)",
 }

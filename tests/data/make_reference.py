@@ -56,8 +56,8 @@ def trajectories() -> dict[str, np.ndarray]:
         sc = jh.load_scenario(name)
         t1_rigid, rope = RIGID[name]
         runs = {
-            "elastic": jh.simulate(sc, T1, n_save=N_SAVE, model=jh.ElasticFoundation()),
-            "rigid": jh.simulate(sc, t1_rigid, n_save=N_SAVE, model=jh.RigidGround(rope=rope)),
+            "elastic": jh.simulate(sc, jh.Times(T1, n=N_SAVE), model=jh.ElasticFoundation()),
+            "rigid": jh.simulate(sc, jh.Times(t1_rigid, n=N_SAVE), model=jh.RigidGround(rope=rope)),
         }
         for model, traj in runs.items():
             for f in TRAJECTORY_FIELDS:
@@ -70,9 +70,8 @@ def scan() -> dict[str, np.ndarray]:
     res = jh.scan(
         jh.load_scenario("paper-4.2"),
         {SCAN_PATH: SCAN_VALUES},
-        SCAN_T1,
+        jh.Times(SCAN_T1, n=N_SAVE),
         observables=list(SCAN_OBSERVABLES),
-        n_save=N_SAVE,
         derivatives=True,
         # the solver the reference was recorded with (the default of scan(derivatives=True) until 2026-11-24)
         options=jh.SolverOptions(diffrax.Tsit5(), adjoint=diffrax.ForwardMode()),
