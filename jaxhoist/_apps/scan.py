@@ -117,7 +117,7 @@ def scan(
     - `observables`: names of built-in observables (`jaxhoist._numerics.observables`), callables
       `fn(traj[, scenario])`, `Observable`s, or a dict name -> any of these.
     - `options`: `SolverOptions` (solver, step-size controller, dt0, step budget: one for every member);
-      default `SolverOptions()` (Rosenbrock-W), or `SolverOptions(diffrax.Tsit5())` with `derivatives`.
+      default `SolverOptions()` (Rosenbrock-W; with `derivatives` in forward mode).
       Constant steps (`SolverOptions(solver, diffrax.ConstantStepSize(), dt0=...)`) with an explicit
       Runge-Kutta solver (e.g. `diffrax.Bosh3()`) run the lean loop of `numerics.fixed_step` (same numbers
       as diffrax's `ConstantStepSize` to round-off when the saved times are multiples of `dt0`; other

@@ -100,12 +100,12 @@ def adaptive_lanes(n: int) -> int:
 
 
 def scan_solver_options(options: SolverOptions | None, derivatives: bool) -> SolverOptions:
-    """The scan's `SolverOptions`: `options`, or the default (`diffrax.Tsit5()` with derivatives: forward-mode
-    sensitivities through the default Rosenbrock-W solver are not reliable yet at high friction, they grow
-    without bound over 25 s of paper-4.2 at mu >= 0.5; docs/performance.md); with `derivatives`, forward
-    mode (`diffrax.ForwardMode`)."""
+    """The scan's `SolverOptions`: `options`, or the default `SolverOptions()` (the Rosenbrock-W solver); with
+    `derivatives`, forward mode (`diffrax.ForwardMode`), in which the W solver integrates the sensitivities
+    as their own error-controlled ODE (`_numerics/sensitivity.py`; differentiating the steps of Tsit5, the
+    earlier default, gave sensitivities that grew without bound over 25 s of paper-4.2)."""
     if options is None:
-        options = SolverOptions(diffrax.Tsit5() if derivatives else None)
+        options = SolverOptions()
     elif not isinstance(options, SolverOptions):
         raise ScenarioError(f"options must be a jaxhoist.SolverOptions, got {type(options).__name__}")
     if derivatives and not options.forward_mode:

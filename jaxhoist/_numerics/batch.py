@@ -105,9 +105,10 @@ def member(scenario, ts, row, spec: BatchSpec):
         _, (obs, traj) = run(row)
         jac = {}
     ok = traj.status == SolveStatus.OK
-    # a NaN observable or sensitivity of a solve that succeeded is flagged, never silent (values are kept)
-    checked = [*obs.values(), *jac.values()]
-    nan_obs = jnp.any(jnp.stack([jnp.any(jnp.isnan(v)) for v in checked])) if checked else False
+    # a NaN observable, or a NaN or infinite sensitivity, of a solve that succeeded is flagged, never silent
+    # (values are kept)
+    checked = [jnp.isnan(v) for v in obs.values()] + [~jnp.isfinite(v) for v in jac.values()]
+    nan_obs = jnp.any(jnp.stack([jnp.any(v) for v in checked])) if checked else False
     status = jnp.where(ok & nan_obs, ScanStatus.NAN_OBSERVABLE, traj.status).astype(jnp.int32)
     obs = {k: jnp.where(ok, v, jnp.nan) for k, v in obs.items()}
     obs.update({f"d_{k}": jnp.where(ok, v, jnp.nan) for k, v in jac.items()})

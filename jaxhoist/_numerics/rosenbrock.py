@@ -170,21 +170,26 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
     - `quadrature`: `where(y)` selecting the state's pure quadratures (integrated by the trapezoidal rule
       on the steps' end points, see `w_step`); default the elastic model's energy integrals; None for none.
     - `tableau`: the method; default ROS34PW2 (order 3, embedded order 2, L-stable, stiffly accurate).
+    - `tangent_weight`: the weight w of the sensitivities' error in the step-size control of forward-mode
+      derivatives (`jax.jvp`, `jax.jacfwd`, `scan(derivatives=True)` with `adjoint=diffrax.ForwardMode()`):
+      a step is accepted when max(‖e_y‖, w ‖e_s‖) <= 1, so a sensitivity may carry 1/w times the
+      relative local error of the state (`_numerics/sensitivity.py`). Default 0.1.
 
     f at each step's end is kept for the next step's first stage, so a step costs four evaluations of the
     vector field, one linearisation and one 6x6 factorisation.
 
-    Derivatives (`jax.jacfwd`, `jax.grad`) go through the steps with W held fixed. They agree with
-    differences of the solution over short spans (tests/test_rosenbrock.py), but over the full 25 s of
-    paper-4.2 at μ >= 0.5 forward-mode sensitivities grew without bound (docs/performance.md): for
-    sensitivities over long spans use `diffrax.Tsit5()`, which `scan(derivatives=True)` and
-    `locate_bifurcation` do by default. Dense output between steps is linear;
+    Forward-mode derivatives (`SolverOptions(adjoint=diffrax.ForwardMode())`) are solved as their own
+    error-controlled ODE beside the state (`_numerics/sensitivity.py`): differentiating the steps instead
+    let the tangent grow without bound in stick-slip over 25 s of paper-4.2. Reverse mode (`jax.grad`, the
+    default adjoint) goes through the steps with W held fixed; it agrees with differences of the solution
+    over short spans (tests/test_rosenbrock.py). Dense output between steps is linear;
     `numerics.solve` makes the steps land on the saved times, so saved values are the method's own.
     """
 
     linearise: Callable = eqx.field(static=True, default=elastic_linearise)
     quadrature: Callable | None = eqx.field(static=True, default=elastic_quadratures)
     tableau: WTableau = ROS34PW2
+    tangent_weight: float = eqx.field(static=True, default=0.1)
 
     term_structure: ClassVar = AbstractTerm
     interpolation_cls: ClassVar = diffrax.LocalLinearInterpolation

@@ -20,6 +20,7 @@ from .._physics.params import Scenario
 from .options import AbstractModel, ElasticFoundation, RigidGround, SolverOptions, as_model
 from .rigid_options import RigidOptions
 from .rigid_solve import simulate_rigid
+from .sensitivity import solve_forward, uses_tangent_solve
 from .times import TimesLike
 from .times import convert_legacy as convert_legacy_times
 from .trajectory import Trajectory as Trajectory
@@ -81,7 +82,15 @@ def _controller(options: SolverOptions, ts):
 
 
 def solve(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOptions) -> Trajectory:
-    """The traceable core: initial state, one diffeqsolve with `throw=False`, outputs. Never raises."""
+    """The traceable core: initial state, one diffeqsolve with `throw=False`, outputs. Never raises.
+    With the Rosenbrock-W solver in forward mode, derivatives are the error-controlled sensitivities of
+    `sensitivity.solve_forward`."""
+    if uses_tangent_solve(options):
+        return _solve_forward(scenario, ts, options)
+    return _solve_plain(scenario, ts, options)
+
+
+def _solve_plain(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOptions) -> Trajectory:
     y0, c = initial_state(scenario)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(vector_field),  # pyright: ignore[reportArgumentType]  # jaxtyping Scalar vs diffrax RealScalarLike
@@ -102,6 +111,7 @@ def solve(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOptions) 
     return outputs(ts, sol.ys, scenario, c, _status(sol.result, y1), sol.stats)  # pyright: ignore[reportArgumentType]  # sol.ys is the saved State with SaveAt(ts=...)
 
 
+_solve_forward = solve_forward(_solve_plain, _controller, outputs, _status)
 _solve_jit = eqx.filter_jit(solve)
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 from pathlib import Path
 
+import diffrax
 import jax
 import numpy as np
 
@@ -72,6 +73,8 @@ def scan() -> dict[str, np.ndarray]:
         jh.Times(SCAN_T1, n=N_SAVE),
         observables=list(SCAN_OBSERVABLES),
         derivatives=True,
+        # the solver the reference was recorded with (the default of scan(derivatives=True) until 2026-11-24)
+        options=jh.SolverOptions(diffrax.Tsit5(), adjoint=diffrax.ForwardMode()),
         batch=jh.BatchOptions(
             devices=jax.devices()[:1]
         ),  # one device: valid while the multi-device path changes

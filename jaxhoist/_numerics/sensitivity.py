@@ -1,0 +1,176 @@
+"""Forward-mode sensitivities through the Rosenbrock-W solver, solved as their own error-controlled ODE.
+
+Differentiating the W steps themselves (what `jax.jvp` of `diffeqsolve` does) gives the *discrete* tangent:
+the same steps applied to the variational equations ṡ = f_y s + f_θ, with W held fixed. The primal solution
+is kept accurate by error control; the tangent is not, and in stick-slip the two part company. The stage
+Jacobian f_y at a corner crossing the friction band |v| < ε has the slope μN/ε, while W, taken at the
+step's start, may hold the sliding slope μN/|v|; one such step multiplies the tangent by ~hμN/(εm) while
+the friction force itself saturates at μN and keeps the primal bounded. On paper-4.2 over 25 s the discrete
+tangent reached |∂x/∂μ| ~ 1e125 m at μ = 0.55 (and, for Tsit5 at rtol 1e-8, 1e59 m at μ = 0.3), against
+central differences of 1-10 m.
+
+So here the tangent is integrated *with* the state, as one augmented system (y, s), s = ∂y/∂θ along one
+direction θ̇ (Hairer, Nørsett & Wanner I, §I.14; the "staggered-direct" forward sensitivities of CVODES):
+
+    ẏ = f(t, y, θ),    ṡ = f_y(t, y, θ) s + f_θ(t, y, θ) θ̇,    s(0) = ∂y0/∂θ θ̇,
+
+by the same W-method with the same W for both blocks (one factorisation serves both: W approximates the
+Jacobian of the variational block as well as of f), and with the step-size controller seeing the error of
+s too: a step is accepted when max(‖e_y‖, w ‖e_s‖) ≤ 1 in the controller's scaled norm (its own rtol,
+atol). The weight w = `RosenbrockW.tangent_weight` (default 0.1) lets a sensitivity carry 1/w times the
+relative local error of the state; w = 1 controls both alike. Measured on paper-4.2, 25 s, default
+tolerances, against central differences (h = 1e-4) of Tsit5 solves at rtol 1e-10 (`python
+experiments/w_sensitivity.py`): see docs/performance.md.
+
+`solve_forward` wraps the solve in `jax.custom_jvp`, so `jax.jvp`, `jax.jacfwd` and everything built on
+them (`scan(derivatives=True)`, `locate_bifurcation`) get these sensitivities. The values under
+differentiation are those of the plain solve, bit for bit (the primal is solved as usual, the augmented
+system only for the tangent: a tangent must not change the primal, and `jax.jacfwd` needs the primal to be
+the same for every direction). Reverse mode (`jax.grad`) is not available on this path: use
+`adjoint=diffrax.RecursiveCheckpointAdjoint()` (the default) for it.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from collections.abc import Callable
+
+import diffrax
+import equinox as eqx
+import jax
+import jax.numpy as jnp
+
+from .._errors import SolveStatus
+from .._physics.elastic import vector_field
+from .._physics.equilibrium import initial_state
+from .._physics.params import Scenario
+from .options import SolverOptions
+from .rosenbrock import RosenbrockW
+
+
+class _TangentLinearisation(eqx.Module):
+    """The W of the augmented system (y, s): the state's W on both blocks, factorised once."""
+
+    lin: eqx.Module
+
+    def factor(self, hg):
+        return self.lin.factor(hg)  # pyright: ignore[reportAttributeAccessIssue]  # a Linearisation
+
+    def solve(self, factors, r, hg):
+        solve = self.lin.solve  # pyright: ignore[reportAttributeAccessIssue]  # a Linearisation
+        return (solve(factors, r[0], hg), solve(factors, r[1], hg))
+
+
+@dataclasses.dataclass(frozen=True)
+class _Augmented:
+    """Static helpers of the augmented system for a solver's `linearise` and `quadrature` (hashable, so
+    that they can be static fields of `RosenbrockW`)."""
+
+    linearise: Callable
+    quadrature: Callable | None
+
+    def lin(self, t, y, args):
+        scenario_args = args[0]
+        return _TangentLinearisation(self.linearise(t, y[0], scenario_args))
+
+    def quad(self, y):
+        assert self.quadrature is not None
+        return (*self.quadrature(y[0]), *self.quadrature(y[1]))
+
+
+def uses_tangent_solve(options: SolverOptions) -> bool:
+    """Whether forward-mode derivatives of a solve with `options` take the augmented route (the
+    Rosenbrock-W solver in forward mode)."""
+    return isinstance(options.solver, RosenbrockW) and options.forward_mode
+
+
+def _weighted(controller, weight: float):
+    """`controller` with the error norm of (e_y, e_s) max(‖e_y‖, weight ‖e_s‖) if it is a PIDController;
+    others (constant steps) unchanged."""
+    if not isinstance(controller, diffrax.PIDController):
+        return controller
+    norm = controller.norm
+    return dataclasses.replace(controller, norm=lambda e: jnp.maximum(norm(e[0]), weight * norm(e[1])))
+
+
+def solve_forward(solve_plain: Callable, controller: Callable, outputs: Callable, status_of: Callable):
+    """`solve(scenario, ts, options)` whose forward-mode derivative is the augmented solve (module
+    docstring). The arguments are the plain core and its helpers from `solve.py` (passed in, so that this
+    module does not import it back): `solve_plain(scenario, ts, options) -> Trajectory`,
+    `controller(options, ts)`, `outputs(ts, ys, scenario, c, status, stats)`, `status_of(result, y1)`."""
+
+    def solve(scenario: Scenario, ts, options: SolverOptions):
+        dyn, static = eqx.partition(scenario, eqx.is_inexact_array)
+
+        @jax.custom_jvp
+        def run(dyn, ts):
+            return solve_plain(eqx.combine(dyn, static), ts, options)
+
+        @run.defjvp
+        def run_jvp(primals, tangents):
+            dyn, ts = primals
+            ddyn, dts = tangents
+            primal = solve_plain(eqx.combine(dyn, static), ts, options)
+            return primal, _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, status_of)
+
+        return run(dyn, ts)
+
+    return solve
+
+
+def _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, status_of):
+    solver = options.solver
+    assert isinstance(solver, RosenbrockW)
+
+    def init(d):
+        return initial_state(eqx.combine(d, static))
+
+    (y0, c), (dy0, dc) = jax.jvp(init, (dyn,), (ddyn,))
+
+    def field(t, y, args):
+        (d, cc), (dd, dcc) = args
+        ys, s = y
+
+        def f(yy, d_, c_):
+            return vector_field(t, yy, (eqx.combine(d_, static), c_))
+
+        return jax.jvp(f, (ys, d, cc), (s, dd, dcc))
+
+    aug = _Augmented(solver.linearise, solver.quadrature)
+    aug_solver = RosenbrockW(
+        linearise=aug.lin,
+        quadrature=None if solver.quadrature is None else aug.quad,
+        tableau=solver.tableau,
+        tangent_weight=solver.tangent_weight,
+    )
+    sc = eqx.combine(dyn, static)
+    weighted = _weighted(options.stepsize_controller, solver.tangent_weight)
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(field),
+        aug_solver,
+        t0=ts[0] * 0.0,
+        t1=ts[-1],
+        dt0=options.dt0,
+        y0=(y0, dy0),
+        args=((dyn, c), (ddyn, dc)),
+        saveat=diffrax.SaveAt(ts=ts),
+        stepsize_controller=controller(options.replace(stepsize_controller=weighted), ts),
+        max_steps=options.max_steps,
+        progress_meter=options.progress_meter,
+        throw=False,
+    )
+    ys, ss = sol.ys  # pyright: ignore[reportGeneralTypeIssues]  # the saved (y, s) pair
+    # a moved saved time t_k moves the saved state by f(t_k, y_k) dt_k
+    rates = jax.vmap(lambda t, y: vector_field(t, y, (sc, c)))(ts, ys)
+    ss = jax.tree_util.tree_map(lambda s, r: s + r * dts.reshape((-1,) + (1,) * (r.ndim - 1)), ss, rates)
+    y1 = jax.tree_util.tree_map(lambda x: x[-1], ys)
+    status, stats = status_of(sol.result, y1), sol.stats
+
+    # a sensitivity solve that failed gives NaN sensitivities (a scan marks them), never silently wrong ones
+    ok = status == SolveStatus.OK
+    ss = jax.tree_util.tree_map(lambda s: jnp.where(ok, s, jnp.nan), ss)
+
+    def out(ys_, d_, c_, ts_):
+        return outputs(ts_, ys_, eqx.combine(d_, static), c_, status, stats)
+
+    return jax.jvp(out, (ys, dyn, c, ts), (ss, ddyn, dc, dts))[1]
