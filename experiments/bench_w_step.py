@@ -4,14 +4,25 @@ linearisation with its factorisation and one solve, and a full Rosenbrock-W (ROS
 
     python experiments/bench_w_step.py --lanes 256
     python experiments/bench_w_step.py --lanes 64 --kinds f,w
+    python experiments/bench_w_step.py --lanes 16,256 --kinds lin,w --baseline c315662 --rounds 7
 
-Prints compile time and µs per step per trajectory (best of 3 calls after compiling), one device.
+`--baseline REV` also times `lin` and `w` with `jaxhoist/_physics/linearise.py` and
+`jaxhoist/_numerics/rosenbrock.py` as they were at git revision REV (read with `git show`, everything else as
+checked out), in the same process: every kind is compiled first,
+then timed once per round in `--rounds` rounds (the order reversed every other round, so that a load change
+on the shared machine hits both alike), and the best round counts. The ratio printed is baseline / current.
+
+Prints compile time and µs per step per trajectory, one device.
 """
 
 from __future__ import annotations
 
 import argparse
+import importlib.util
+import subprocess
+import sys
 import time
+from pathlib import Path
 
 import jax
 
@@ -30,7 +41,32 @@ from jaxhoist._physics.linearise import linearise  # noqa: E402  (internal: time
 H = 1e-3
 
 
-def loop(kind: str, n_steps: int):
+def _module_at(rev: str, path: str, package: str):
+    """The module `path` as it was at git revision `rev`, imported as a sibling module in `package` (so its
+    relative imports resolve to the current package)."""
+    root = Path(__file__).resolve().parents[1]
+    src = subprocess.run(
+        ["git", "show", f"{rev}:{path}"], cwd=root, check=True, capture_output=True, text=True
+    ).stdout
+    name = f"{package}._{Path(path).stem}_at_{rev}"
+    spec = importlib.util.spec_from_loader(name, loader=None)
+    assert spec is not None
+    mod = importlib.util.module_from_spec(spec)
+    mod.__package__ = package
+    sys.modules[name] = mod
+    exec(compile(src, f"{rev}:{path}", "exec"), mod.__dict__)
+    return mod
+
+
+def baseline(rev: str):
+    """(`linearise`, `w_step`) as they were at git revision `rev` (jaxhoist/_physics/linearise.py and
+    jaxhoist/_numerics/rosenbrock.py; the vector field and everything else as checked out)."""
+    lin = _module_at(rev, "jaxhoist/_physics/linearise.py", "jaxhoist._physics")
+    ros = _module_at(rev, "jaxhoist/_numerics/rosenbrock.py", "jaxhoist._numerics")
+    return lin.linearise, ros.w_step
+
+
+def loop(kind: str, n_steps: int, lin_fn=linearise, step_fn=w_step):
     def one(y0, args):
         if kind == "f":  # one evaluation per step, folded into the state so that XLA keeps it
 
@@ -47,7 +83,7 @@ def loop(kind: str, n_steps: int):
         elif kind == "lin":
 
             def body(i, y):
-                lin = linearise(i * H, y, args)
+                lin = lin_fn(i * H, y, args)
                 hg = H * ROS34PW2.gamma
                 u = lin.solve(lin.factor(hg), y, hg)
                 return jax.tree_util.tree_map(lambda a, b: a + 1e-12 * b, y, u)
@@ -55,7 +91,7 @@ def loop(kind: str, n_steps: int):
         elif kind == "w":
 
             def body(i, y):
-                return w_step(vector_field, linearise, ROS34PW2, i * H, y, H, args)[0]
+                return step_fn(vector_field, lin_fn, ROS34PW2, i * H, y, H, args)[0]
 
         else:
             raise SystemExit(f"unknown kind {kind!r}")
@@ -66,30 +102,43 @@ def loop(kind: str, n_steps: int):
 
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--lanes", type=int, default=256, help="members in the vmap (default 256)")
+    p.add_argument("--lanes", default="256", help="members in the vmap, comma-separated (default 256)")
     p.add_argument("--steps", type=int, default=500, help="steps per call (default 500)")
     p.add_argument("--kinds", default="f,bosh3,lin,w", help="what to time (default f,bosh3,lin,w)")
+    p.add_argument("--baseline", default=None, help="git revision of linearise.py to time lin and w against")
+    p.add_argument("--rounds", type=int, default=3, help="timed rounds (default 3)")
     args = p.parse_args(argv)
     sc = jh.load_scenario("paper-4.2")
+    base = baseline(args.baseline) if args.baseline else None
 
     def member(mu):
         s = eqx.tree_at(lambda s: s.foundation.friction_coefficient, sc, mu)
         y0, c = initial_state(s)
         return y0, (s, c)
 
-    y0s, argss = jax.vmap(member)(jnp.linspace(0.1, 0.6, args.lanes))
-    for kind in args.kinds.split(","):
-        f = loop(kind, args.steps)
-        t0 = time.perf_counter()
-        jax.block_until_ready(f(y0s, argss))
-        compile_s = time.perf_counter() - t0
-        best = float("inf")
-        for _ in range(3):
+    for lanes in [int(x) for x in args.lanes.split(",")]:
+        y0s, argss = jax.vmap(member)(jnp.linspace(0.1, 0.6, lanes))
+        runs = {}
+        for kind in args.kinds.split(","):
+            runs[kind] = loop(kind, args.steps)
+            if base is not None and kind in ("lin", "w"):
+                runs[f"{kind}@{args.baseline}"] = loop(kind, args.steps, *base)
+        compile_s, best = {}, {k: float("inf") for k in runs}
+        for k, f in runs.items():
             t0 = time.perf_counter()
             jax.block_until_ready(f(y0s, argss))
-            best = min(best, time.perf_counter() - t0)
-        us = 1e6 * best / args.steps / args.lanes
-        print(f"{kind:6s} lanes {args.lanes}: compile {compile_s:.1f} s, {us:.3f} us per step per trajectory")
+            compile_s[k] = time.perf_counter() - t0
+        for r in range(args.rounds):
+            for k in list(runs) if r % 2 == 0 else list(runs)[::-1]:
+                t0 = time.perf_counter()
+                jax.block_until_ready(runs[k](y0s, argss))
+                best[k] = min(best[k], time.perf_counter() - t0)
+        for k in runs:
+            us = 1e6 * best[k] / args.steps / lanes
+            line = f"{k:16s} lanes {lanes}: compile {compile_s[k]:.1f} s, {us:.3f} us per step per trajectory"
+            if "@" in k:
+                line += f"  (baseline / current: {best[k] / best[k.split('@')[0]]:.2f}x)"
+            print(line, flush=True)
 
 
 if __name__ == "__main__":
