@@ -182,8 +182,13 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
     error-controlled ODE beside the state (`_numerics/sensitivity.py`): differentiating the steps instead
     let the tangent grow without bound in stick-slip over 25 s of paper-4.2. Reverse mode (`jax.grad`, the
     default adjoint) goes through the steps with W held fixed; it agrees with differences of the solution
-    over short spans (tests/test_rosenbrock.py). Dense output between steps is linear;
-    `numerics.solve` makes the steps land on the saved times, so saved values are the method's own.
+    over short spans when every step is checkpointed (tests/test_rosenbrock.py). With fewer checkpoints
+    (the default) diffrax recomputes steps in the backward pass, in a differently compiled program that
+    rounds differently; where that flips a step's acceptance, the gradient belongs to a slightly different
+    step sequence (0.5 % off over 0.5 s of paper-4.2 at rtol 1e-7): for exact gradients pass
+    `adjoint=diffrax.RecursiveCheckpointAdjoint(checkpoints=max_steps)` or use forward mode. Dense output
+    between steps is linear; `_numerics/solve.py` makes the steps land on the saved times, so saved values
+    are the method's own.
     """
 
     linearise: Callable = eqx.field(static=True, default=elastic_linearise)
