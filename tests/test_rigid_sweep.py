@@ -207,7 +207,8 @@ def _edge_run(chatter, max_phases: int, span: float):
     import jax.numpy as jnp
 
     from jaxhoist._numerics.rigid_compiled import _Options
-    from jaxhoist._numerics.rigid_driver import _DEFAULT_TOL, _Driver
+    from jaxhoist._numerics.rigid_driver import _Driver
+    from jaxhoist._numerics.rigid_options import DRIVER_TOLERANCES
     from jaxhoist._numerics.rigid_run import _Run
     from jaxhoist._physics import rigid
     from jaxhoist._physics.elastic import State
@@ -220,7 +221,7 @@ def _edge_run(chatter, max_phases: int, span: float):
     o, settings = jh.RigidOptions(), rigid.Settings()
     assert o.stall is not None
     opt = _Options(o.rtol, o.atol, o.max_steps, 1e-10, o.stall.window, o.stall.min_step)  # as simulate_rigid
-    drv = _Driver(sc, c, settings, opt, 0.0, dict(_DEFAULT_TOL))
+    drv = _Driver(sc, c, settings, opt, 0.0, dict(DRIVER_TOLERANCES))
     run = _Run(drv, np.linspace(t0, t0 + span, 21), t0 + span, max_phases, o.max_steps, chatter, False)
     run.resume(t0, y0)
     while run.step():

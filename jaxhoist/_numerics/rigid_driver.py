@@ -31,7 +31,6 @@ from .rigid_compiled import (
     _RopeWouldPush,
 )
 from .rigid_coulomb import coulomb_pattern
-from .rigid_options import DRIVER_TOLERANCES as _DEFAULT_TOL  # noqa: F401  (rigid_solve and tests read it here)
 from .rigid_records import _fmt
 
 

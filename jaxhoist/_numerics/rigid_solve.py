@@ -54,8 +54,8 @@ from .rigid_compiled import (
 )
 from .rigid_compliant import ChatterRule
 from .rigid_coulomb import coulomb_pattern
-from .rigid_driver import _DEFAULT_TOL, _Driver
-from .rigid_options import RigidOptions, convert_legacy
+from .rigid_driver import _Driver
+from .rigid_options import DRIVER_TOLERANCES, RigidOptions, convert_legacy
 from .rigid_records import PhaseRecord, RigidContactError, RigidTrajectory
 from .rigid_run import _Run
 from .times import TimesLike
@@ -150,7 +150,7 @@ def simulate_rigid(
         stall_step=0.0 if stall is None else float(stall.min_step),
     )
     y0, c = rigid.initial_state(scenario)
-    drv = _Driver(scenario, c, settings, phase_options, float(model.restitution), dict(_DEFAULT_TOL))
+    drv = _Driver(scenario, c, settings, phase_options, float(model.restitution), dict(DRIVER_TOLERANCES))
     drv.debug = verbose == "debug"
     drv.inextensible = isinstance(model.rope, InextensibleRope)
 
