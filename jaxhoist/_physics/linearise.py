@@ -7,13 +7,17 @@ foundation dampers h and springs k (3.1)-(3.2), the rope damper b_l and spring c
 and dampers (2.13). Each acts through a point whose velocity is linear in V, u = G V, so its contribution to
 the generalised force Q = Σ Gᵀ F has the derivatives
 
-    D = ∂Q/∂V = Σ Gᵀ (∂F/∂u) G,    K = ∂Q/∂X = Σ Gᵀ (∂F/∂x) G,
+    D = ∂Q/∂V = Σ Gᵀ (∂F/∂u) G,    K = ∂Q/∂X = Σ Gᵀ (∂F/∂x) G + Σ Gᵀ (∂F/∂u) G^ω,
 
-with X the generalised displacement (δx_C, δθ in body axes, δx_A). The 3x3 (corner) and scalar (rope)
-force derivatives come from forward-mode derivatives of the force laws themselves (`forces.py`, the friction
-law of the scenario), so any friction law is covered; what is left out is slow: gyroscopic terms, the change
-of the lever arms G with the orientation, the rope's transverse (geometric) stiffness S/|AB|, and the
-friction law's internal state (bristle deflection).
+with X the generalised displacement (δx_C, δθ in body axes, δx_A). The second term of K is the corner
+velocities turning with the body at fixed V, u_i = v_C + R (ω x ρ_i), so δu_i = -R [ω x ρ_i]x δθ = G^ω_i X:
+while a corner sticks, ∂F/∂u holds the friction slope μN/ε and this term is as stiff as the contact itself
+(paper-4.2 at μ = 0.55 tips about one sticking corner for seconds; without it the W steps there were 10x
+shorter). The 3x3 (corner) and scalar (rope) force derivatives come from forward-mode derivatives of the
+force laws themselves (`forces.py`, the friction law of the scenario), so any friction law is covered; what
+is left out is slow: gyroscopic terms, the turning of the lever arms G at fixed force (|F| |ρ|, no friction
+slope in it), the rope's velocity turning with the body, its transverse (geometric) stiffness S/|AB|, and
+the friction law's internal state (bristle deflection).
 
 `Linearisation.solve` then solves the linear system of a linearly implicit (Rosenbrock-W) step for the
 approximate Jacobian J that these matrices define on the full state (positions driven by velocities, velocity
@@ -277,8 +281,15 @@ def linearise(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> Linearis
     # D_b = Σ_i G_iᵀ C_i G_i, K_b = Σ_i G_iᵀ K_i G_i as batched matrix products: on XLA's CPU backend a
     # product is one kernel whose result is stored, where written-out sums are recomputed in every kernel
     # that reads them (here the unrolled LU of `factor`).
+    # Turning the body at fixed V turns the corner velocities too: δu_i = R (δθ x (ω x ρ_i)) = G^ω_i δθ,
+    # G^ω_i = -R [ω x ρ_i]x. Through ∂F_i/∂u_i that is a stiffness in δθ of size μN/ε |ω| |ρ| while a corner
+    # sticks (~1e8 N/rad on paper-4.2 at μ = 0.55, tipping about one sticking corner); left out, the W step
+    # met it explicitly and took 3x the steps over 25 s there (experiments/w_orientation.py).
+    turn = -R[None] @ _skew(jnp.cross(omega, c.corners_rel))
+    G_turn = jnp.concatenate([jnp.zeros((4, 3, 3)), turn], axis=-1)
     D_body = jnp.einsum("irk,irj->kj", G, jnp.einsum("irs,isj->irj", C, G))
-    K_body = jnp.einsum("irk,irj->kj", G, jnp.einsum("irs,isj->irj", Kc, G))
+    KG = jnp.einsum("irs,isj->irj", Kc, G) + jnp.einsum("irs,isj->irj", C, G_turn)
+    K_body = jnp.einsum("irk,irj->kj", G, KG)
 
     # Rope, eq. (2.14): S(δ, dδ/dt) along e (from B towards A); dδ/dt = eᵀ(v_A - v_B) + ds/dt.
     G_B = jnp.concatenate([eye3, -_mm(R, _skew(c.attachment_rel))], axis=-1)
