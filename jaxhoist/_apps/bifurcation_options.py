@@ -114,9 +114,11 @@ class SearchOptions(eqx.Module):
 
 def default_solver_options() -> SolverOptions:
     """The locator's solver settings: `diffrax.Tsit5()` with rtol 1e-6, atol 1e-8 (its default tolerances).
-    Newton steps take forward-mode sensitivities, which through the default Rosenbrock-W solver are not
-    reliable yet at high friction (they grow without bound over 25 s of paper-4.2 at mu >= 0.5;
-    docs/performance.md)."""
+    Not the Rosenbrock-W solver of `simulate` and `scan`: a locator needs the observable to well below its
+    `tol` and a slope per Newton step, and on the paper's §4.3 change (paper-4.3, ϑ(t1) = 15° in μ over
+    25 s, `experiments/locator_solver.py`) W at its rtol 1e-3 put μ* 6e-6 off (Tsit5: 1.4e-7) in 1.9x
+    Tsit5's time, at rtol 1e-4 1.1e-6 off in 4.2x: its error-controlled sensitivities
+    (`_numerics/sensitivity.py`) cost more than Tsit5's differentiated steps over these spans."""
     return SolverOptions(solver=diffrax.Tsit5())
 
 
