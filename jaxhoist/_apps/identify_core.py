@@ -18,7 +18,9 @@ import optimistix as optx
 from .._errors import SolveStatus
 from .._numerics.compile_cache import compiled, structure_key
 from .._numerics.options import SolverOptions
-from .._numerics.solve import outputs, solve
+from .._numerics.rosenbrock import RosenbrockW
+from .._numerics.sensitivity import _weighted, augmented_solver
+from .._numerics.solve import _controller, outputs, solve
 from .._physics.elastic import vector_field
 from .._physics.equilibrium import initial_state
 from .._physics.params import Scenario
@@ -145,16 +147,27 @@ def _sensitivity_solve(cfg: _Config, z, args):
         ydot, lin = jax.linearize(lambda y_, z_, c_: vector_field(t, y_, (scen(z_), c_)), y, zz, cc)
         return ydot, jax.vmap(lin)(Y, eye, dcc)
 
+    if isinstance(opt.solver, RosenbrockW):
+        # W on every block, factorised once per step for the state and its p sensitivities; the step-size
+        # control as in `numerics.sensitivity` (each sensitivity's error weighted by `tangent_weight`), and a
+        # step landing on every saved time as in `numerics.solve`
+        solver = augmented_solver(opt.solver, many=True)
+        args = ((scen(z), c), (z, c, dC))
+        term = diffrax.ODETerm(lambda t, state, a: rhs(t, state, a[1]))
+        weighted = _weighted(opt.stepsize_controller, opt.solver.tangent_weight, many=True)
+        controller = _controller(opt.replace(stepsize_controller=weighted), ts)
+    else:
+        solver, args, term, controller = opt.solver, (z, c, dC), diffrax.ODETerm(rhs), opt.stepsize_controller
     sol = diffrax.diffeqsolve(
-        diffrax.ODETerm(rhs),
-        opt.solver,
+        term,
+        solver,
         t0=ts[0] * 0.0,
         t1=ts[-1],
         dt0=opt.dt0,
         y0=(y0, Y0),
-        args=(z, c, dC),
+        args=args,
         saveat=diffrax.SaveAt(ts=ts),
-        stepsize_controller=opt.stepsize_controller,
+        stepsize_controller=controller,
         max_steps=opt.max_steps,
         adjoint=diffrax.ForwardMode(),
         throw=False,
@@ -184,10 +197,13 @@ def _sensitivity_solve(cfg: _Config, z, args):
 def _model_and_jacobian(cfg: _Config, z, args):
     """Whitened residuals r (n,), their Jacobian dr/dz (n, p), status and solver steps.
 
-    `cfg.sensitivity = "equations"` (default): the forward sensitivity equations with error control
-    (`_sensitivity_solve`). `"solver"`: `jax.jacfwd` through the solve with `diffrax.ForwardMode`
-    (`simulate(..., options=SolverOptions(adjoint="forward"))`), cheaper but without error control on the
-    tangents."""
+    `cfg.sensitivity = "equations"` (explicit solvers): the forward sensitivity equations with error control
+    (`_sensitivity_solve`). `"solver"`: `jax.jacfwd` through the solve in forward mode. With the
+    Rosenbrock-W solver (the default, see `sensitivity_route`) that is error-controlled too: the solve's
+    `jax.custom_jvp` (`numerics.sensitivity`) integrates each tangent direction as its own augmented ODE
+    beside the state, under the step-size control, and the primal is the plain solve bit for bit. With an
+    explicit solver and `diffrax.ForwardMode` it differentiates the solver's own steps, without error control
+    on the tangents (kept for comparison only, see `_sensitivity_solve`)."""
     _, _, data, sigma, _ = args
     if cfg.sensitivity == "solver":
 
