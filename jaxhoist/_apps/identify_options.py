@@ -80,10 +80,11 @@ def fit_solver_options(options: SolverOptions | None) -> SolverOptions:
     The state and its parameter sensitivities are integrated as one system under one step-size control
     (`identify_core._sensitivity_solve`); with `jaxhoist.RosenbrockW` its W serves every block, factorised
     once per step. That solver is not the default here (unlike `simulate` and `scan`): on paper-4.2
-    (`experiments/identify_paper42.py`, μ, k, h, c_l, b_l from 5 mm / 1 % noise) RosenbrockW at its
-    default rtol 1e-3 moves the estimates by at most 0.03 standard errors from Tsit5's at rtol 1e-6, but
-    its fit took 1.14x Tsit5's wall time over 25 s (the sensitivities' error control needs 22 500 W steps
-    against Tsit5's 16 400) and 1.9x over 3 s, and it compiles 1.7x longer; docs/identification.md.
+    (`experiments/identify_paper42.py --solver tsit5 --solver rosenbrock-w`, μ, k, h, c_l, b_l from 5 mm /
+    1 % noise) RosenbrockW at its default rtol 1e-3 puts the estimates within 0.031 standard errors of
+    Tsit5's at rtol 1e-6, but its fit took 1.37x Tsit5's wall time over 25 s (the sensitivities' error
+    control needs 22 500 W steps against Tsit5's 16 500) and 2.0x over 3 s, and it compiles 1.8x longer;
+    docs/identification.md.
 
     **Raises** `ScenarioError` for options that are not a `SolverOptions`.
     """
