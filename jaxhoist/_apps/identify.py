@@ -224,8 +224,8 @@ def identify(
       integrated with its sensitivities as one error-controlled system. `SolverOptions()`, the Rosenbrock-W
       solver at rtol 1e-3, atol 1e-5, works too (one W for the state and every sensitivity); on paper-4.2 its
       estimates lie within 0.031 standard errors of Tsit5's, but the fit took 1.4-2x the wall time and 1.8x
-      the compile time, so it is not the default here (`identify_options.fit_solver_options`,
-      docs/identification.md).
+      the compile time, so it is not the default here; with 10x stiffer friction it was 1.7x faster
+      (`identify_options.fit_solver_options`, docs/identification.md).
     - `fit`: `FitOptions` (extra random starts, Levenberg-Marquardt termination and step budget,
       identifiability thresholds, and `weights`: signal or group -> residual weight [1/unit] for signals
       without a known noise level); default `FitOptions()`. Signals with neither a noise level nor a weight
