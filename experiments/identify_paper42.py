@@ -1,17 +1,23 @@
-"""Identify μ, k, h, c_l and b_l of paper-4.2 from a synthetic measurement; compare with scipy.
+"""Identify μ, k, h, c_l and b_l of paper-4.2 from a synthetic measurement; compare solvers and scipy.
 
 The measurement: the mass-centre path (position_x, _y, _z) sampled at 50 Hz with 5 mm Gaussian noise and the
-rope tension with 1 % noise (standard deviation 1 % of its RMS value), simulated from the paper-4.2 preset.
-The fit starts from every parameter perturbed by ±30 % (alternating signs) and fits all five together with
-`jaxhoist._apps.identify.identify` (optimistix Levenberg-Marquardt, forward-mode sensitivities). In the same
-process, `scipy.optimize.least_squares` (trust-region reflective, 2-point finite-difference Jacobian) solves
-the same weighted problem in the same log variables, through the same compiled forward solve.
+rope tension with 1 % noise (standard deviation 1 % of its RMS value), simulated from the paper-4.2 preset
+with Tsit5 at `--data-rtol` (default 1e-8, atol 1e-10). The fit starts from every parameter perturbed by
+±30 % (alternating signs) and fits all five together with `jaxhoist.identify` (optimistix
+Levenberg-Marquardt, forward-mode sensitivities), once per `--solver` (repeatable; NAME or NAME@RTOL with
+NAME rosenbrock-w or tsit5, atol = RTOL/100; without @RTOL `--rtol`/`--atol`, else the solver's default
+tolerances; without `--solver`, identify's default options). In the same process,
+`scipy.optimize.least_squares` (trust-region reflective, 2-point finite-difference Jacobian) solves the same
+weighted problem in the same log variables, through the compiled forward solve of the data's solver.
 
 Printed and saved as markdown (DIR/identify_paper42.md): truth, start, estimate, standard error,
 (estimate - truth)/SE, scipy's estimate; iterations, function/Jacobian evaluations and wall times (compile
-apart); and a check of the forward-mode Jacobian against central differences at the estimate.
+apart); a check of each fit's Jacobian against central differences of the data's accurate solve at the
+estimate; and, with several solvers, every fit's estimate against the first one's in units of its SE.
 
-    python experiments/identify_paper42.py --out out/identify --quick   # 3 s horizon
+    python experiments/identify_paper42.py --out out/identify --quick   # 3 s horizon, identify's default
+    python experiments/identify_paper42.py --out out/identify --quick --no-scipy \\
+        --solver tsit5 --solver rosenbrock-w --solver rosenbrock-w@1e-4
     python experiments/identify_paper42.py --out out/identify           # the full 25 s horizon
 """
 
@@ -44,14 +50,47 @@ PATHS = {
 PERTURB = {"mu": 1.3, "k": 0.7, "h": 1.3, "c_l": 0.7, "b_l": 1.3}  # ±30 %, alternating
 
 
+SOLVERS = {"rosenbrock-w": jh.RosenbrockW, "tsit5": diffrax.Tsit5}
+
+
+def fit_options(spec: str | None, rtol, atol) -> tuple[str, jh.SolverOptions | None]:
+    """`(label, options)` of a `--solver` spec NAME[@RTOL]; None: identify's default (options None)."""
+    if spec is None:
+        return "identify's default", None
+    name, _, tol = spec.partition("@")
+    if name not in SOLVERS:
+        raise SystemExit(f"--solver {spec}: unknown solver {name!r} (choose from {', '.join(SOLVERS)})")
+    if tol:
+        rtol, atol = float(tol), float(tol) / 100
+    opts = jh.SolverOptions(SOLVERS[name](), rtol=rtol, atol=atol, max_steps=1_000_000)
+    ctl = opts.stepsize_controller
+    return f"{name} rtol {ctl.rtol:g} atol {ctl.atol:g}", opts  # pyright: ignore[reportAttributeAccessIssue]
+
+
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", default="out/identify_paper42")
     p.add_argument("--quick", action="store_true", help="3 s horizon instead of 25 s")
     p.add_argument("--t1", type=float, default=None, help="horizon [s] (overrides --quick)")
     p.add_argument("--seed", type=int, default=42)
-    p.add_argument("--rtol", type=float, default=1e-8, help="ODE rtol for both fits (default 1e-8)")
-    p.add_argument("--atol", type=float, default=1e-10, help="ODE atol for both fits (default 1e-10)")
+    p.add_argument(
+        "--solver",
+        action="append",
+        default=None,
+        metavar="NAME[@RTOL]",
+        help="the fit's solver, rosenbrock-w or tsit5, optionally with its rtol (atol = rtol/100; without it "
+        "--rtol/--atol or the solver's defaults); repeatable: one fit per solver on the same data (default: "
+        "identify's default options)",
+    )
+    p.add_argument("--rtol", type=float, default=None, help="ODE rtol of fits without @RTOL")
+    p.add_argument("--atol", type=float, default=None, help="ODE atol of fits without @RTOL")
+    p.add_argument(
+        "--data-rtol",
+        type=float,
+        default=1e-8,
+        help="rtol of the Tsit5 solve that makes the data and the central-difference Jacobian (atol "
+        "rtol/100; default 1e-8)",
+    )
     p.add_argument(
         "--diff-step",
         type=float,
@@ -65,9 +104,12 @@ def main(argv=None):
     truth_sc = jh.load_scenario("paper-4.2")
     t1 = args.t1 if args.t1 is not None else (3.0 if args.quick else truth_sc.t1)
     t = np.round(np.arange(0.0, t1 + 1e-9, 0.02), 10)  # 50 Hz
-    truth = {k: float(jh.physics.params.get_leaf(truth_sc, PATHS[k])) for k in PARAMS}
+    truth = {k: float(jh.get_param(truth_sc, PATHS[k])) for k in PARAMS}
     start = {k: truth[k] * PERTURB[k] for k in PARAMS}
-    solver = jh.SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol, max_steps=1_000_000)
+    data_solver = jh.SolverOptions(
+        diffrax.Tsit5(), rtol=args.data_rtol, atol=args.data_rtol / 100, max_steps=1_000_000
+    )
+    fits = [fit_options(spec, args.rtol, args.atol) for spec in (args.solver or [None])]
 
     w = time.perf_counter()
     meas = synthetic_measurement(
@@ -77,7 +119,7 @@ def main(argv=None):
         noise={"position": 0.005, "rope_tension": "1%"},
         seed=args.seed,
         source="paper-4.2 synthetic",
-        options=solver,
+        options=data_solver,
     )
     t_synth = time.perf_counter() - w
     csv = write_measurement(
@@ -92,20 +134,41 @@ def main(argv=None):
         f"(simulated in {t_synth:.2f} s incl. compile)",
         flush=True,
     )
+    # central differences of the accurate (data) solve: the reference for every fit's Jacobian
+    fn_ref, _ = residual_function(truth_sc, csv, PARAMS, start=start, t1=t1, options=data_solver)
 
-    # ---- jaxhoist: LM with forward-mode sensitivities (reads the CSV back: units and noise from the JSON)
-    res = identify(
-        truth_sc, csv, PARAMS, start=start, t1=t1, options=solver, fit=jh.FitOptions(max_iterations=200)
-    )
-    print(res.summary(), flush=True)
+    # ---- jaxhoist: LM with forward-mode sensitivities, once per solver, on the same data
+    results = []
+    for label, solver in fits:
+        print(f"--- fit with {label}", flush=True)
+        res = identify(
+            truth_sc, csv, PARAMS, start=start, t1=t1, options=solver, fit=jh.FitOptions(max_iterations=200)
+        )
+        print(res.summary(), flush=True)
+        J_ad = res.jacobian
+        J_fd = np.empty_like(J_ad)
+        for i in range(len(PARAMS)):
+            h = 1e-3 * res.values[i]
+            tp, tm = res.values.copy(), res.values.copy()
+            tp[i] += h
+            tm[i] -= h
+            J_fd[:, i] = (fn_ref(tp) - fn_ref(tm)) / (2 * h)
+        jac_err = {
+            k: float(np.linalg.norm(J_ad[:, i] - J_fd[:, i]) / np.linalg.norm(J_fd[:, i]))
+            for i, k in enumerate(PARAMS)
+        }
+        results.append((label, solver, res, jac_err))
+    label, _, res, jac_err = results[0]
     est = dict(zip(PARAMS, res.values, strict=True))
     se = dict(zip(PARAMS, res.std_errors, strict=True))
 
     # ---- scipy: the same whitened residuals, 2-point finite differences in z = log(θ/θ_start)
-    fn, theta0 = residual_function(truth_sc, csv, PARAMS, start=start, t1=t1, options=solver)
-    fn(theta0)  # compile the forward solve outside the timing
     sp = None
     if not args.no_scipy:
+        # the accurate solve of the data: finite differences of identify's default rtol 1e-6 are too noisy
+        # for a relative step of 1e-4 (scipy stopped at the start, `xtol` satisfied, cost 83 685 against 285)
+        fn, theta0 = fn_ref, np.array([start[k] for k in PARAMS])
+        fn(theta0)  # the forward solve compiled outside the timing
         th0 = np.array([start[k] for k in PARAMS])
         nfev = [0]
 
@@ -138,24 +201,10 @@ def main(argv=None):
             "message": sol.message,
         }
         print(
-            f"scipy least_squares: {sol.message} cost {sol.cost:.6g}, {sol.nfev} fev + {sol.njev} jev "
-            f"({nfev[0]} forward solves), {t_sp:.2f} s",
+            f"scipy least_squares (Tsit5 rtol {args.data_rtol:g}): {sol.message} cost {sol.cost:.6g}, "
+            f"{sol.nfev} fev + {sol.njev} jev ({nfev[0]} forward solves), {t_sp:.2f} s",
             flush=True,
         )
-
-    # ---- forward-mode Jacobian vs central differences at the estimate (relative steps 1e-3)
-    J_ad = res.jacobian
-    J_fd = np.empty_like(J_ad)
-    for i in range(len(PARAMS)):
-        h = 1e-3 * res.values[i]
-        tp, tm = res.values.copy(), res.values.copy()
-        tp[i] += h
-        tm[i] -= h
-        J_fd[:, i] = (fn(tp) - fn(tm)) / (2 * h)
-    jac_err = {
-        k: float(np.linalg.norm(J_ad[:, i] - J_fd[:, i]) / np.linalg.norm(J_fd[:, i]))
-        for i, k in enumerate(PARAMS)
-    }
 
     # ---- report
     rows = []
@@ -179,15 +228,16 @@ def main(argv=None):
         "",
         f"Command: `{cmd}`  ",
         f"Data: {t.size} samples at 50 Hz of position_x/y/z (σ = 5 mm) and rope_tension (σ = 1 % of its RMS "
-        f"= {meas.noise['rope_tension']:.4g} N), seed {args.seed}; "
-        f"ODE rtol {args.rtol:g}, atol {args.atol:g}.",
+        f"= {meas.noise['rope_tension']:.4g} N), seed {args.seed}, simulated with Tsit5 rtol "
+        f"{args.data_rtol:g}; the fit's solver: {label}.",
         "",
         "| parameter | truth | start (±30 %) | estimate | std error | error | (est - truth)/SE | "
         "scipy FD estimate | AD vs FD Jacobian |",
         "|---|---|---|---|---|---|---|---|---|",
         *rows,
         "",
-        "| | jaxhoist LM (forward sensitivities) | scipy least_squares (2-point FD) |",
+        f"| | jaxhoist LM (forward sensitivities, {label}) | scipy least_squares (2-point FD, Tsit5 rtol "
+        f"{args.data_rtol:g}) |",
         "|---|---|---|",
         f"| iterations | {res.iterations} LM steps ({res.accepted_steps} accepted) | "
         + (
@@ -204,8 +254,8 @@ def main(argv=None):
         f"Within 2 SE of the truth: {', '.join(f'{k}: {v}' for k, v in within.items())}.  ",
         f"μ and c_l within 1 %: {', '.join(f'{k}: {v}' for k, v in one_pct.items())}.  ",
         f"Condition number of JᵀJ (relative units): {res.condition_number:.3g}.  ",
-        "AD vs FD Jacobian: ‖J_fwd - J_cd‖/‖J_cd‖ per column at the estimate (central differences, "
-        "relative step 1e-3).",
+        "AD vs FD Jacobian: ‖J_fwd - J_cd‖/‖J_cd‖ per column at the estimate (central differences of the "
+        f"Tsit5 rtol {args.data_rtol:g} solve, relative step 1e-3).",
         "",
         "Correlations:",
         "",
@@ -218,6 +268,25 @@ def main(argv=None):
     ]
     if res.warnings:
         md += ["", "Warnings:", "", *[f"- {w_}" for w_ in res.warnings]]
+    if len(results) > 1:
+        md += [
+            "",
+            f"Solvers on the same data: each fit's estimate minus the first one's ({label}), in units of the "
+            "first one's standard error; wall time of the fit (compile apart) and of the compile; LM steps; "
+            "the largest AD vs FD Jacobian error over the columns.",
+            "",
+            "| fit's solver | " + " | ".join(f"Δ{k}/SE" for k in PARAMS) + " | fit | compile | LM steps | "
+            "cost | max Jacobian error |",
+            "|---|" + "---|" * (len(PARAMS) + 5),
+        ]
+        for lab, _, r_, je in results:
+            d = (r_.values - res.values) / res.std_errors
+            md.append(
+                f"| {lab} | "
+                + " | ".join(f"{x:+.2g}" for x in d)
+                + f" | {r_.fit_time:.2f} s | {r_.compile_time:.2f} s | {r_.iterations} ({r_.accepted_steps} "
+                f"accepted) | {r_.cost:.6g} | {100 * max(je.values()):.2g} % |"
+            )
     text = "\n".join(md) + "\n"
     print(text)
     name = "identify_paper42_quick" if args.quick else "identify_paper42"
@@ -228,6 +297,10 @@ def main(argv=None):
                 "truth": truth,
                 "start": start,
                 "jaxhoist": res.to_dict(),
+                "fits": [
+                    {"solver": lab, "result": r_.to_dict(), "jacobian_rel_error": je}
+                    for lab, _, r_, je in results
+                ],
                 "scipy": sp,
                 "jacobian_rel_error": jac_err,
                 "within_2se": within,

@@ -1,8 +1,22 @@
-"""What the command-line modules share: the program name, float64 set-up and the tolerance help texts."""
+"""What the command-line modules share: the program name, float64 set-up, the tolerance help texts and the
+`--solver` choices."""
 
 from __future__ import annotations
 
+import diffrax
+
+from .._numerics.rosenbrock import RosenbrockW
+
 PROG = "jaxhoist"
+
+_CLI_SOLVERS = {  # `--solver` name -> solver class (`jaxhoist scan`, `jaxhoist identify`)
+    "rosenbrock-w": RosenbrockW,
+    "tsit5": diffrax.Tsit5,
+    "bosh3": diffrax.Bosh3,
+    "dopri5": diffrax.Dopri5,
+    "dopri8": diffrax.Dopri8,
+    "heun": diffrax.Heun,
+}
 
 
 def _enable_x64() -> None:

@@ -9,7 +9,8 @@ The fit is weighted nonlinear least squares, solved by optimistix's Levenberg-Ma
 (`optimistix.least_squares` with `optimistix.LevenbergMarquardt`) through the differentiable solver. The
 Jacobian comes from forward-mode sensitivities, no finite differences: the state and its p sensitivities are
 integrated together as one ODE whose step-size control also watches the sensitivities (see
-`_sensitivity_solve` for why `jax.jacfwd` through `diffrax.ForwardMode` is not used by default). It enters
+`_sensitivity_solve` for why `jax.jacfwd` through `diffrax.ForwardMode` is not used by default), by Tsit5
+(default) or, with `SolverOptions()`, by the Rosenbrock-W solver with one W for every block. It enters
 optimistix through a `jax.custom_jvp` whose rule returns the whole Jacobian once, so each LM step costs one
 augmented solve and the damped linear solves reuse the matrix.
 
@@ -218,9 +219,13 @@ def identify(
       (stiffness, damping, μ, mass, ...) through a log; `load.mass_centre` is bounded by the box by default.
     - `t1`: end of the simulated span [s] (default `scenario.t1`); every sample time must lie in [0, t1].
       The solver runs only to the last sample time.
-    - `options`: `SolverOptions` of the simulations (tolerances, step budget); default
-      `SolverOptions(diffrax.Tsit5())` (rtol 1e-6, atol 1e-8). Forward mode is always used; the
-      Rosenbrock-W solver is refused (the state is integrated with its sensitivities as one system).
+    - `options`: `SolverOptions` of the simulations (solver, tolerances, step budget); default
+      `SolverOptions(diffrax.Tsit5())` (rtol 1e-6, atol 1e-8). Forward mode is always used: the state is
+      integrated with its sensitivities as one error-controlled system. `SolverOptions()`, the Rosenbrock-W
+      solver at rtol 1e-3, atol 1e-5, works too (one W for the state and every sensitivity); on paper-4.2 its
+      estimates lie within 0.031 standard errors of Tsit5's, but the fit took 1.4-2x the wall time and 1.8x
+      the compile time, so it is not the default here; with 10x stiffer friction it was 1.7x faster
+      (`identify_options.fit_solver_options`, docs/identification.md).
     - `fit`: `FitOptions` (extra random starts, Levenberg-Marquardt termination and step budget,
       identifiability thresholds, and `weights`: signal or group -> residual weight [1/unit] for signals
       without a known noise level); default `FitOptions()`. Signals with neither a noise level nor a weight
@@ -443,9 +448,10 @@ def synthetic_measurement(
     - `noise`: signal or group -> standard deviation [SI unit] or "x%" of the true signal's RMS value;
       signals not named are noise-free. The noise levels are stored in the returned `Measurement`.
     - `seed`: of `numpy.random.default_rng`; `source`: a label stored in the `Measurement`.
-    - `options`: `SolverOptions` of the simulation; default `SolverOptions(diffrax.Tsit5())`, the solver
-      of `identify`'s model, so that a fit to noise-free data recovers the parameters to the solver's
-      accuracy. The earlier `rtol`, `atol`, `max_steps` still work, with a `DeprecationWarning`.
+    - `options`: `SolverOptions` of the simulation; default `SolverOptions(diffrax.Tsit5())` (rtol 1e-6),
+      the default solver of `identify`'s model, so that a fit to noise-free data with the default recovers
+      the parameters to the solver's accuracy (with the Rosenbrock-W solver at rtol 1e-3 to ~1e-4
+      relative). The earlier `rtol`, `atol`, `max_steps` still work, with a `DeprecationWarning`.
     """
     require_x64()
     options, _ = convert_legacy(

@@ -5,27 +5,17 @@ from __future__ import annotations
 
 from pathlib import Path
 
-import diffrax
 import jax
 import numpy as np
 
 from .._errors import ScenarioError
 from .._io.validate import check_out_dir, parse_values
 from .._numerics.options import SolverOptions
-from .._numerics.rosenbrock import RosenbrockW
 from .._numerics.times import Times
+from .cli_common import _CLI_SOLVERS
 from .scan import scan
 from .scan_layout import BatchOptions
 from .sweep import as_sweep
-
-_CLI_SOLVERS = {
-    "rosenbrock-w": RosenbrockW,
-    "tsit5": diffrax.Tsit5,
-    "bosh3": diffrax.Bosh3,
-    "dopri5": diffrax.Dopri5,
-    "dopri8": diffrax.Dopri8,
-    "heun": diffrax.Heun,
-}
 
 
 def configure_parser(subparsers) -> None:

@@ -49,15 +49,20 @@ from .rosenbrock import RosenbrockW
 
 
 class _TangentLinearisation(eqx.Module):
-    """The W of the augmented system (y, s): the state's W on both blocks, factorised once."""
+    """The W of the augmented system (y, s): the state's W on both blocks, factorised once. With `many`,
+    s holds several tangents along a leading axis (`identify`'s p parameter directions), all solved with the
+    same factors."""
 
     lin: eqx.Module
+    many: bool = eqx.field(static=True, default=False)
 
     def factor(self, hg):
         return self.lin.factor(hg)  # pyright: ignore[reportAttributeAccessIssue]  # a Linearisation
 
     def solve(self, factors, r, hg):
         solve = self.lin.solve  # pyright: ignore[reportAttributeAccessIssue]  # a Linearisation
+        if self.many:
+            return (solve(factors, r[0], hg), jax.vmap(lambda ri: solve(factors, ri, hg))(r[1]))
         return (solve(factors, r[0], hg), solve(factors, r[1], hg))
 
 
@@ -68,10 +73,11 @@ class _Augmented:
 
     linearise: Callable
     quadrature: Callable | None
+    many: bool = False  # s holds several tangents along a leading axis (`_TangentLinearisation`)
 
     def lin(self, t, y, args):
         scenario_args = args[0]
-        return _TangentLinearisation(self.linearise(t, y[0], scenario_args))
+        return _TangentLinearisation(self.linearise(t, y[0], scenario_args), self.many)
 
     def quad(self, y):
         assert self.quadrature is not None
@@ -84,13 +90,31 @@ def uses_tangent_solve(options: SolverOptions) -> bool:
     return isinstance(options.solver, RosenbrockW) and options.forward_mode
 
 
-def _weighted(controller, weight: float):
+def _weighted(controller, weight: float, many: bool = False):
     """`controller` with the error norm of (e_y, e_s) max(‖e_y‖, weight ‖e_s‖) if it is a PIDController;
-    others (constant steps) unchanged."""
+    others (constant steps) unchanged. With `many` (tangents along a leading axis of s), ‖e_s‖ is the largest
+    of the tangents' norms: a step passes when each tangent would pass on its own."""
     if not isinstance(controller, diffrax.PIDController):
         return controller
     norm = controller.norm
+    if many:
+        return dataclasses.replace(
+            controller, norm=lambda e: jnp.maximum(norm(e[0]), weight * jnp.max(jax.vmap(norm)(e[1])))
+        )
     return dataclasses.replace(controller, norm=lambda e: jnp.maximum(norm(e[0]), weight * norm(e[1])))
+
+
+def augmented_solver(solver: RosenbrockW, many: bool = False) -> RosenbrockW:
+    """The W-method of the augmented system (y, s) (or, with `many`, (y, S) with several tangents along a
+    leading axis of S): `solver`'s tableau and tangent weight, its W on every block. Its `args` are
+    `(scenario_args, anything)`: the linearisation reads `args[0]` = (scenario, derived constants)."""
+    aug = _Augmented(solver.linearise, solver.quadrature, many)
+    return RosenbrockW(
+        linearise=aug.lin,
+        quadrature=None if solver.quadrature is None else aug.quad,
+        tableau=solver.tableau,
+        tangent_weight=solver.tangent_weight,
+    )
 
 
 def solve_forward(solve_plain: Callable, controller: Callable, outputs: Callable, status_of: Callable):
@@ -136,13 +160,7 @@ def _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, sta
 
         return jax.jvp(f, (ys, d, cc), (s, dd, dcc))
 
-    aug = _Augmented(solver.linearise, solver.quadrature)
-    aug_solver = RosenbrockW(
-        linearise=aug.lin,
-        quadrature=None if solver.quadrature is None else aug.quad,
-        tableau=solver.tableau,
-        tangent_weight=solver.tangent_weight,
-    )
+    aug_solver = augmented_solver(solver)
     sc = eqx.combine(dyn, static)
     weighted = _weighted(options.stepsize_controller, solver.tangent_weight)
     sol = diffrax.diffeqsolve(
