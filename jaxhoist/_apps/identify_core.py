@@ -19,8 +19,8 @@ from .._errors import SolveStatus
 from .._numerics.compile_cache import compiled, structure_key
 from .._numerics.options import SolverOptions
 from .._numerics.rosenbrock import RosenbrockW
-from .._numerics.sensitivity import _weighted, augmented_solver
-from .._numerics.solve import _controller, outputs, solve
+from .._numerics.sensitivity import augmented_solver, tangent_weighted_controller
+from .._numerics.solve import outputs, solve, step_size_controller
 from .._physics.elastic import vector_field
 from .._physics.equilibrium import initial_state
 from .._physics.params import Scenario
@@ -158,8 +158,8 @@ def _sensitivity_solve(cfg: _Config, z, args):
         solver = augmented_solver(opt.solver, many=True)
         args = ((scen(z), c), (z, c, dC))
         term = diffrax.ODETerm(lambda t, state, a: rhs(t, state, a[1]))
-        weighted = _weighted(opt.stepsize_controller, opt.solver.tangent_weight, many=True)
-        controller = _controller(opt.replace(stepsize_controller=weighted), ts)
+        weighted = tangent_weighted_controller(opt.stepsize_controller, opt.solver.tangent_weight, many=True)
+        controller = step_size_controller(opt.replace(stepsize_controller=weighted), ts)
     else:
         solver, args, term, controller = opt.solver, (z, c, dC), diffrax.ODETerm(rhs), opt.stepsize_controller
     sol = diffrax.diffeqsolve(

@@ -90,7 +90,7 @@ def uses_tangent_solve(options: SolverOptions) -> bool:
     return isinstance(options.solver, RosenbrockW) and options.forward_mode
 
 
-def _weighted(controller, weight: float, many: bool = False):
+def tangent_weighted_controller(controller, weight: float, many: bool = False):
     """`controller` with the error norm of (e_y, e_s) max(‖e_y‖, weight ‖e_s‖) if it is a PIDController;
     others (constant steps) unchanged. With `many` (tangents along a leading axis of s), ‖e_s‖ is the largest
     of the tangents' norms: a step passes when each tangent would pass on its own."""
@@ -162,7 +162,7 @@ def _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, sta
 
     aug_solver = augmented_solver(solver)
     sc = eqx.combine(dyn, static)
-    weighted = _weighted(options.stepsize_controller, solver.tangent_weight)
+    weighted = tangent_weighted_controller(options.stepsize_controller, solver.tangent_weight)
     sol = diffrax.diffeqsolve(
         diffrax.ODETerm(field),
         aug_solver,

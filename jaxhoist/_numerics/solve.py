@@ -70,7 +70,7 @@ def outputs(ts, ys: State, scenario: Scenario, c: Constants, status, stats) -> T
     )
 
 
-def _controller(options: SolverOptions, ts):
+def step_size_controller(options: SolverOptions, ts):
     """The step-size controller of `options`; for a solver whose dense output is only linear (the
     Rosenbrock-W solver), error control also lands a step on every saved time, so that saved values are
     the method's own rather than interpolated."""
@@ -101,7 +101,7 @@ def _solve_plain(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOp
         y0=y0,
         args=(scenario, c),
         saveat=diffrax.SaveAt(ts=ts),
-        stepsize_controller=_controller(options, ts),
+        stepsize_controller=step_size_controller(options, ts),
         max_steps=options.max_steps,
         adjoint=options.adjoint,
         progress_meter=options.progress_meter,
@@ -111,7 +111,7 @@ def _solve_plain(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOp
     return outputs(ts, sol.ys, scenario, c, _status(sol.result, y1), sol.stats)  # pyright: ignore[reportArgumentType]  # sol.ys is the saved State with SaveAt(ts=...)
 
 
-_solve_forward = solve_forward(_solve_plain, _controller, outputs, _status)
+_solve_forward = solve_forward(_solve_plain, step_size_controller, outputs, _status)
 _solve_jit = eqx.filter_jit(solve)
 
 
