@@ -71,9 +71,10 @@ def outputs(ts, ys: State, scenario: Scenario, c: Constants, status, stats) -> T
 
 
 def step_size_controller(options: SolverOptions, ts):
-    """The step-size controller of `options`; for a solver whose dense output is only linear (the
-    Rosenbrock-W solver), error control also lands a step on every saved time, so that saved values are
-    the method's own rather than interpolated."""
+    """The step-size controller of `options`; for a solver whose dense output is only linear, error control
+    also lands a step on every saved time, so that saved values are the method's own rather than linearly
+    interpolated (the Rosenbrock-W solver's dense output is cubic Hermite, diffrax's Runge-Kutta methods'
+    their own: neither needs it)."""
     ctrl = options.stepsize_controller
     linear = options.solver.interpolation_cls is diffrax.LocalLinearInterpolation
     if linear and isinstance(ctrl, diffrax.PIDController):
