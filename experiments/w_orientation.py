@@ -31,9 +31,9 @@ jax.config.update("jax_enable_x64", True)
 import diffrax  # noqa: E402
 import equinox as eqx  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
-import numpy as np  # noqa: E402
 from bench_w_step import _module_at  # noqa: E402  (the module of a git revision, imported beside the package)
 from jax.flatten_util import ravel_pytree  # noqa: E402
+from w_controller import step_report  # noqa: E402  (the same report line as the controller comparison)
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist import set_param, vector_field  # noqa: E402
@@ -104,16 +104,7 @@ def main(argv=None) -> int:
             variants[f"dense J, mu {a.dense}"][2],
         )
     for name, (solver, members, r) in variants.items():
-        tr = run(jh.SolverOptions(solver), members)
-        st = np.asarray(tr.num_accepted_steps + tr.num_rejected_steps)
-        err = np.linalg.norm(np.asarray(tr.position[:, -1] - r.position[:, -1]), axis=-1)
-        rej = np.asarray(tr.num_rejected_steps).sum() / st.sum()
-        failed = int(np.sum(np.asarray(tr.status) != 0))
-        print(
-            f"{name:26s} steps {st.sum():8d}, median {np.median(st):6.0f}, max {st.max():6d}, rejected "
-            f"{rej:4.0%}, max error {100 * err.max():.2f} cm, failed {failed}",
-            flush=True,
-        )
+        step_report(name, run(jh.SolverOptions(solver), members), r, width=26)
     return 0
 
 

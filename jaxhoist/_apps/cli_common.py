@@ -9,7 +9,7 @@ from .._numerics.rosenbrock import RosenbrockW
 
 PROG = "jaxhoist"
 
-_CLI_SOLVERS = {  # `--solver` name -> solver class (`jaxhoist scan`, `jaxhoist identify`)
+CLI_SOLVERS = {  # `--solver` name -> solver class (`jaxhoist scan`, `jaxhoist identify`)
     "rosenbrock-w": RosenbrockW,
     "tsit5": diffrax.Tsit5,
     "bosh3": diffrax.Bosh3,

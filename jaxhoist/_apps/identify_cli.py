@@ -17,7 +17,7 @@ from .._io.measurement import (
 )
 from .._io.scenario import apply_overrides, load_scenario
 from .._numerics.options import SolverOptions
-from .cli_common import _ATOL_HELP, _CLI_SOLVERS, _RTOL_HELP
+from .cli_common import _ATOL_HELP, _RTOL_HELP, CLI_SOLVERS
 from .identify import identify
 from .identify_options import FitOptions
 from .identify_params import ALIASES
@@ -89,7 +89,7 @@ def configure_parser(subparsers) -> None:
     )
     p.add_argument(
         "--solver",
-        choices=sorted(_CLI_SOLVERS),
+        choices=sorted(CLI_SOLVERS),
         default=CLI_DEFAULT_SOLVER,
         help=f"integrator of the fit's simulations and their sensitivity equations (default "
         f"{CLI_DEFAULT_SOLVER}): a diffrax Runge-Kutta method or rosenbrock-w (linearly implicit, one W for "
@@ -149,7 +149,7 @@ def run(args: argparse.Namespace) -> int:
         f"fitting {', '.join(params)} of {scenario.name} to {len(measurement.names)} signals x "
         f"{measurement.t.size} samples of {args.measurement} (compiles once, then iterates) ..."
     )
-    options = SolverOptions(_CLI_SOLVERS[args.solver](), rtol=args.rtol, atol=args.atol)
+    options = SolverOptions(CLI_SOLVERS[args.solver](), rtol=args.rtol, atol=args.atol)
     bar = None
     if not quiet:
         from .progress_bars import FitProgressBar

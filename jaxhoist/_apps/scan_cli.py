@@ -12,7 +12,7 @@ from .._errors import ScenarioError
 from .._io.validate import check_out_dir, parse_values
 from .._numerics.options import SolverOptions
 from .._numerics.times import Times
-from .cli_common import _CLI_SOLVERS
+from .cli_common import CLI_SOLVERS
 from .scan import scan
 from .scan_layout import BatchOptions
 from .sweep import as_sweep
@@ -72,7 +72,7 @@ def configure_parser(subparsers) -> None:
     p.add_argument("--max-steps", type=int, default=200_000)
     p.add_argument(
         "--solver",
-        choices=sorted(_CLI_SOLVERS),
+        choices=sorted(CLI_SOLVERS),
         default="rosenbrock-w",
         help="integrator: rosenbrock-w (default: linearly implicit, stiff contact and rope forces implicit) "
         "or a diffrax Runge-Kutta method (bosh3 is the accurate explicit choice at fixed steps)",
@@ -120,7 +120,7 @@ def run_cli(args) -> int:
     params = {p: parse_values(v, "--values") for p, v in zip(args.param, args.values, strict=True)}
     out = check_out_dir(Path(args.out) if args.out else Path("out") / f"scan-{scenario.name}", "--out")
     options = SolverOptions(
-        _CLI_SOLVERS[args.solver](),
+        CLI_SOLVERS[args.solver](),
         rtol=args.rtol,
         atol=args.atol,
         dt0=args.fixed_step,
