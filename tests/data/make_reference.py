@@ -49,11 +49,30 @@ SCAN_OBSERVABLES = ("final_psi", "final_position", "max_tilt")
 OUT = Path(__file__).with_name("reference_results.npz")
 
 
+def _one_label(sc: jh.Scenario, like: jh.Scenario) -> jh.Scenario:
+    """`sc` with the static labels (`name`, `t1`, `description`) of `like`, every leaf its own. The labels
+    are static fields, so each preset used to compile the elastic solve and the rigid phase kernels again
+    (74 s of the test's 88 s); no solve reads them here (the saved times are given), and the arrays are the
+    same bit for bit either way (checked against the recorded file when this was introduced)."""
+    return jh.Scenario(
+        sc.load,
+        sc.foundation,
+        sc.rope,
+        sc.hoist,
+        sc.boom,
+        sc.gravity,
+        name=like.name,
+        t1=like.t1,
+        description=like.description,
+    )
+
+
 def trajectories() -> dict[str, np.ndarray]:
     """`{preset}/{model}/{field}` -> the field at the N_SAVE saved times of a short simulate per model."""
     out = {}
+    like = jh.load_scenario(PRESETS[-1])
     for name in PRESETS:
-        sc = jh.load_scenario(name)
+        sc = _one_label(jh.load_scenario(name), like)
         t1_rigid, rope = RIGID[name]
         runs = {
             "elastic": jh.simulate(sc, jh.Times(T1, n=N_SAVE), model=jh.ElasticFoundation()),
