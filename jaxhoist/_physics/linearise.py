@@ -273,12 +273,19 @@ def band_entry_slope(
       error 1.62 -> 0.42 cm; 1.17x the steps at ε = 1e-3 (65 718) instead of 2.9x;
     - ε = 1e-3, 32 members: steps 132 622 -> 131 104 (max 4 538 -> 4 448), worst error 0.12 -> 0.10 cm
       (median 0.030 -> 0.033 cm). k = 3 and 4 took 2 % and 7 % fewer steps at ε = 1e-4, but at ε = 1e-3
-      k = 3 was 0.14 cm off, and k = 4 at atol 3e-5 0.62 cm (k = 2 there: 0.20 cm, exact slope 0.24 cm).
+      k = 3 was 0.14 cm off, and k = 4 at atol 3e-5 0.62 cm (k = 2 there: 0.20 cm, exact slope 0.24 cm);
+    - wall time of the 16-member vmapped solve (best of 5, after compilation): ε = 1e-4 0.54 s against
+      0.34 s at ε = 1e-3, 1.6x (without: 2.3 s, 6.7x); the cost per step is unchanged (74-80 µs per
+      lock-step of the 16 members at ε = 1e-3, with and without the term).
 
     Other friction laws keep their exact slope (`BristleFriction` has no band: its stiffness is μN/δ in
     its own state)."""
     if not isinstance(law, RegularisedCoulomb):
         return dT_dux, dT_duy
+    # Barriers on the inputs and the result: without them XLA's CPU backend fused the corner velocities and
+    # normal forces into these few elementwise operations and recomputed them there; a vmapped solve of
+    # paper-4.2 (16 members, 25 s) took 93 instead of 74 µs per lock-step, with them 74 (as without the term).
+    normal, velocity, dT_dux, dT_duy = _bar((normal, velocity, dT_dux, dT_duy))
     eps = law.regularisation_velocity
     u2 = jnp.sum(velocity * velocity, axis=-1)
     s2 = u2 + eps * eps
@@ -287,7 +294,7 @@ def band_entry_slope(
     c = w * mu * normal / (s2 * jnp.sqrt(s2))
     dT_dux = dT_dux - (c * velocity[:, 0])[:, None] * velocity
     dT_duy = dT_duy - (c * velocity[:, 1])[:, None] * velocity
-    return dT_dux, dT_duy
+    return _bar((dT_dux, dT_duy))
 
 
 def linearise(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> Linearisation:
