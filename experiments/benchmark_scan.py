@@ -11,7 +11,7 @@ What it runs (all in one process, so every ratio is against a baseline measured 
 
 1. **the scan, as a user calls it**: `scan(load_scenario("paper-4.2"), {μ: linspace(0.1, 0.6, n)},
    Times(t1, n=2), observables=[final_position, final_euler])`: the preset's physics (regularised Coulomb,
-   ε = 1e-3 m/s) and the default solver (Rosenbrock-W, rtol 1e-3, atol 3e-5, lock-step groups); compile
+   ε = 1e-3 m/s) and the default solver (Rosenbrock-W, rtol 1e-3, atol 1e-5, lock-step groups); compile
    time, wall time per trajectory (compute / n), steps, peak RSS;
 2. **accuracy**: the final mass-centre position against adaptive Tsit5 at rtol --ref-rtol (atol 1e-2 rtol)
    on --ref-n members evenly spaced through the scan: the fraction within 1 cm, median, 95th percentile and

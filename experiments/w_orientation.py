@@ -16,6 +16,7 @@ share rejected, and the largest distance of the final mass centre from Tsit5 at 
 
     python experiments/w_orientation.py --n 32 --t1 25 --dense 0.55
     python experiments/w_orientation.py --n 16 --t1 25 --eps 1e-4
+    python experiments/w_orientation.py --n 16 --t1 25 --eps 1e-4 --atol 3e-5 --baseline 3bc0e4f
 
 Step counts do not depend on the machine's load.
 """
@@ -72,6 +73,7 @@ def main(argv=None) -> int:
         "--eps", type=float, default=None, help="friction regularisation ε [m/s] (default the preset's)"
     )
     p.add_argument("--dense", type=float, default=None, metavar="MU", help="also the full-Jacobian W at MU")
+    p.add_argument("--atol", type=float, default=None, help="absolute tolerance (default SolverOptions')")
     a = p.parse_args(argv)
     sc = jh.load_scenario("paper-4.2")
     if a.eps is not None:
@@ -104,7 +106,8 @@ def main(argv=None) -> int:
             variants[f"dense J, mu {a.dense}"][2],
         )
     for name, (solver, members, r) in variants.items():
-        step_report(name, run(jh.SolverOptions(solver), members), r, width=26)
+        kw = {} if a.atol is None else {"atol": a.atol}
+        step_report(name, run(jh.SolverOptions(solver, **kw), members), r, width=26)
     return 0
 
 

@@ -45,7 +45,7 @@ EXTENSIONS = {
 # then gets its default appended by `_DefaultsFormatter`.
 _EXTRA_HELP = {
     "rtol": _RTOL_HELP + " (default: the solver's, 1e-3 for the default rosenbrock-w, 1e-6 for the others)",
-    "atol": _ATOL_HELP + " (default: the solver's, 3e-5 for the default rosenbrock-w, 1e-8 for the others)",
+    "atol": _ATOL_HELP + " (default: the solver's, 1e-5 for the default rosenbrock-w, 1e-8 for the others)",
     "t1": "end time [s] (default: the scenario's t1)",
     "n_save": "number of equally spaced saved times from 0 to t1",
     "max_steps": "solver step budget per solve; reaching it is reported as status max_steps",

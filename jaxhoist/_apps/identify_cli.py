@@ -106,7 +106,7 @@ def configure_parser(subparsers) -> None:
         "--atol",
         type=float,
         default=None,
-        help=_ATOL_HELP + " (default: the solver's, 3e-5 for rosenbrock-w, 1e-8 for the others)",
+        help=_ATOL_HELP + " (default: the solver's, 1e-5 for rosenbrock-w, 1e-8 for the others)",
     )
     p.add_argument("--max-iterations", type=int, default=100, help="LM step budget (default 100)")
     p.add_argument(

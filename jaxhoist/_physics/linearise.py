@@ -17,7 +17,9 @@ shorter). The 3x3 (corner) and scalar (rope) force derivatives come from forward
 force laws themselves (`forces.py`, the friction law of the scenario), so any friction law is covered; what
 is left out is slow: gyroscopic terms, the turning of the lever arms G at fixed force (|F| |ρ|, no friction
 slope in it), the rope's velocity turning with the body, its transverse (geometric) stiffness S/|AB|, and
-the friction law's internal state (bristle deflection).
+the friction law's internal state (bristle deflection). One term is deliberately not the derivative: near
+the friction band a corner's slope along its sliding direction is raised towards the secant |T|/|u|
+(`band_entry_slope`), so that a step carrying a sliding corner into the band stays implicit.
 
 `Linearisation.solve` then solves the linear system of a linearly implicit (Rosenbrock-W) step for the
 approximate Jacobian J that these matrices define on the full state (positions driven by velocities, velocity
@@ -33,6 +35,7 @@ from jaxtyping import Array, Float
 from .._typing import Quat, Scalar
 from . import forces, kinematics
 from .elastic import Constants, State
+from .friction import AbstractFrictionLaw, RegularisedCoulomb
 from .params import Scenario
 
 Mat9 = Float[Array, "9 9"]
@@ -230,6 +233,70 @@ def _lu_solve(lu, b):
     return jnp.stack(_bar(x))
 
 
+BAND_ENTRY_WIDTH = 2.0
+"""k of `band_entry_slope`: corners slower than about k ε [m/s] get the secant friction slope in W [-]."""
+
+
+def band_entry_slope(
+    law: AbstractFrictionLaw,
+    mu: Scalar,
+    normal: Float[Array, "4"],
+    velocity: Float[Array, "4 2"],
+    dT_dux: Float[Array, "4 2"],
+    dT_duy: Float[Array, "4 2"],
+) -> tuple[Float[Array, "4 2"], Float[Array, "4 2"]]:
+    """W's friction slope for corners about to enter the regularisation band: the columns (∂T/∂u_x,
+    ∂T/∂u_y) [N s/m] of each corner's friction slope, with the slope along the sliding direction raised
+    towards the secant |T|/|u| for corners near the band.
+
+    For `RegularisedCoulomb`, T = -μN u/s with s = sqrt(|u|² + ε²) (μ [-], N [N], u the corner's horizontal
+    velocity [m/s], ε its `regularisation_velocity` [m/s]), the exact slope is μN/s across the sliding
+    direction but only μN ε²/s³ along it: nearly nothing for a corner sliding at a few ε, while inside the
+    band |u| < ε it is μN/ε. A step that carries a decelerating corner into the band so meets that slope
+    explicitly and is rejected until h is tiny (at ε = 1e-4 m/s 31 % of the steps were rejected and the
+    slowest member took 7x the steps of ε = 1e-3; a full-Jacobian W took as many). The secant μN/s is the
+    slope of the chord from the corner's velocity to u = 0, where T vanishes too: with it in W the step
+    decays the corner's velocity towards the band rather than through it. Every corner gets
+
+        along = μN ε²/s³ + w (μN/s - μN ε²/s³) = μN ε²/s³ + w μN |u|²/s³,   w = 1/(1 + (|u|/(k ε))⁴),
+
+    k = `BAND_ENTRY_WIDTH`, i.e. C' = C - (w μN/s³) u uᵀ (finite at u = 0, where C is already μN/ε I). Only
+    slow corners: the secant for every corner halved the steps at ε = 1e-4 but its over-damped steps of fast
+    sliding corners fooled the embedded error estimate (the worst final mass centre of paper-4.2 at
+    ε = 1e-3 1.35 cm off instead of 0.11 cm). A W-method keeps its order for any W, and W is not
+    differentiated (`rosenbrock.w_step`), so this changes only which steps are accepted.
+
+    Measured with `experiments/w_band.py` (paper-4.2 over 25 s, μ evenly in [0.1, 0.6], 201 saved times,
+    default tolerances; errors: final mass centre against Tsit5 at rtol 1e-9), without -> with (k = 2):
+
+    - ε = 1e-4, 16 members: steps 191 635 -> 76 721 (max 32 123 -> 7 058, rejected 31 % -> 11 %), worst
+      error 1.62 -> 0.42 cm; 1.17x the steps at ε = 1e-3 (65 718) instead of 2.9x;
+    - ε = 1e-3, 32 members: steps 132 622 -> 131 104 (max 4 538 -> 4 448), worst error 0.12 -> 0.10 cm
+      (median 0.030 -> 0.033 cm). k = 3 and 4 took 2 % and 7 % fewer steps at ε = 1e-4, but at ε = 1e-3
+      k = 3 was 0.14 cm off, and k = 4 at atol 3e-5 0.62 cm (k = 2 there: 0.20 cm, exact slope 0.24 cm);
+    - wall time of the 16-member vmapped solve (best of 5, after compilation): ε = 1e-4 0.54 s against
+      0.34 s at ε = 1e-3, 1.6x (without: 2.3 s, 6.7x); the cost per step is unchanged (74-80 µs per
+      lock-step of the 16 members at ε = 1e-3, with and without the term).
+
+    Other friction laws keep their exact slope (`BristleFriction` has no band: its stiffness is μN/δ in
+    its own state)."""
+    if not isinstance(law, RegularisedCoulomb):
+        return dT_dux, dT_duy
+    # Barriers on the inputs and the result: without them XLA's CPU backend fused the corner velocities and
+    # normal forces into these few elementwise operations and recomputed them there; a vmapped solve of
+    # paper-4.2 (16 members, 25 s) took 93 instead of 74 µs per lock-step, with them 74 (as without the term).
+    normal, velocity, dT_dux, dT_duy = _bar((normal, velocity, dT_dux, dT_duy))
+    eps = law.regularisation_velocity
+    u2 = jnp.sum(velocity * velocity, axis=-1)
+    s2 = u2 + eps * eps
+    width2 = (BAND_ENTRY_WIDTH * eps) ** 2
+    w = 1.0 / (1.0 + (u2 / width2) ** 2)
+    c = w * mu * normal / (s2 * jnp.sqrt(s2))
+    dT_dux = dT_dux - (c * velocity[:, 0])[:, None] * velocity
+    dT_duy = dT_duy - (c * velocity[:, 1])[:, None] * velocity
+    return _bar((dT_dux, dT_duy))
+
+
 def linearise(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> Linearisation:
     """The `Linearisation` of the elastic model's stiff forces at (t, y) (pure; `args` as for
     `elastic.vector_field`)."""
@@ -259,6 +326,7 @@ def linearise(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> Linearis
     dT_dN = jax.jvp(lambda n: friction(n, u_h), (N,), (ones,))[1]  # (4, 2)
     dT_dux = jax.jvp(lambda u: friction(N, u), (u_h,), (jnp.stack([ones, 0 * ones], -1),))[1]
     dT_duy = jax.jvp(lambda u: friction(N, u), (u_h,), (jnp.stack([0 * ones, ones], -1),))[1]
+    dT_dux, dT_duy = band_entry_slope(fnd.friction, fnd.friction_coefficient, N, u_h, dT_dux, dT_duy)
     # ∂F_i/∂u_i and ∂F_i/∂x_i in world axes (F = (T_x, T_y, N); Z_i = -p_i).
     dN_dz, dN_dw = -dN_dp, -dN_dpd
     zero = jnp.zeros(4)
