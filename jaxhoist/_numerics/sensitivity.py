@@ -43,6 +43,8 @@ import jax.numpy as jnp
 from .._errors import SolveStatus
 from .._physics.elastic import vector_field
 from .._physics.equilibrium import initial_state
+from .._physics.linearise import linearise as elastic_linearise
+from .._physics.linearise import linearise_exact_slope
 from .._physics.params import Scenario
 from .options import SolverOptions
 from .rosenbrock import RosenbrockW
@@ -107,8 +109,14 @@ def tangent_weighted_controller(controller, weight: float, many: bool = False):
 def augmented_solver(solver: RosenbrockW, many: bool = False) -> RosenbrockW:
     """The W-method of the augmented system (y, s) (or, with `many`, (y, S) with several tangents along a
     leading axis of S): `solver`'s tableau and tangent weight, its W on every block. Its `args` are
-    `(scenario_args, anything)`: the linearisation reads `args[0]` = (scenario, derived constants)."""
-    aug = _Augmented(solver.linearise, solver.quadrature, many)
+    `(scenario_args, anything)`: the linearisation reads `args[0]` = (scenario, derived constants).
+
+    With the elastic model's default linearisation, W here has the friction law's exact slope
+    (`linearise_exact_slope`): the band-entry slope of the state's solve made the sensitivities' error
+    estimate misjudge over-damped steps (up to 15 % off central differences instead of 1.9 %). Any other
+    `solver.linearise` is used as given."""
+    lin = linearise_exact_slope if solver.linearise is elastic_linearise else solver.linearise
+    aug = _Augmented(lin, solver.quadrature, many)
     return RosenbrockW(
         linearise=aug.lin,
         quadrature=None if solver.quadrature is None else aug.quad,

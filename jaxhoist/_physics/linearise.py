@@ -297,9 +297,13 @@ def band_entry_slope(
     return _bar((dT_dux, dT_duy))
 
 
-def linearise(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> Linearisation:
+def linearise(
+    t: Scalar, y: State, args: tuple[Scenario, Constants], band_entry: bool = True
+) -> Linearisation:
     """The `Linearisation` of the elastic model's stiff forces at (t, y) (pure; `args` as for
-    `elastic.vector_field`)."""
+    `elastic.vector_field`). `band_entry`: W's friction slope near the band is the band-entry slope
+    (`band_entry_slope`, the default of the state's solve); False: the exact slope
+    (`linearise_exact_slope`)."""
     scenario, c = args
     fnd, rope, boom, load = scenario.foundation, scenario.rope, scenario.boom, scenario.load
     R = kinematics.quat_to_matrix(y.quaternion)
@@ -326,7 +330,8 @@ def linearise(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> Linearis
     dT_dN = jax.jvp(lambda n: friction(n, u_h), (N,), (ones,))[1]  # (4, 2)
     dT_dux = jax.jvp(lambda u: friction(N, u), (u_h,), (jnp.stack([ones, 0 * ones], -1),))[1]
     dT_duy = jax.jvp(lambda u: friction(N, u), (u_h,), (jnp.stack([0 * ones, ones], -1),))[1]
-    dT_dux, dT_duy = band_entry_slope(fnd.friction, fnd.friction_coefficient, N, u_h, dT_dux, dT_duy)
+    if band_entry:
+        dT_dux, dT_duy = band_entry_slope(fnd.friction, fnd.friction_coefficient, N, u_h, dT_dux, dT_duy)
     # ∂F_i/∂u_i and ∂F_i/∂x_i in world axes (F = (T_x, T_y, N); Z_i = -p_i).
     dN_dz, dN_dw = -dN_dp, -dN_dpd
     zero = jnp.zeros(4)
@@ -390,3 +395,13 @@ def linearise(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> Linearis
         rope_stiffness=dS_dd,
         quaternion=y.quaternion,
     )
+
+
+def linearise_exact_slope(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> Linearisation:
+    """`linearise` with the friction law's exact slope everywhere (no band-entry slope): the W of the
+    forward-mode sensitivity solve (`numerics.sensitivity`). There the band-entry slope's over-damped steps
+    fooled the error estimate of the sensitivities: d(final mass centre)/dμ over 64 μ of paper-4.2, 25 s,
+    against central differences of Tsit5 at rtol 1e-10 on 8 of them, was up to 15 % off with it (at
+    μ = 0.6) and 1.9 % without, at about the same cost (12.2x and 10.2x the plain scan; `python
+    experiments/w_sensitivity.py --n 64 --t1 25 --ref 8 --weights 0.1`, 2026-11-25)."""
+    return linearise(t, y, args, band_entry=False)
