@@ -27,15 +27,13 @@ jax.config.update("jax_enable_x64", True)
 import diffrax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
-from w_controller import step_report  # noqa: E402  (the same report line as the controller comparison)
+from w_controller import solve_mus, step_report  # noqa: E402  (the same solve and report as the controller comparison)
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist import set_param  # noqa: E402
 from jaxhoist._numerics.rosenbrock import RosenbrockW  # noqa: E402  (internal: the default solver's class)
-from jaxhoist._numerics.solve import as_float64_leaves, solve  # noqa: E402  (internal: the bare solve core)
+from jaxhoist._numerics.solve import as_float64_leaves  # noqa: E402  (internal: strongly typed leaves, one compile)
 from jaxhoist._physics import linearise as lin  # noqa: E402  (internal: the width is a module constant)
-
-MU = "foundation.friction_coefficient"
 
 
 def main(argv=None) -> int:
@@ -56,8 +54,7 @@ def main(argv=None) -> int:
     mus, ts = jnp.linspace(0.1, 0.6, a.n), jnp.linspace(0.0, a.t1, 201)
 
     def run(options):
-        one = lambda mu: solve(set_param(sc, MU, mu), ts, options)  # noqa: E731
-        return jax.block_until_ready(jax.jit(jax.vmap(one))(mus))
+        return solve_mus(sc, mus, ts, options)
 
     cache = Path(a.cache) / f"ref_n{a.n}_t{a.t1}_eps{a.eps}.npy"
     if cache.exists():

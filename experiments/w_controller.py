@@ -79,8 +79,7 @@ def main(argv=None) -> int:
     mus, ts = jnp.linspace(0.1, 0.6, a.n), jnp.linspace(0.0, a.t1, a.n_save)
 
     def run(options):
-        one = lambda mu: solve(set_param(sc, "foundation.friction_coefficient", mu), ts, options)  # noqa: E731
-        return jax.block_until_ready(jax.jit(jax.vmap(one))(mus))
+        return solve_mus(sc, mus, ts, options)
 
     ref = run(jh.SolverOptions(diffrax.Tsit5(), rtol=1e-9, atol=1e-11, max_steps=400_000))
     for name, (pc, ic) in CONTROLLERS.items():
@@ -89,6 +88,14 @@ def main(argv=None) -> int:
         ctrl = diffrax.PIDController(rtol=1e-3, atol=1e-5, pcoeff=pc, icoeff=ic)
         step_report(name, run(jh.SolverOptions(stepsize_controller=ctrl)), ref, width=28)
     return 0
+
+
+def solve_mus(sc, mus, ts, options):
+    """One jitted, vmapped solve of the scenario `sc` over the friction coefficients `mus` [-], saved at
+    `ts` [s], with `options` (the bare solve core, status per member, no exception): a `Trajectory` with a
+    leading member axis."""
+    one = lambda mu: solve(set_param(sc, "foundation.friction_coefficient", mu), ts, options)  # noqa: E731
+    return jax.block_until_ready(jax.jit(jax.vmap(one))(mus))
 
 
 def step_report(name: str, tr, ref, width: int) -> None:

@@ -34,14 +34,12 @@ import equinox as eqx  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 from bench_w_step import _module_at  # noqa: E402  (the module of a git revision, imported beside the package)
 from jax.flatten_util import ravel_pytree  # noqa: E402
-from w_controller import step_report  # noqa: E402  (the same report line as the controller comparison)
+from w_controller import solve_mus, step_report  # noqa: E402  (the same solve and report as the controller comparison)
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist import set_param, vector_field  # noqa: E402
 from jaxhoist._numerics.rosenbrock import RosenbrockW  # noqa: E402  (internal: a W with another linearisation)
-from jaxhoist._numerics.solve import as_float64_leaves, solve  # noqa: E402  (internal: the bare solve core under vmap)
-
-MU = "foundation.friction_coefficient"
+from jaxhoist._numerics.solve import as_float64_leaves  # noqa: E402  (internal: strongly typed leaves, one compile)
 
 
 class _Dense(eqx.Module):
@@ -82,8 +80,7 @@ def main(argv=None) -> int:
     mus, ts = jnp.linspace(0.1, 0.6, a.n), jnp.linspace(0.0, a.t1, a.n_save)
 
     def run(options, members):
-        one = lambda mu: solve(set_param(sc, MU, mu), ts, options)  # noqa: E731
-        return jax.block_until_ready(jax.jit(jax.vmap(one))(members))
+        return solve_mus(sc, members, ts, options)
 
     ref_options = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-9, atol=1e-11, max_steps=2_000_000)
     ref = run(ref_options, mus)

@@ -7,7 +7,7 @@ median, max: a lock-step group's cost follows its slowest member), the share rej
 the mass centre from Tsit5 at rtol 1e-9 (atol 1e-11): at t1 (median, max, at which μ) and the largest at
 any saved time. Step counts do not depend on the machine's load.
 
-    python experiments/w_tolerance.py --n 32 --t1 25
+    python experiments/w_tolerance.py --n 32 --t1 25          # from experiments/, or with it on PYTHONPATH
     python experiments/w_tolerance.py --n 128 --t1 25 --tols "1e-3,1e-5;1e-3,2e-5;1e-3,3e-5"
 
 Measured 2026-11-25 (the W with the turning-corner term, cubic dense output), --n 32 --t1 25 (steps
@@ -43,12 +43,10 @@ jax.config.update("jax_enable_x64", True)
 import diffrax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
+from w_controller import solve_mus, step_report  # noqa: E402  (the same solve and report as the controller comparison)
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist import set_param  # noqa: E402
-from jaxhoist._numerics.solve import as_float64_leaves, solve  # noqa: E402  (internal: the bare solve core under vmap)
-
-MU = "foundation.friction_coefficient"
+from jaxhoist._numerics.solve import as_float64_leaves  # noqa: E402  (internal: strongly typed leaves, one compile)
 
 
 def main(argv=None) -> int:
@@ -65,23 +63,18 @@ def main(argv=None) -> int:
     mus, ts = jnp.linspace(a.lo, a.hi, a.n), jnp.linspace(0.0, a.t1, 201)
 
     def run(options):
-        one = lambda mu: solve(set_param(sc, MU, mu), ts, options)  # noqa: E731
-        return jax.block_until_ready(jax.jit(jax.vmap(one))(mus))
+        return solve_mus(sc, mus, ts, options)
 
     ref = run(jh.SolverOptions(diffrax.Tsit5(), rtol=1e-9, atol=1e-11, max_steps=400_000))
     for tol in a.tols.split(";"):
         rtol, atol = map(float, tol.split(","))
         tr = run(jh.SolverOptions(rtol=rtol, atol=atol))
-        st = np.asarray(tr.num_accepted_steps + tr.num_rejected_steps)
-        rej = np.asarray(tr.num_rejected_steps).sum() / st.sum()
+        step_report(f"rtol {rtol:g} atol {atol:g}", tr, ref, width=22)
         dist = np.linalg.norm(np.asarray(tr.position - ref.position), axis=-1)  # (n, saved times)
         final = dist[:, -1]
         print(
-            f"rtol {rtol:g} atol {atol:g}: steps {st.sum()}, median {np.median(st):.0f}, max {st.max()}, "
-            f"rejected {rej:.1%}, final error median {100 * np.median(final):.3f} cm, max "
-            f"{100 * final.max():.3f} cm (μ {float(mus[final.argmax()]):.3f}), "
-            f"any time {100 * dist.max():.3f} cm, "
-            f"failed {int(np.sum(np.asarray(tr.status) != 0))}",
+            f"    final error median {100 * np.median(final):.3f} cm, worst at μ "
+            f"{float(mus[final.argmax()]):.3f}; any saved time {100 * dist.max():.3f} cm",
             flush=True,
         )
     return 0
