@@ -749,9 +749,12 @@ def test_sweep_objects_count_members_and_refuse_bad_input(box):
 
 def test_default_lanes_widen_with_the_member_count_only():
     """The default group width of an adaptive scan grows with the number of members (a denser scan's
-    groups are close neighbours that take about the same steps) from 16 to 256, keeping at least 16
-    groups, and never depends on the devices (results must not); constant steps keep 256; `lanes` given
-    wins, capped at the member count's next power of two."""
+    groups are close neighbours that take about the same steps) from 16 to 256 on CPUs, keeping at least 16
+    groups, and never depends on the device count (results must not); on accelerators the whole scan is
+    one group of up to 65 536; constant steps keep 256; `lanes` given wins, capped at the member count's
+    next power of two."""
+    from types import SimpleNamespace
+
     from jaxhoist._apps.scan_layout import adaptive_lanes
 
     widths = {n: adaptive_lanes(n) for n in (1, 64, 511, 512, 1024, 4096, 65536)}
@@ -763,3 +766,12 @@ def test_default_lanes_widen_with_the_member_count_only():
     assert jh.BatchOptions(devices=jax.devices()[:1]).lanes_for(adaptive, 4096) == 256
     assert jh.BatchOptions().lanes_for(fixed, 100) == 128  # 256, capped at the next power of two
     assert jh.BatchOptions(lanes=8).lanes_for(adaptive, 4096) == 8
+    gpus = tuple(SimpleNamespace(platform="gpu") for _ in range(2))
+    assert [adaptive_lanes(n, accelerator=True) for n in (1, 4096, 10**6)] == [65536] * 3
+    for devices in (gpus[:1], gpus):
+        assert jh.BatchOptions().lanes_for(adaptive, 4096, devices) == 4096  # capped at the next power of two
+        assert jh.BatchOptions().lanes_for(adaptive, 100_000, devices) == 65536
+        assert jh.BatchOptions().lanes_for(fixed, 4096, devices) == 256
+        assert jh.BatchOptions(lanes=8).lanes_for(adaptive, 4096, devices) == 8
+    cpu_and_gpu = (jax.devices()[0], gpus[0])  # not all accelerators: the CPU rule
+    assert jh.BatchOptions().lanes_for(adaptive, 4096, cpu_and_gpu) == 256

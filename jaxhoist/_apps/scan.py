@@ -214,7 +214,7 @@ def _scan(
             f"out_dir, a folder on a file system that all of them share"
         )
     n = members.shape[0]
-    lanes = batch.lanes_for(options, n)
+    lanes = batch.lanes_for(options, n, devs)
     invalid, order, solve_rows = layout.order(scenario, paths, members, batch.sort)
     chunk = layout.chunk_size(n, lanes, len(devs), len(ts), histories, batch)
     spec = BatchSpec(

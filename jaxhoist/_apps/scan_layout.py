@@ -29,9 +29,10 @@ class BatchOptions(eqx.Module):
 
     - `lanes`: members solved together in one vmapped, lock-step solve (a numerical setting: results are
       independent of the chunk size and devices, not of `lanes`; XLA may round differently in a vmap of
-      another width); capped at the number of members. Default (None): with adaptive steps 16 to 256, as
-      wide as still gives 16 groups (`adaptive_lanes`: wide groups cost less per member, but wait for
-      their slowest member), 256 with constant steps.
+      another width); capped at the number of members. Default (None): with adaptive steps on CPUs 16 to
+      256, as wide as still gives 16 groups, on accelerators (GPU, TPU) the whole scan in one group of up
+      to 65 536 members (`adaptive_lanes`: wide groups cost less per member, but wait for their slowest
+      member), 256 with constant steps.
     - `chunk_size`: members per compiled call (rounded up to whole groups on every device); default (None):
       up to 8 groups per device, fewer if the saved histories would exceed `max_memory`.
     - `max_memory`: bytes of saved histories per chunk that the default chunk size keeps below [B].
@@ -62,26 +63,35 @@ class BatchOptions(eqx.Module):
             if not (np.isfinite(v) and v > 0):
                 raise ScenarioError(f"{name} must be a positive number, got {v}")
 
-    def lanes_for(self, options: SolverOptions, n: int) -> int:
-        """The group width for `n` members: `lanes` if given, else 256 with constant steps and
-        `adaptive_lanes(n)` with adaptive ones; capped at the next power of two >= n."""
+    def lanes_for(self, options: SolverOptions, n: int, devices: tuple = ()) -> int:
+        """The group width for `n` members on `devices`: `lanes` if given, else 256 with constant steps and
+        `adaptive_lanes(n, accelerator)` with adaptive ones (`accelerator`: every device is a GPU or TPU);
+        capped at the next power of two >= n."""
         if self.lanes is not None:
             lanes = int(self.lanes)
+        elif options.fixed_step:
+            lanes = 256
         else:
-            lanes = 256 if options.fixed_step else adaptive_lanes(n)
+            accelerator = bool(devices) and all(d.platform != "cpu" for d in devices)
+            lanes = adaptive_lanes(n, accelerator=accelerator)
         return int(min(lanes, 1 << max(0, math.ceil(math.log2(n)))))
 
 
-#: Bounds of the default group width with adaptive steps, and the number of groups it keeps at least.
+#: Bounds of the default group width with adaptive steps on CPUs, and the number of groups it keeps at least.
 ADAPTIVE_LANES = (16, 256)
 MIN_GROUPS = 16
+#: The default group width with adaptive steps on accelerators (GPU, TPU): one group up to this many members.
+ACCELERATOR_LANES = 65536
 
 
-def adaptive_lanes(n: int) -> int:
-    """The default group width of an adaptive scan of `n` members: the widest power of two in
-    `ADAPTIVE_LANES` that still splits the scan into `MIN_GROUPS` groups (4096 members: 256 lanes; 1024:
-    64; up to 511: 16). It depends on `n` only, never on the devices, so that results stay independent of
-    the device count (the width is a numerical setting: XLA may round differently in a wider vmap).
+def adaptive_lanes(n: int, accelerator: bool = False) -> int:
+    """The default group width of an adaptive scan of `n` members.
+
+    On CPUs: the widest power of two in `ADAPTIVE_LANES` that still splits the scan into `MIN_GROUPS` groups
+    (4096 members: 256 lanes; 1024: 64; up to 511: 16). On accelerators: the whole scan in one group, up to
+    `ACCELERATOR_LANES` members. It depends on `n` and the kind of device only, never on the device count,
+    so that results stay independent of how many devices share the scan (the width is a numerical setting:
+    XLA may round differently in a wider vmap).
 
     Why: a vmapped step costs far less per member in a wide group (the per-kernel cost of the small
     per-member systems is shared), but a group takes as many steps as its slowest member. In a dense scan,
@@ -91,7 +101,12 @@ def adaptive_lanes(n: int) -> int:
     device): 92 / 45 / 40 / 38 ms per trajectory for 16 / 64 / 128 / 256 lanes, lock-step efficiency
     0.98-0.95, the same results; 64 members spread over μ = 0.1-0.6 instead: 16 and 32 lanes 1.0x, 64 lanes
     1.25x (efficiency 0.39). Member count stands in for density: a bigger scan of a fixed range is denser.
+    On a GPU a step's kernels cost about the same for a few hundred members as for tens of thousands (they
+    are bound by launches, not arithmetic), so groups run one after another waste the chip: one group, even
+    at the lock-step efficiency of a whole scan, wins (docs/performance.md, "On a GPU").
     """
+    if accelerator:
+        return ACCELERATOR_LANES
     lo, hi = ADAPTIVE_LANES
     lanes = lo
     while lanes * 2 <= hi and n >= MIN_GROUPS * lanes * 2:
