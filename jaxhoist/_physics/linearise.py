@@ -128,15 +128,20 @@ class Linearisation(eqx.Module):
         """Factors of S = M - hγ D - (hγ)² K (see `solve`): the LU factors of the 6x6 body block
         S_b = M_b - hγ D_b - (hγ)² K_b, the diagonal tip block s_A = m_0 + hγ c_A + (hγ)² k_A, the
         Sherman-Morrison map T = I - σ w aᵀ for the rope's rank-one term β a aᵀ (β = hγ s_v + (hγ)² s_x >= 0,
-        w = B⁻¹a, σ = β/(1 + β aᵀw)), and the 9x18 map [hγ M, (hγ)² K] from (r_V, P r_x) to the right-hand
-        side.
+        w = B⁻¹a with B the block-diagonal part, σ = β/(1 + β aᵀw)), so that S⁻¹ z = T B⁻¹z, and the body
+        rows' right-hand-side maps hγ M_b, (hγ)² K_b - (hγ)² s_x a_b a_bᵀ (from the body's X) and
+        -(hγ)² s_x a_b a_tᵀ (from the tip's displacement).
 
         The LU is taken without pivoting: S_b is M_b (positive definite) plus hγ times the dissipative
         part -D_b and (hγ)² times the restoring part -K_b, both positive semi-definite up to the small
         non-symmetric friction-normal coupling, so elimination in the natural order is stable. It is written
-        out, so that a vmapped batch runs it as elementwise arithmetic over the members. T and the 9x18 map
-        are formed once per step, so that each of the step's solves is two batched products and one
-        triangular solve."""
+        out, so that a vmapped batch runs it as elementwise arithmetic over the members. The tip rows'
+        right-hand side is diagonal and formed in `solve`: building the earlier 9x18 map [hγ M, (hγ)² K] of
+        the whole right-hand side took a quarter of the linearisation's time (a profile of 256 vmapped
+        members). Writing T out as z - σ w (aᵀz) instead of the product T z was tried and not kept: no faster
+        (`bench_w_step.py --lanes 16,256 --kinds lin,w`: 0.92x-1.03x), and its rounding differed between
+        the forward- and reverse-mode programs of one solve by 1e-11 relative (`tests/test_rosenbrock.py`
+        asks for 1e-12)."""
         Sb = self.body_mass - hg * self.body_damping - hg * hg * self.body_stiffness
         lu = _lu(Sb)
         s_tip = self.tip_mass + hg * self.tip_damping + hg * hg * self.tip_stiffness
@@ -144,45 +149,37 @@ class Linearisation(eqx.Module):
         w = jnp.concatenate([_lu_solve(lu, a[:6]), a[6:] / s_tip])
         beta = hg * self.rope_damping + hg * hg * self.rope_stiffness
         T = jnp.eye(9) - (beta / (1.0 + beta * _dot(a, w))) * w[:, None] * a[None, :]
+        # the right-hand side's maps from r_V and from X (the rope's -s_x a aᵀ included)
         hg2 = hg * hg
-        z63, z36 = jnp.zeros((6, 3)), jnp.zeros((3, 6))
-        rope = (hg2 * self.rope_stiffness) * a[:, None] * a[None, :]
-        rhs_map = jnp.block(
-            [
-                [hg * self.body_mass, z63, hg2 * self.body_stiffness, z63],
-                [z36, (hg * self.tip_mass) * jnp.eye(3), z36, -hg2 * jnp.diag(self.tip_stiffness)],
-            ]
-        )
-        rhs_map = rhs_map.at[:, 9:].add(-rope)
-        return lu, s_tip, T, rhs_map
+        a_b, a_t = a[:6], a[6:]
+        sx = hg2 * self.rope_stiffness
+        K_bb = hg2 * self.body_stiffness - sx * a_b[:, None] * a_b[None, :]
+        K_bt = -sx * a_b[:, None] * a_t[None, :]
+        return lu, s_tip, T, hg * self.body_mass, K_bb, K_bt
 
     def solve(self, factors, r: State, hg: Scalar) -> State:
         """u with (I/(hγ) - J) u = r, J the approximate Jacobian described in the module docstring.
 
         Positions follow their velocities, u_x = hγ (r_x + ∂ẋ/∂V u_V); the velocities solve
         S u_V = hγ (M r_V + hγ K P r_x) with P the map from the position part of the state to X
-        (δθ = 2 Ξᵀ δq/|q|² for the quaternion, so that P ∂ẋ/∂V = I); everything else is explicit, u = hγ r.
+        (δθ = 2 Ξᵀ δq/|q|², so that P ∂ẋ/∂V = I); everything else is explicit, u = hγ r.
 
-        The right-hand side hγ (M r_V + hγ K P r_x) and the Sherman-Morrison update u_V = T z are batched
-        matrix-vector products (`@`): on XLA's CPU backend each is one kernel whose result is stored, where
-        written-out sums were fused into every kernel that reads them and recomputed there (a 9x18 product
-        over 256 members in a loop: 6 µs as a dot, 60-90 µs written out).
+        The body block's products M_b r_V and K_b P r_x are batched matrix-vector products (`@`): on XLA's
+        CPU backend each is one kernel whose result is stored, where written-out sums were fused into every
+        kernel that reads them and recomputed there.
         """
-        lu, s_tip, T, rhs_map = factors
+        lu, s_tip, T, M_h, K_bb, K_bt = factors
         q = self.quaternion
         xi = _quat_xi(q)
-        r_VX = jnp.concatenate(
-            [
-                r.velocity,
-                r.angular_velocity,
-                r.tip_velocity,
-                r.position,
-                2.0 * _mv(xi.T, r.quaternion) / _dot(q, q),
-                r.tip_position,
-            ]
-        )
-        rhs = rhs_map @ r_VX
-        z = jnp.concatenate([_lu_solve(lu, rhs[:6]), rhs[6:] / s_tip])
+        a = self.rope_direction
+        r_V = jnp.concatenate([r.velocity, r.angular_velocity])
+        r_X = jnp.concatenate([r.position, 2.0 * _mv(xi.T, r.quaternion) / _dot(q, q)])
+        hg2 = hg * hg
+        # the rope's stiffness -s_x a aᵀ acts on the whole X, the tip's displacement included
+        rope = hg2 * self.rope_stiffness * ((a[:6] @ r_X) + _dot(a[6:], r.tip_position))
+        rhs_b = M_h @ r_V + K_bb @ r_X + K_bt @ r.tip_position
+        rhs_a = (hg * self.tip_mass) * r.tip_velocity - (hg2 * self.tip_stiffness) * r.tip_position
+        z = jnp.concatenate([_lu_solve(lu, rhs_b), (rhs_a - rope * a[6:]) / s_tip])
         u_V = T @ z
         u_v, u_w, u_a = u_V[:3], u_V[3:6], u_V[6:]
         return State(
@@ -359,10 +356,11 @@ def linearise(
     # sticks (~1e8 N/rad on paper-4.2 at μ = 0.55, tipping about one sticking corner); left out, the W step
     # met it explicitly and took 3x the steps over 25 s there (experiments/w_orientation.py).
     turn = -R[None] @ _skew(jnp.cross(omega, c.corners_rel))
-    G_turn = jnp.concatenate([jnp.zeros((4, 3, 3)), turn], axis=-1)
-    D_body = jnp.einsum("irk,irj->kj", G, jnp.einsum("irs,isj->irj", C, G))
-    KG = jnp.einsum("irs,isj->irj", Kc, G) + jnp.einsum("irs,isj->irj", C, G_turn)
-    K_body = jnp.einsum("irk,irj->kj", G, KG)
+    CG = _mm(C, G)
+    # K_i G_i: K_i has only its z column k_i; C_i G^ω_i = [0, C_i turn_i]
+    KG = Kc[:, :, 2, None] * G[:, None, 2, :] + jnp.pad(_mm(C, turn), ((0, 0), (0, 0), (3, 0)))
+    DK = jnp.einsum("irk,irj->kj", G, jnp.concatenate([CG, KG], axis=-1))
+    D_body, K_body = DK[:, :6], DK[:, 6:]
 
     # Rope, eq. (2.14): S(δ, dδ/dt) along e (from B towards A); dδ/dt = eᵀ(v_A - v_B) + ds/dt.
     G_B = jnp.concatenate([eye3, -_mm(R, _skew(c.attachment_rel))], axis=-1)
