@@ -70,7 +70,9 @@ def device_peak_bytes() -> int | None:
 
 def plain_vmap_tsit5(sc, mus, t1: float) -> tuple[dict, dict]:
     """The baseline: one `jax.vmap` of `diffeqsolve(Tsit5, PIDController(1e-6, 1e-8))` over all `mus`."""
-    sol_fn = jax.jit(jax.vmap(lambda mu: _solve(sc, mu, t1, diffrax.PIDController(rtol=1e-6, atol=1e-8))))
+    sol_fn = jax.jit(
+        jax.vmap(lambda mu: tsit5_final(sc, mu, t1, diffrax.PIDController(rtol=1e-6, atol=1e-8)))
+    )
     x = jax.numpy.asarray(mus)
     t0 = time.perf_counter()
     compiled = sol_fn.lower(x).compile()
@@ -97,7 +99,7 @@ def plain_vmap_tsit5(sc, mus, t1: float) -> tuple[dict, dict]:
     return rec, finals
 
 
-def _solve(sc, mu, t1: float, controller, max_steps: int = 1_000_000):
+def tsit5_final(sc, mu, t1: float, controller, max_steps: int = 1_000_000):
     """(final mass-centre position [m], accepted steps, success) of one Tsit5 solve at μ."""
     s = eqx.tree_at(lambda x: x.foundation.friction_coefficient, sc, mu)
     y0, c = jh.initial_state(s)
@@ -194,7 +196,7 @@ def bench(args) -> None:
 def reference(sc, mus, t1) -> np.ndarray:
     """Final positions of adaptive Tsit5 at rtol 1e-10, atol 1e-12, vmapped over groups of 8 members."""
     controller = diffrax.PIDController(rtol=1e-10, atol=1e-12)
-    f = jax.jit(jax.vmap(lambda mu: _solve(sc, mu, t1, controller, max_steps=5_000_000)))
+    f = jax.jit(jax.vmap(lambda mu: tsit5_final(sc, mu, t1, controller, max_steps=5_000_000)))
     outs = [f(jax.numpy.asarray(c)) for c in np.array_split(mus, max(1, len(mus) // 8))]
     if not all(bool(np.all(np.asarray(o[2]))) for o in outs):
         raise RuntimeError("a reference solve failed")

@@ -52,6 +52,7 @@ jax.config.update("jax_enable_x64", True)
 
 import diffrax  # noqa: E402
 import numpy as np  # noqa: E402
+from benchmark_accelerator import tsit5_final  # noqa: E402  (the same plain Tsit5 solve as on the GPU)
 from jax.flatten_util import ravel_pytree  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
@@ -104,25 +105,9 @@ def _timed_scan(sc, mus, times, **kw):
 def plain_vmap_tsit5(sc, mus, t1):
     """`jax.jit(jax.vmap(...))` of a plain `diffrax.diffeqsolve(Tsit5, PIDController(1e-6, 1e-8))` over every
     member at once: (wall s after compilation, compile s, final positions)."""
-    import equinox as eqx
 
     def one(mu):
-        s = eqx.tree_at(lambda x: x.foundation.friction_coefficient, sc, mu)
-        y0, c = initial_state(s)
-        sol = diffrax.diffeqsolve(
-            diffrax.ODETerm(vector_field),
-            diffrax.Tsit5(),
-            0.0,
-            t1,
-            None,
-            y0,
-            (s, c),
-            stepsize_controller=diffrax.PIDController(rtol=1e-6, atol=1e-8),
-            max_steps=10**6,
-            saveat=diffrax.SaveAt(t1=True),
-            throw=False,
-        )
-        return sol.ys.position[-1]
+        return tsit5_final(sc, mu, t1, diffrax.PIDController(rtol=1e-6, atol=1e-8))[0]
 
     f = jax.jit(jax.vmap(one))
     x = jax.numpy.asarray(mus)
