@@ -27,12 +27,19 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
 
 import jax
 
+# on a CPU, every core by default (--devices N to change), set before JAX starts its backend; an accelerator
+# is JAX's default backend whatever this says
+jax.config.update(
+    "jax_num_cpu_devices",
+    int(sys.argv[sys.argv.index("--devices") + 1]) if "--devices" in sys.argv else (os.cpu_count() or 1),
+)
 jax.config.update("jax_enable_x64", True)
 
 import diffrax  # noqa: E402
@@ -261,6 +268,7 @@ def main(argv=None) -> None:
     p.add_argument("--check", help="a folder written by the benchmark: check its final positions here")
     p.add_argument("--runs", default="4096,65536", help="comma-separated runs (see above)")
     p.add_argument("--t1", type=float, default=25.0, help="horizon [s] (default 25, paper-4.2's)")
+    p.add_argument("--devices", type=int, default=None, help="host CPU devices (default: one per core)")
     p.add_argument("--budget", type=float, default=float("inf"), help="start no run after this many s")
     p.add_argument("--ref-n", type=int, default=512, help="members checked against the reference (--check)")
     args = p.parse_args(argv)

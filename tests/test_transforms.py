@@ -1,6 +1,8 @@
 """JAX transforms through `simulate`: vmap, forward and reverse derivatives against finite differences,
 no recompilation when only leaf values change, and failure reporting."""
 
+import dataclasses
+
 import diffrax
 import equinox as eqx
 import jax
@@ -130,7 +132,9 @@ def _mu(s):
 
 def test_no_recompile_when_leaf_values_change(paper42, guarded_core):
     """One trace serves every call that changes only values: leaves through `Scenario.replace` and
-    `eqx.tree_at` (float64 arrays), t1 as a float, numpy or JAX scalar, saved times of the same length."""
+    `eqx.tree_at` (float64 arrays), t1 as a float, numpy or JAX scalar, saved times of the same length,
+    and scenarios that differ only in their static labels (another preset, a renamed copy:
+    `Scenario.unlabelled`)."""
     kw = dict(options=LOOSE)
     jh.simulate(paper42, jh.Times(0.05, n=3), **kw)
     jh.simulate(
@@ -149,6 +153,9 @@ def test_no_recompile_when_leaf_values_change(paper42, guarded_core):
     jh.simulate(paper42, jh.Times(np.float64(0.04), n=3), **kw)
     jh.simulate(paper42, jh.Times(jnp.asarray(0.06), n=3), **kw)
     jh.simulate(paper42, jh.Times(ts=np.array([0.0, 0.01, 0.03])), options=LOOSE)
+    jh.simulate(jh.load_scenario("paper-2.3"), jh.Times(0.05, n=3), **kw)
+    renamed = dataclasses.replace(paper42, name="my lift", t1=3.0, description="renamed")
+    jh.simulate(renamed, jh.Times(0.05, n=3), **kw)
     # The guard is live: a new shape of the saved times must retrace, and does.
     with pytest.raises(RuntimeError, match="traced"):
         jh.simulate(paper42, jh.Times(0.05, n=4), options=LOOSE)

@@ -238,7 +238,8 @@ def _scan(
             "lanes": lanes,
         }
         chunk, done_chunks = store.open(order, chunk, header, resume)
-    run = _Run(spec, scenario, ts, solve_rows, order, chunk, store, done_chunks, wall0)
+    # the compiled chunks get the scenario without its labels: one program for any scenario's labels
+    run = _Run(spec, scenario.unlabelled(), ts, solve_rows, order, chunk, store, done_chunks, wall0)
     flat, timings = run.chunks(progress_mod.resolve(progress))
     result = _assemble(
         scenario,

@@ -204,6 +204,7 @@ def _solve_elastic(args, scenario, ts, options, progress):
 
     from .._numerics.compile_cache import is_cached
 
+    scenario = scenario.unlabelled()  # one compiled program for any scenario's labels
     cached = is_cached("cli-simulate", _cache_key(scenario, ts, options))
     with progress("compiling (cached in this process)" if cached else "compiling"):
         solve_fn = _compiled_solve(scenario, ts, options)

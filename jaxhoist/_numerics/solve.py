@@ -254,5 +254,5 @@ def simulate(
     warn_moved("simulate", moved)
     ts = jnp.asarray(ts, dtype=jnp.float64)
     with forward_mode_hint():  # jacfwd through the reverse adjoint: say to pass adjoint="forward"
-        traj = _solve_jit(scenario, ts, options)
+        traj = _solve_jit(scenario.unlabelled(), ts, options)  # one program for any labels
     return _raise_on_failure(traj) if throw else traj

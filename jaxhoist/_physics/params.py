@@ -11,6 +11,8 @@ Host-side checks (`check()`) run on concrete values only, so the modules stay tr
 
 from __future__ import annotations
 
+import dataclasses
+
 import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
@@ -291,6 +293,13 @@ class Scenario(eqx.Module):
                     f"{_show(sink)} m, at least the box height c = {_show(c)} m (stiffen the ground or "
                     f"lighten the load)"
                 )
+
+    def unlabelled(self) -> Scenario:
+        """This scenario with its static labels (`name`, `t1`, `description`) set to fixed values: what a
+        compiled solve is given, so that scenarios that differ only in their labels (the presets, a copy
+        renamed in a notebook) share one compiled program instead of compiling again. No solve reads the
+        labels (the saved times are resolved from `t1` before compiling)."""
+        return dataclasses.replace(self, name="scenario", t1=1.0, description="")
 
     def replace(self, **leaves) -> Scenario:
         """A copy with leaves replaced by dotted path.
