@@ -62,6 +62,18 @@ def member(mu: float):
     return y0, (sc, c)
 
 
+def controller(norm=None):
+    """The default solver's step-size control (`SolverOptions()`), with the error norm `norm` if given."""
+    kw = {} if norm is None else {"norm": norm}
+    return diffrax.PIDController(rtol=RTOL, atol=ATOL, pcoeff=0.3, icoeff=0.3, **kw)
+
+
+def integral_controller(norm=None):
+    """The default step-size control before 2026-11-26: diffrax's integral controller."""
+    kw = {} if norm is None else {"norm": norm}
+    return diffrax.PIDController(rtol=RTOL, atol=ATOL, **kw)
+
+
 def solve(mu, t1, solver, controller, saveat, max_steps=200_000):
     y0, args = member(mu)
     return diffrax.diffeqsolve(
@@ -70,10 +82,10 @@ def solve(mu, t1, solver, controller, saveat, max_steps=200_000):
     )  # fmt: skip
 
 
-def budget(mu: float, t1: float) -> None:
+def budget(mu: float, t1: float, time_derivative: bool, make_controller) -> None:
     """Part 1: the error norm's shares by state leaf over one member's accepted steps."""
-    ctrl = diffrax.PIDController(rtol=RTOL, atol=ATOL)
-    sol = solve(mu, t1, RosenbrockW(), ctrl, diffrax.SaveAt(steps=True))
+    solver = RosenbrockW(time_derivative=time_derivative)
+    sol = solve(mu, t1, solver, make_controller(), diffrax.SaveAt(steps=True))
     n = int(sol.stats["num_accepted_steps"])
     ts = np.asarray(sol.ts)[:n]
     ys = jax.tree_util.tree_map(lambda x: x[:n], sol.ys)
@@ -84,8 +96,9 @@ def budget(mu: float, t1: float) -> None:
     @jax.jit
     @jax.vmap
     def scaled_sq(t, y, h):
+        f0 = vector_field(t, y, args)
         y1, e, _ = w_step(
-            vector_field, linearise, ROS34PW2, t, y, h, args, vector_field(t, y, args), elastic_quadratures
+            vector_field, linearise, ROS34PW2, t, y, h, args, f0, elastic_quadratures, time_derivative
         )
         return jax.tree_util.tree_map(
             lambda a, b, ee: (ee / (ATOL + RTOL * jnp.maximum(jnp.abs(a), jnp.abs(b)))) ** 2, y, y1, e
@@ -123,7 +136,7 @@ def weighted_norm(w: float):
     return norm
 
 
-def weights(n: int, t1: float, ws: list[float]) -> None:
+def weights(n: int, t1: float, ws: list[float], time_derivative: bool, make_controller) -> None:
     """Part 2: steps and accuracy with the boom tip's error weighted by w."""
     mus = jnp.linspace(0.1, 0.6, n)
     final = diffrax.SaveAt(t1=True)
@@ -136,8 +149,9 @@ def weights(n: int, t1: float, ws: list[float]) -> None:
     ref, _ = jax.jit(lambda: run(diffrax.Tsit5(), tight, 10_000_000))()
     print("w      steps median   max    rejected   final mass centre vs Tsit5 1e-10: median   max")
     for w in ws:
-        ctrl = diffrax.PIDController(rtol=RTOL, atol=ATOL, norm=weighted_norm(w))
-        pos, stats = jax.jit(lambda c=ctrl: run(RosenbrockW(), c, 200_000))()
+        ctrl = make_controller(weighted_norm(w))
+        solver = RosenbrockW(time_derivative=time_derivative)
+        pos, stats = jax.jit(lambda c=ctrl, s=solver: run(s, c, 200_000))()
         acc, rej = np.asarray(stats["num_accepted_steps"]), np.asarray(stats["num_rejected_steps"])
         err = 100 * np.linalg.norm(np.asarray(pos) - np.asarray(ref), axis=-1)
         print(
@@ -152,11 +166,19 @@ def main(argv=None) -> int:
     p.add_argument("--n", type=int, default=16, help="members of the weight sweep (0: skip it)")
     p.add_argument("--t1", type=float, default=25.0, help="end time [s]")
     p.add_argument("--weights", default="1,0.3,0.1,0", help="weights w of the boom tip's error")
+    p.add_argument(
+        "--no-time-derivative",
+        action="store_true",
+        help="the solver without the ∂f/∂t term in its stages (RosenbrockW(time_derivative=False)), "
+        "and diffrax's integral controller, as the default was before 2026-11-26",
+    )
     a = p.parse_args(argv)
+    with_t = not a.no_time_derivative
+    make = controller if with_t else integral_controller
     for mu in (float(m) for m in a.mus.split(",") if m):
-        budget(mu, a.t1)
+        budget(mu, a.t1, with_t, make)
     if a.n:
-        weights(a.n, a.t1, [float(w) for w in a.weights.split(",")])
+        weights(a.n, a.t1, [float(w) for w in a.weights.split(",")], with_t, make)
     return 0
 
 

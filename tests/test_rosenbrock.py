@@ -43,33 +43,63 @@ def _smooth_rhs(t, y, args):
     return jnp.array([-50.0 * (y[0] - jnp.cos(t)) + y[1] ** 2, -y[1] + 0.5 * jnp.sin(y[0])])
 
 
-def _fixed_solve(W_of, h, T=1.0):
+def _fixed_solve(W_of, h, T=1.0, time_derivative=False):
     n = round(T / h)
     y = jnp.array([1.0, 0.5])
 
     def body(i, y):
-        return w_step(_smooth_rhs, lambda t, y, a: _DenseW(W_of(t, y)), ROS34PW2, i * h, y, h, None)[0]
+        lin = lambda t, y, a: _DenseW(W_of(t, y))  # noqa: E731
+        return w_step(_smooth_rhs, lin, ROS34PW2, i * h, y, h, None, time_derivative=time_derivative)[0]
 
     return jax.lax.fori_loop(0, n, body, y)
 
 
 @pytest.mark.parametrize(
-    "which",
-    ["exact", "wrong"],
+    "which, time_derivative",
+    [("exact", False), ("wrong", False), ("exact", True), ("wrong", True)],
 )
-def test_order_three_for_exact_and_wrong_jacobians(which):
+def test_order_three_for_exact_and_wrong_jacobians(which, time_derivative):
     """Halving the step divides the error by ~2^3 whether W is the true Jacobian or a wrong one (only its
     diagonal, scaled by 0.7): the W-method keeps its order, which is what licenses the structured
-    linearisation of the model."""
+    linearisation of the model; with and without the ∂f/∂t term in the stages."""
 
     def jac(t, y):
         J = jax.jacfwd(lambda yy: _smooth_rhs(t, yy, None))(y)
         return J if which == "exact" else 0.7 * jnp.diag(jnp.diag(J))
 
-    ref = _fixed_solve(jac, 1.0 / 4096)
-    errs = [float(jnp.max(jnp.abs(_fixed_solve(jac, h) - ref))) for h in (1 / 64, 1 / 128, 1 / 256)]
+    ref = _fixed_solve(jac, 1.0 / 4096, time_derivative=time_derivative)
+    errs = [
+        float(jnp.max(jnp.abs(_fixed_solve(jac, h, time_derivative=time_derivative) - ref)))
+        for h in (1 / 64, 1 / 128, 1 / 256)
+    ]
     orders = np.log2(np.array(errs[:-1]) / np.array(errs[1:]))
     assert np.all(orders > 2.7), (errs, orders)
+
+
+def test_time_derivative_on_a_ramped_stiff_system():
+    """y' = λ (y - c t), λ = -1e6 1/s (a stiff spring pulled at a constant rate, like the hoisted rope), from
+    its particular solution y_p = c t + c/λ, five steps with |hλ| = 1e4. With the exact W the steps stay on
+    y_p to rounding with and without γ_i h ∂f/∂t in the stages. With W off by ±30 % (the structured W of the
+    model is not the Jacobian either) they leave it, and the ∂f/∂t term, the time column of the autonomous
+    system's W, more than halves the error (measured 2.3x at 0.7 λ, 4.3x at 1.3 λ)."""
+    lam, c, h = -1e6, 0.3, 1e-2
+
+    def rhs(t, y, args):
+        return lam * (y - c * t)
+
+    def error(w_factor, with_t):
+        y, t = jnp.array([c / lam]), 0.0
+        for _ in range(5):
+            lin = lambda t, y, a: _DenseW(jnp.array([[w_factor * lam]]))  # noqa: E731
+            y = w_step(rhs, lin, ROS34PW2, t, y, h, None, time_derivative=with_t)[0]
+            t += h
+        return abs(float(y[0]) - (c * t + c / lam))
+
+    assert error(1.0, True) < 1e-15 and error(1.0, False) < 1e-15
+    for w_factor in (0.7, 1.3):
+        with_t, without = error(w_factor, True), error(w_factor, False)
+        assert without > 1e-6, without  # the inexact W's error is real (3e-3 and 2e-4)
+        assert with_t < 0.5 * without, (w_factor, with_t, without)
 
 
 def _sliding_state(sc):

@@ -11,11 +11,19 @@ by ε.
 One step from (t, y) with step h, in the transformed variables u_i = Σ_{j<=i} γ_ij k_j (Hairer & Wanner,
 Solving ODEs II, §IV.7, (7.25)) so that no product J u is needed:
 
-    (I/(hγ) - W) u_i = f(t + α_i h, y + Σ_{j<i} a_ij u_j) + Σ_{j<i} (c_ij / h) u_j,
+    (I/(hγ) - W) u_i = f(t + α_i h, y + Σ_{j<i} a_ij u_j) + Σ_{j<i} (c_ij / h) u_j + γ_i h ∂f/∂t(t, y),
     y_1 = y + Σ m_i u_i,    error = Σ (m_i - m̂_i) u_i,
 
 with a = α Γ⁻¹, c = diag(1/γ) - Γ⁻¹, m = bᵀ Γ⁻¹ (Γ the lower-triangular matrix of γ_ij, γ on its
-diagonal). Time enters only through f (the hoist law); a W-method allows leaving ∂f/∂t out of W.
+diagonal) and γ_i = Σ_j γ_ij. Time enters through the hoist law: the rope's rest length shortens at the
+hoist speed, so ∂f/∂t is the stiff rope's force rate c_l v_l (4.2e6 N/s on paper-4.2) acting on the boom tip
+and the load. A W-method may leave ∂f/∂t out (it is the time column of the autonomous system's W), and the
+default does (`RosenbrockW(time_derivative=False)`): the ramp in the rope's stretch then enters each step
+only through the explicit stage values. With `time_derivative=True` the stages carry γ_i h ∂f/∂t (one
+forward-mode derivative in t per step, at the step's start, held fixed like W). On a stiff spring pulled at
+a constant rate with a W 30 % off its Jacobian that more than halves the error of a long step
+(tests/test_rosenbrock.py), and on paper-4.2 it took a third of the steps at the same accuracy
+(docs/performance.md, "The time derivative"); it is not yet the default, see there.
 
 `RosenbrockW` is a diffrax solver: it runs inside `diffrax.diffeqsolve` with any step-size controller,
 `SaveAt`, adjoint (forward mode, checkpointed reverse mode) and under `jax.vmap`, like diffrax's own solvers.
@@ -40,7 +48,8 @@ from ._tree import lin_comb
 class WTableau(eqx.Module):
     """Coefficients of a Rosenbrock-W method in the transformed form used by `w_step` (see the module
     docstring): `a` (stage states), `c` (stage couplings, divided by h), `alpha` (stage times), `m` and
-    `m_err` (solution and error weights), `gamma`, the `order` and the order of the embedded solution."""
+    `m_err` (solution and error weights), `gamma`, `gamma_t` (the weights γ_i = Σ_j γ_ij of the time
+    derivative ∂f/∂t in each stage), the `order` and the order of the embedded solution."""
 
     a: tuple = eqx.field(static=True)
     c: tuple = eqx.field(static=True)
@@ -48,6 +57,7 @@ class WTableau(eqx.Module):
     m: tuple = eqx.field(static=True)
     m_err: tuple = eqx.field(static=True)
     gamma: float = eqx.field(static=True)
+    gamma_t: tuple = eqx.field(static=True)
     order: int = eqx.field(static=True)
     embedded_order: int = eqx.field(static=True)
 
@@ -74,6 +84,7 @@ def w_tableau(alpha, gamma_lower, gamma: float, b, b_hat, order: int, embedded_o
         m=frozen(m),  # pyright: ignore[reportArgumentType]  # frozen() of a matrix is a tuple
         m_err=frozen(m - m_hat),  # pyright: ignore[reportArgumentType]  # frozen() of a matrix is a tuple
         gamma=float(gamma),
+        gamma_t=frozen(Gam.sum(axis=1)),  # pyright: ignore[reportArgumentType]  # frozen() of a vector is a tuple
         order=order,
         embedded_order=embedded_order,
     )
@@ -102,7 +113,7 @@ ROS34PW2 = w_tableau(
 )
 
 
-def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None):
+def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None, time_derivative=False):
     """One Rosenbrock-W step of size h from (t, y).
 
     - `f(t, y, args)`: the vector field; `linearise(t, y, args)`: an object with `factor(hγ)` and
@@ -114,6 +125,8 @@ def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None)
       stiff components of a linearly implicit method are not accurate (only the step's result is), so a
       quadrature of a nonlinear function of them (a damper's loss h ṗ²) through the stages is biased, by a
       factor 3 for the foundation and rope dampers' loss on paper-4.2.
+    - `time_derivative`: add γ_i h ∂f/∂t(t, y) to each stage (module docstring); False (default) leaves it
+      out.
 
     **Returns** `(y1, error, f1)`: the order-3 solution, the difference to the embedded solution, and
     f(t + h, y1) (for the next step's first stage and the dense output).
@@ -127,6 +140,9 @@ def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None)
     # Barriers keep XLA from fusing (and so recomputing) the linearisation and its factors into every
     # stage that reads them.
     lin, lu = jax.lax.optimization_barrier((lin, lin.factor(hg)))
+    if time_derivative:  # ∂f/∂t, the time column of W: held fixed like W
+        ones = jnp.ones_like(t)
+        f_t = jax.lax.stop_gradient(jax.jvp(lambda tt: f(tt, y, args), (t,), (ones,))[1])
     us = []
     for i in range(len(tab.m)):
         if i == 0 and f0 is not None:
@@ -141,6 +157,9 @@ def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None)
             ri = jax.tree_util.tree_map(lambda fl, cl: fl + cl / h, fi, cu)
         else:
             ri = fi
+        if time_derivative and tab.gamma_t[i] != 0.0:
+            g_i = float(tab.gamma_t[i])
+            ri = jax.tree_util.tree_map(lambda r, d: r + (g_i * h) * d, ri, f_t)  # pyright: ignore[reportPossiblyUnboundVariable]  # set above
         us.append(jax.lax.optimization_barrier(lin.solve(lu, ri, hg)))
     y1 = lin_comb(list(zip(tab.m, us, strict=True)), base=y)
     err = lin_comb(list(zip(tab.m_err, us, strict=True)), like=y)
@@ -174,9 +193,12 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
       derivatives (`jax.jvp`, `jax.jacfwd`, `scan(derivatives=True)` with `adjoint=diffrax.ForwardMode()`):
       a step is accepted when max(‖e_y‖, w ‖e_s‖) <= 1, so a sensitivity may carry 1/w times the
       relative local error of the state (`_numerics/sensitivity.py`). Default 0.1.
+    - `time_derivative`: whether the stages carry the γ_i h ∂f/∂t term (the module docstring). Default
+      False; True took a third of the steps on paper-4.2 (docs/performance.md, "The time derivative").
 
     f at each step's end is kept for the next step's first stage, so a step costs four evaluations of the
-    vector field, one linearisation and one 6x6 factorisation.
+    vector field, one linearisation and one 6x6 factorisation (and, with `time_derivative`, one derivative
+    of the vector field in t).
 
     Forward-mode derivatives (`SolverOptions(adjoint=diffrax.ForwardMode())`) are solved as their own
     error-controlled ODE beside the state (`_numerics/sensitivity.py`): differentiating the steps instead
@@ -197,6 +219,7 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
     quadrature: Callable | None = eqx.field(static=True, default=elastic_quadratures)
     tableau: WTableau = ROS34PW2
     tangent_weight: float = eqx.field(static=True, default=0.1)
+    time_derivative: bool = eqx.field(static=True, default=False)
 
     term_structure: ClassVar = AbstractTerm
     interpolation_cls: ClassVar = diffrax.ThirdOrderHermitePolynomialInterpolation
@@ -215,7 +238,16 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
         # stays valid across `made_jump`.
         del made_jump
         y1, err, f1 = w_step(
-            terms.vf, self.linearise, self.tableau, t0, y0, t1 - t0, args, solver_state, self.quadrature
+            terms.vf,
+            self.linearise,
+            self.tableau,
+            t0,
+            y0,
+            t1 - t0,
+            args,
+            solver_state,
+            self.quadrature,
+            self.time_derivative,
         )
         h = t1 - t0
         k0 = jax.tree_util.tree_map(lambda d: h * d, solver_state)

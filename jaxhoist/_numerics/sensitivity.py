@@ -122,6 +122,7 @@ def augmented_solver(solver: RosenbrockW, many: bool = False) -> RosenbrockW:
         quadrature=None if solver.quadrature is None else aug.quad,
         tableau=solver.tableau,
         tangent_weight=solver.tangent_weight,
+        time_derivative=solver.time_derivative,
     )
 
 
