@@ -139,10 +139,13 @@ def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None,
     hg = h * tab.gamma
     # Barriers keep XLA from fusing (and so recomputing) the linearisation and its factors into every
     # stage that reads them.
-    lin, lu = jax.lax.optimization_barrier((lin, lin.factor(hg)))
-    if time_derivative:  # ∂f/∂t, the time column of W: held fixed like W
+    if time_derivative:  # ∂f/∂t, the time column of W: held fixed like W, behind the same barrier
         ones = jnp.ones_like(t)
-        f_t = jax.lax.stop_gradient(jax.jvp(lambda tt: f(tt, y, args), (t,), (ones,))[1])
+        y_, args_, t_ = jax.lax.stop_gradient((y, args, t))  # no derivative of it is traced
+        f_t = jax.jvp(lambda tt: f(tt, y_, args_), (t_,), (ones,))[1]
+        lin, lu, f_t = jax.lax.optimization_barrier((lin, lin.factor(hg), f_t))
+    else:
+        lin, lu = jax.lax.optimization_barrier((lin, lin.factor(hg)))
     us = []
     for i in range(len(tab.m)):
         if i == 0 and f0 is not None:
