@@ -49,8 +49,7 @@ import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist import initial_state, vector_field  # noqa: E402
-from jaxhoist._numerics.rosenbrock import ROS34PW2, RosenbrockW, elastic_quadratures, w_step  # noqa: E402  (internal: one step's error estimate)
-from jaxhoist._physics.linearise import linearise  # noqa: E402  (internal: the default W)
+from jaxhoist._numerics.rosenbrock import RosenbrockW, w_step  # noqa: E402  (internal: one step's error estimate)
 
 MU = "foundation.friction_coefficient"
 RTOL, ATOL = 1e-3, 1e-5  # the default solver's tolerances (SolverOptions())
@@ -63,17 +62,14 @@ def member(mu: float):
     return y0, (sc, c)
 
 
-def controller(norm=None):
-    """The default solver's step-size control (`SolverOptions()`: diffrax's integral controller), with the
-    error norm `norm` if given."""
+def controller(pi: bool, norm=None):
+    """The default solver's step-size control (`SolverOptions()`: diffrax's integral controller), or with
+    `pi` the PI controller of `--time-derivative` (pcoeff = icoeff = 0.3); with the error norm `norm` if
+    given."""
     kw = {} if norm is None else {"norm": norm}
+    if pi:
+        kw.update(pcoeff=0.3, icoeff=0.3)
     return diffrax.PIDController(rtol=RTOL, atol=ATOL, **kw)
-
-
-def pi_controller(norm=None):
-    """The PI controller of `--time-derivative` (pcoeff = icoeff = 0.3), with the error norm `norm`."""
-    kw = {} if norm is None else {"norm": norm}
-    return diffrax.PIDController(rtol=RTOL, atol=ATOL, pcoeff=0.3, icoeff=0.3, **kw)
 
 
 def solve(mu, t1, solver, controller, saveat, max_steps=200_000):
@@ -84,10 +80,9 @@ def solve(mu, t1, solver, controller, saveat, max_steps=200_000):
     )  # fmt: skip
 
 
-def budget(mu: float, t1: float, time_derivative: bool, make_controller) -> None:
+def budget(mu: float, t1: float, solver: RosenbrockW, pi: bool) -> None:
     """Part 1: the error norm's shares by state leaf over one member's accepted steps."""
-    solver = RosenbrockW(time_derivative=time_derivative)
-    sol = solve(mu, t1, solver, make_controller(), diffrax.SaveAt(steps=True))
+    sol = solve(mu, t1, solver, controller(pi), diffrax.SaveAt(steps=True))
     n = int(sol.stats["num_accepted_steps"])
     ts = np.asarray(sol.ts)[:n]
     ys = jax.tree_util.tree_map(lambda x: x[:n], sol.ys)
@@ -100,8 +95,9 @@ def budget(mu: float, t1: float, time_derivative: bool, make_controller) -> None
     def scaled_sq(t, y, h):
         f0 = vector_field(t, y, args)
         y1, e, _ = w_step(
-            vector_field, linearise, ROS34PW2, t, y, h, args, f0, elastic_quadratures, time_derivative
-        )
+            vector_field, solver.linearise, solver.tableau, t, y, h, args, f0, solver.quadrature,
+            time_derivative=solver.time_derivative,
+        )  # fmt: skip
         return jax.tree_util.tree_map(
             lambda a, b, ee: (ee / (ATOL + RTOL * jnp.maximum(jnp.abs(a), jnp.abs(b)))) ** 2, y, y1, e
         )
@@ -138,7 +134,7 @@ def weighted_norm(w: float):
     return norm
 
 
-def weights(n: int, t1: float, ws: list[float], time_derivative: bool, make_controller) -> None:
+def weights(n: int, t1: float, ws: list[float], solver: RosenbrockW, pi: bool) -> None:
     """Part 2: steps and accuracy with the boom tip's error weighted by w."""
     mus = jnp.linspace(0.1, 0.6, n)
     final = diffrax.SaveAt(t1=True)
@@ -151,9 +147,8 @@ def weights(n: int, t1: float, ws: list[float], time_derivative: bool, make_cont
     ref, _ = jax.jit(lambda: run(diffrax.Tsit5(), tight, 10_000_000))()
     print("w      steps median   max    rejected   final mass centre vs Tsit5 1e-10: median   max")
     for w in ws:
-        ctrl = make_controller(weighted_norm(w))
-        solver = RosenbrockW(time_derivative=time_derivative)
-        pos, stats = jax.jit(lambda c=ctrl, s=solver: run(s, c, 200_000))()
+        ctrl = controller(pi, weighted_norm(w))
+        pos, stats = jax.jit(lambda c=ctrl: run(solver, c, 200_000))()
         acc, rej = np.asarray(stats["num_accepted_steps"]), np.asarray(stats["num_rejected_steps"])
         err = 100 * np.linalg.norm(np.asarray(pos) - np.asarray(ref), axis=-1)
         print(
@@ -175,12 +170,11 @@ def main(argv=None) -> int:
         "diffrax's PI controller (pcoeff = icoeff = 0.3) instead of the default solver",
     )
     a = p.parse_args(argv)
-    with_t = a.time_derivative
-    make = pi_controller if with_t else controller
+    solver = RosenbrockW(time_derivative=a.time_derivative)
     for mu in (float(m) for m in a.mus.split(",") if m):
-        budget(mu, a.t1, with_t, make)
+        budget(mu, a.t1, solver, a.time_derivative)
     if a.n:
-        weights(a.n, a.t1, [float(w) for w in a.weights.split(",")], with_t, make)
+        weights(a.n, a.t1, [float(w) for w in a.weights.split(",")], solver, a.time_derivative)
     return 0
 
 

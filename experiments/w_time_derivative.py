@@ -71,17 +71,18 @@ def main(argv=None) -> int:
     ref = reference(sc, mus[pick], a.t1)
     ref_e = reference(stiff, mus_e[pick_e], a.t1)
     best: dict[tuple[str, str], tuple] = {}
-    names = list(variants())
+    options = variants()
+    names = list(options)
     for r in range(a.rounds):
         for name in names if r % 2 == 0 else names[::-1]:
             for case, s, m in (("1e-3", sc, mus), ("1e-4", stiff, mus_e), ("1e-3 small", sc, mus_e)):
-                out = run(s, m, a.t1, variants()[name])
+                out = run(s, m, a.t1, options[name])
                 if (name, case) not in best or out[0] < best[name, case][0]:
                     best[name, case] = out
     for name in names:
         t, steps, rej, final, failed = best[name, "1e-3"]
         err = 100 * np.linalg.norm(final[pick] - ref, axis=-1)
-        te, steps_e, rej_e, final_e, failed_e = best[name, "1e-4"]
+        te, steps_e, _, final_e, failed_e = best[name, "1e-4"]
         ts = best[name, "1e-3 small"][0]
         err_e = 100 * np.linalg.norm(final_e[pick_e] - ref_e, axis=-1)
         print(

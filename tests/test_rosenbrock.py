@@ -89,8 +89,8 @@ def test_time_derivative_on_a_ramped_stiff_system():
 
     def error(w_factor, with_t):
         y, t = jnp.array([c / lam]), 0.0
+        lin = lambda t, y, a: _DenseW(jnp.array([[w_factor * lam]]))  # noqa: E731
         for _ in range(5):
-            lin = lambda t, y, a: _DenseW(jnp.array([[w_factor * lam]]))  # noqa: E731
             y = w_step(rhs, lin, ROS34PW2, t, y, h, None, time_derivative=with_t)[0]
             t += h
         return abs(float(y[0]) - (c * t + c / lam))

@@ -139,13 +139,13 @@ def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None,
     hg = h * tab.gamma
     # Barriers keep XLA from fusing (and so recomputing) the linearisation and its factors into every
     # stage that reads them.
-    if time_derivative:  # ∂f/∂t, the time column of W: held fixed like W, behind the same barrier
-        ones = jnp.ones_like(t)
-        y_, args_, t_ = jax.lax.stop_gradient((y, args, t))  # no derivative of it is traced
-        f_t = jax.jvp(lambda tt: f(tt, y_, args_), (t_,), (ones,))[1]
-        lin, lu, f_t = jax.lax.optimization_barrier((lin, lin.factor(hg), f_t))
-    else:
-        lin, lu = jax.lax.optimization_barrier((lin, lin.factor(hg)))
+    # ∂f/∂t, the time column of W, is held fixed like W (no derivative of it is traced) and goes behind the
+    # same barrier (None, an empty pytree, without `time_derivative`).
+    f_t = None
+    if time_derivative:
+        y_, args_, t_ = jax.lax.stop_gradient((y, args, t))
+        f_t = jax.jvp(lambda tt: f(tt, y_, args_), (t_,), (jnp.ones_like(t_),))[1]
+    lin, lu, f_t = jax.lax.optimization_barrier((lin, lin.factor(hg), f_t))
     us = []
     for i in range(len(tab.m)):
         if i == 0 and f0 is not None:
@@ -160,9 +160,9 @@ def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None,
             ri = jax.tree_util.tree_map(lambda fl, cl: fl + cl / h, fi, cu)
         else:
             ri = fi
-        if time_derivative and tab.gamma_t[i] != 0.0:
+        if f_t is not None and tab.gamma_t[i] != 0.0:
             g_i = float(tab.gamma_t[i])
-            ri = jax.tree_util.tree_map(lambda r, d: r + (g_i * h) * d, ri, f_t)  # pyright: ignore[reportPossiblyUnboundVariable]  # set above
+            ri = jax.tree_util.tree_map(lambda r, d: r + (g_i * h) * d, ri, f_t)
         us.append(jax.lax.optimization_barrier(lin.solve(lu, ri, hg)))
     y1 = lin_comb(list(zip(tab.m, us, strict=True)), base=y)
     err = lin_comb(list(zip(tab.m_err, us, strict=True)), like=y)
@@ -241,17 +241,9 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
         # stays valid across `made_jump`.
         del made_jump
         y1, err, f1 = w_step(
-            terms.vf,
-            self.linearise,
-            self.tableau,
-            t0,
-            y0,
-            t1 - t0,
-            args,
-            solver_state,
-            self.quadrature,
-            self.time_derivative,
-        )
+            terms.vf, self.linearise, self.tableau, t0, y0, t1 - t0, args, solver_state, self.quadrature,
+            time_derivative=self.time_derivative,
+        )  # fmt: skip
         h = t1 - t0
         k0 = jax.tree_util.tree_map(lambda d: h * d, solver_state)
         k1 = jax.tree_util.tree_map(lambda d: h * d, f1)
