@@ -1,17 +1,25 @@
-"""The ∂f/∂t term in the Rosenbrock-W stages (`RosenbrockW(time_derivative=True)`) against the default
-solver, on the issue-10 scan (paper-4.2, μ in [0.1, 0.6], 25 s, `jaxhoist.scan` on every CPU core).
+"""The ∂f/∂t term in the Rosenbrock-W stages and the PI controller, against the solver without them, on the
+issue-10 scan (paper-4.2, μ in [0.1, 0.6], 25 s, `jaxhoist.scan` on every CPU core).
 
 Variants, each timed in the same process, in --rounds rounds (order reversed every other round; best
 round counts):
 
-- `default`: `SolverOptions()`;
-- `t`: `RosenbrockW(time_derivative=True)` with the default integral controller (rtol 1e-3, atol 1e-5);
-- `t+pi`: the same with diffrax's PI controller, pcoeff = icoeff = 0.3.
+- `before`: the default until 2026-11-27: `RosenbrockW(time_derivative=False)`, diffrax's integral
+  controller at rtol 1e-3, atol 1e-5;
+- `t`: `RosenbrockW(time_derivative=True)` with the same integral controller;
+- `t+pi`: the same with diffrax's PI controller, pcoeff = icoeff = 0.3 (rtol 1e-3);
+- `default`: `SolverOptions()`, the default since 2026-11-27: the ∂f/∂t term and the PI controller at
+  rtol 5e-4, atol 1e-5.
 
 For each: ms per trajectory of --n members (steps median / max, rejected median), the same at
 ε = 1e-4 m/s on --eps-n members (ratio to ε = 1e-3 on the same members), and the distance of the final mass
 centre from Tsit5 at rtol 1e-10 on --ref-n evenly spaced members (ε = 1e-3) and on the ε = 1e-4 members
 (--eps-ref-n of them).
+
+Then the saved outputs between steps (`--tension-mus`, one solve each): over the first --tension-t1 s of
+paper-4.2 with 201 saved times, the largest difference of the rope tension (relative to its maximum) and
+of the mass centre from Tsit5 at rtol 1e-8, the check of `tests/test_rosenbrock.py`
+(test_default_agrees_with_tight_reference asks 0.1 % and 0.1 mm at the preset's μ).
 
     python experiments/w_time_derivative.py --n 4096 --eps-n 256 --ref-n 64 --eps-ref-n 16
 """
@@ -39,10 +47,38 @@ MU = "foundation.friction_coefficient"
 def variants() -> dict[str, jh.SolverOptions]:
     w_t = jh.RosenbrockW(time_derivative=True)
     return {
-        "default": jh.SolverOptions(),
+        "before": jh.SolverOptions(
+            jh.RosenbrockW(time_derivative=False), diffrax.PIDController(rtol=1e-3, atol=1e-5)
+        ),
         "t": jh.SolverOptions(w_t, diffrax.PIDController(rtol=1e-3, atol=1e-5)),
         "t+pi": jh.SolverOptions(w_t, diffrax.PIDController(rtol=1e-3, atol=1e-5, pcoeff=0.3, icoeff=0.3)),
+        "default": jh.SolverOptions(),
     }
+
+
+def saved_outputs(mus, t1, options: dict[str, jh.SolverOptions]) -> None:
+    """Rope tension and mass centre at 201 saved times over [0, t1] against Tsit5 at rtol 1e-8 (the
+    tests' reference), for each μ and variant."""
+    ts = np.linspace(0.0, t1, 201)
+    tight = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-8, atol=1e-10, max_steps=2_000_000)
+    for mu in mus:
+        sc = jh.load_scenario("paper-4.2")
+        if mu is not None:
+            sc = jh.set_param(sc, MU, mu)
+        ref = jh.simulate(sc, jh.Times(ts=ts), options=tight)
+        s_max = float(np.max(ref.rope_tension))
+        for name, o in options.items():
+            r = jh.simulate(sc, jh.Times(ts=ts), options=o)
+            d_s = np.abs(np.asarray(r.rope_tension - ref.rope_tension))
+            d_x = float(np.max(np.abs(np.asarray(r.position - ref.position))))
+            label = "preset" if mu is None else f"{mu:g}"
+            print(
+                f"μ {label:6s} {name:8s} {t1:g} s: steps {int(r.num_accepted_steps)} accepted "
+                f"{int(r.num_rejected_steps)} rejected, rope tension max {100 * d_s.max() / s_max:.3f} % "
+                f"(t = {ts[int(np.argmax(d_s))]:.2f} s) median {100 * np.median(d_s) / s_max:.4f} %, "
+                f"mass centre max {1e3 * d_x:.4f} mm",
+                flush=True,
+            )
 
 
 def run(sc, mus, t1, options):
@@ -61,6 +97,10 @@ def main(argv=None) -> int:
     p.add_argument("--eps-ref-n", type=int, default=16, help="ε = 1e-4 members checked")
     p.add_argument("--t1", type=float, default=25.0, help="end time [s]")
     p.add_argument("--rounds", type=int, default=2)
+    p.add_argument("--tension-t1", type=float, default=2.0, help="horizon of the saved-output check [s]")
+    p.add_argument(
+        "--tension-mus", default="preset,0.15,0.2,0.3,0.45,0.6", help="μ of that check ('' for none)"
+    )
     a = p.parse_args(argv)
     sc = jh.load_scenario("paper-4.2")
     stiff = eqx.tree_at(lambda s: s.foundation.friction, sc, jh.RegularisedCoulomb(1e-4))
@@ -94,6 +134,8 @@ def main(argv=None) -> int:
             f"{failed_e}, error median {np.median(err_e):.3f} max {err_e.max():.3f} cm",
             flush=True,
         )
+    mus_t = [None if m == "preset" else float(m) for m in a.tension_mus.split(",") if m]
+    saved_outputs(mus_t, a.tension_t1, options)
     return 0
 
 

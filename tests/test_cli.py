@@ -98,7 +98,7 @@ def test_simulate_csv_goes_into_identify_unchanged(tmp_path):
     """simulate (μ = 0.3) -> trajectory.csv -> identify recovers μ from the mass-centre path (0.4 s: before a
     corner touches down again, see docs/identification.md); `identify --set` applies overrides first."""
     sim = tmp_path / "sim"
-    # rtol 1e-8: the data are then exact to well below the fit's tolerance (with the default rtol 1e-3 of the
+    # rtol 1e-8: the data are then exact to well below the fit's tolerance (at rtol 1e-3 with the
     # Rosenbrock-W solver the path is off by ~1e-4 relative and the fit lands 4e-4 away from 0.3)
     assert (
         cli.main(

@@ -44,7 +44,7 @@ EXTENSIONS = {
 # Help texts the CLI adds where a subcommand module gives none (key: (command, option dest)); each help
 # then gets its default appended by `_DefaultsFormatter`.
 _EXTRA_HELP = {
-    "rtol": _RTOL_HELP + " (default: the solver's, 1e-3 for the default rosenbrock-w, 1e-6 for the others)",
+    "rtol": _RTOL_HELP + " (default: the solver's, 5e-4 for the default rosenbrock-w, 1e-6 for the others)",
     "atol": _ATOL_HELP + " (default: the solver's, 1e-5 for the default rosenbrock-w, 1e-8 for the others)",
     "t1": "end time [s] (default: the scenario's t1)",
     "n_save": "number of equally spaced saved times from 0 to t1",

@@ -222,9 +222,10 @@ def identify(
     - `options`: `SolverOptions` of the simulations (solver, tolerances, step budget); default
       `SolverOptions(diffrax.Tsit5())` (rtol 1e-6, atol 1e-8). Forward mode is always used: the state is
       integrated with its sensitivities as one error-controlled system. `SolverOptions()`, the Rosenbrock-W
-      solver at rtol 1e-3, atol 1e-5, works too (one W for the state and every sensitivity); on paper-4.2 its
-      estimates lie within 0.031 standard errors of Tsit5's, but the fit took 1.4-2x the wall time and 1.8x
-      the compile time, so it is not the default here; with 10x stiffer friction it was 1.7x faster
+      solver, works too (one W for the state and every sensitivity); on paper-4.2 (at rtol 1e-3, without
+      the ∂f/∂t term: its default until 2026-11-27) its estimates lie within 0.031 standard errors of
+      Tsit5's, but the fit took 1.4-2x the wall time and 1.8x the compile time, so it is not the default
+      here; with 10x stiffer friction it was 1.7x faster
       (`identify_options.fit_solver_options`, docs/identification.md).
     - `fit`: `FitOptions` (extra random starts, Levenberg-Marquardt termination and step budget,
       identifiability thresholds, and `weights`: signal or group -> residual weight [1/unit] for signals

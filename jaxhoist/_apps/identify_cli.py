@@ -100,7 +100,7 @@ def configure_parser(subparsers) -> None:
         "--rtol",
         type=float,
         default=None,
-        help=_RTOL_HELP + " (default: the solver's, 1e-3 for rosenbrock-w, 1e-6 for the others)",
+        help=_RTOL_HELP + " (default: the solver's, 5e-4 for rosenbrock-w, 1e-6 for the others)",
     )
     p.add_argument(
         "--atol",

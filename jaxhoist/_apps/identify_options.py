@@ -81,9 +81,10 @@ def fit_solver_options(options: SolverOptions | None) -> SolverOptions:
     (`identify_core._sensitivity_solve`); with `jaxhoist.RosenbrockW` its W serves every block, factorised
     once per step. That solver is not the default here (unlike `simulate` and `scan`): on paper-4.2
     (`experiments/identify_paper42.py --solver tsit5 --solver rosenbrock-w`, μ, k, h, c_l, b_l from 5 mm /
-    1 % noise) RosenbrockW at its default rtol 1e-3 puts the estimates within 0.031 standard errors of
-    Tsit5's at rtol 1e-6, but its fit took 1.37x Tsit5's wall time over 25 s (the sensitivities' error
-    control needs 22 500 W steps against Tsit5's 16 500) and 2.0x over 3 s, and it compiles 1.8x longer.
+    1 % noise) RosenbrockW at rtol 1e-3 (its default until 2026-11-27) puts the estimates within 0.031
+    standard errors of Tsit5's at rtol 1e-6, but its fit took 1.37x Tsit5's wall time over 25 s (the
+    sensitivities' error control needs 22 500 W steps against Tsit5's 16 500) and 2.0x over 3 s, and it
+    compiles 1.8x longer.
     With 10x stiffer friction (regularisation velocity 1e-4 m/s) W's fit was 1.7x faster instead (Tsit5 at
     its stability limit: 69 000-158 000 steps); docs/identification.md.
 

@@ -279,7 +279,7 @@ def configure_simulate(subparsers) -> None:
         type=number_arg,
         default=None,
         metavar="R",
-        help=_RTOL_HELP + " (default 1e-3 with the default Rosenbrock-W solver; 1e-6 with --model rigid)",
+        help=_RTOL_HELP + " (default 5e-4 with the default Rosenbrock-W solver; 1e-6 with --model rigid)",
     )
     p.add_argument(
         "--atol",

@@ -19,16 +19,29 @@ from .._errors import ScenarioError
 
 #: Default tolerances of the adaptive step-size control (relative, absolute in SI units of each state), for
 #: the default Rosenbrock-W solver (order 3) and for any other solver (the higher-order explicit ones).
-DEFAULT_TOLERANCES = {"RosenbrockW": (1e-3, 1e-5)}
+DEFAULT_TOLERANCES = {"RosenbrockW": (5e-4, 1e-5)}
 DEFAULT_RTOL = 1e-6
 DEFAULT_ATOL = 1e-8
+#: Default coefficients of diffrax's PID controller where they differ from diffrax's own (pcoeff = 0,
+#: icoeff = 1: the integral controller): a PI controller for the Rosenbrock-W solver.
+DEFAULT_CONTROLLER_COEFFICIENTS = {"RosenbrockW": {"pcoeff": 0.3, "icoeff": 0.3}}
 
 
 def default_tolerances(solver) -> tuple[float, float]:
-    """(rtol, atol) used when a solver is given without tolerances: 1e-3, 1e-5 for the Rosenbrock-W
-    solver (its error constant and order 3 put the default scan within 0.1 cm of an rtol 1e-10 reference,
-    docs/performance.md), 1e-6, 1e-8 otherwise."""
+    """(rtol, atol) used when a solver is given without tolerances: 5e-4, 1e-5 for the Rosenbrock-W
+    solver (with its PI controller as accurate as Tsit5 at rtol 1e-8 on the tests' 2 s of paper-4.2, and
+    within 0.1 cm of an rtol 1e-10 reference on the default scan, docs/performance.md), 1e-6, 1e-8
+    otherwise."""
     return DEFAULT_TOLERANCES.get(type(solver).__name__, (DEFAULT_RTOL, DEFAULT_ATOL))
+
+
+def default_controller_coefficients(solver) -> dict[str, float]:
+    """Keyword arguments of `diffrax.PIDController` besides the tolerances used when a solver is given
+    without a controller: for the Rosenbrock-W solver diffrax's PI coefficients pcoeff = icoeff = 0.3 (the
+    integral controller oscillated between long and rejected steps where a corner sticks: half the steps
+    rejected at ε = 1e-4 m/s, docs/performance.md "The time derivative"); none (diffrax's integral
+    controller) otherwise."""
+    return dict(DEFAULT_CONTROLLER_COEFFICIENTS.get(type(solver).__name__, {}))
 
 
 #: Default step budget of one solve.
@@ -49,7 +62,8 @@ class SolverOptions(eqx.Module):
       treats the model's stiff contact, rope and boom forces implicitly (`numerics.rosenbrock`); any diffrax
       solver works (`diffrax.Tsit5()` was the default before).
     - `stepsize_controller`: a diffrax step-size controller: `diffrax.PIDController(rtol, atol)` for error
-      control (the default; rtol 1e-3, atol 1e-5 with the default solver, 1e-6, 1e-8 with any other) or
+      control (the default; with the default solver rtol 5e-4, atol 1e-5 and the PI coefficients
+      pcoeff = icoeff = 0.3, with any other rtol 1e-6, atol 1e-8 and diffrax's integral controller) or
       `diffrax.ConstantStepSize()` for constant steps of `dt0` (no error control; every member of a vmapped
       batch takes the same steps).
     - `adjoint`: how derivatives are taken: `diffrax.RecursiveCheckpointAdjoint()` (default; `jax.grad`) or
@@ -104,6 +118,7 @@ class SolverOptions(eqx.Module):
                 stepsize_controller = diffrax.PIDController(
                     rtol=_positive("rtol", d_rtol if rtol is None else rtol),
                     atol=_positive("atol", d_atol if atol is None else atol),
+                    **default_controller_coefficients(self.solver),
                 )
         elif isinstance(stepsize_controller, diffrax.PIDController):
             _positive("rtol", stepsize_controller.rtol)

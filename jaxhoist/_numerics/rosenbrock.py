@@ -17,13 +17,14 @@ Solving ODEs II, §IV.7, (7.25)) so that no product J u is needed:
 with a = α Γ⁻¹, c = diag(1/γ) - Γ⁻¹, m = bᵀ Γ⁻¹ (Γ the lower-triangular matrix of γ_ij, γ on its
 diagonal) and γ_i = Σ_j γ_ij. Time enters through the hoist law: the rope's rest length shortens at the
 hoist speed, so ∂f/∂t is the stiff rope's force rate c_l v_l (4.2e6 N/s on paper-4.2) acting on the boom tip
-and the load. A W-method may leave ∂f/∂t out (it is the time column of the autonomous system's W), and the
-default does (`RosenbrockW(time_derivative=False)`): the ramp in the rope's stretch then enters each step
-only through the explicit stage values. With `time_derivative=True` the stages carry γ_i h ∂f/∂t (one
-forward-mode derivative in t per step, at the step's start, held fixed like W). On a stiff spring pulled at
-a constant rate with a W 30 % off its Jacobian that more than halves the error of a long step
-(tests/test_rosenbrock.py), and on paper-4.2 it took a third of the steps at the same accuracy
-(docs/performance.md, "The time derivative"); it is not yet the default, see there.
+and the load. A W-method may leave ∂f/∂t out (it is the time column of the autonomous system's W); the ramp in
+the rope's stretch then enters each step only through the explicit stage values, and the boom tip's
+velocity error set the step (98 % of the error norm, `experiments/w_error_budget.py`). By default
+(`RosenbrockW(time_derivative=True)`) the stages carry γ_i h ∂f/∂t (one forward-mode derivative in t per
+step, at the step's start, held fixed like W). On a stiff spring pulled at a constant rate with a W 30 %
+off its Jacobian that more than halves the error of a long step (tests/test_rosenbrock.py), and on
+paper-4.2 it took 40 % of the steps at the same accuracy (docs/performance.md, "The time derivative");
+`time_derivative=False` leaves it out (the default until 2026-11-27).
 
 `RosenbrockW` is a diffrax solver: it runs inside `diffrax.diffeqsolve` with any step-size controller,
 `SaveAt`, adjoint (forward mode, checkpointed reverse mode) and under `jax.vmap`, like diffrax's own solvers.
@@ -125,8 +126,8 @@ def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None,
       stiff components of a linearly implicit method are not accurate (only the step's result is), so a
       quadrature of a nonlinear function of them (a damper's loss h ṗ²) through the stages is biased, by a
       factor 3 for the foundation and rope dampers' loss on paper-4.2.
-    - `time_derivative`: add γ_i h ∂f/∂t(t, y) to each stage (module docstring); False (default) leaves it
-      out.
+    - `time_derivative`: add γ_i h ∂f/∂t(t, y) to each stage (module docstring); False (the default here, a
+      plain W-method step) leaves it out. `RosenbrockW` passes True by default.
 
     **Returns** `(y1, error, f1)`: the order-3 solution, the difference to the embedded solution, and
     f(t + h, y1) (for the next step's first stage and the dense output).
@@ -197,7 +198,8 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
       a step is accepted when max(‖e_y‖, w ‖e_s‖) <= 1, so a sensitivity may carry 1/w times the
       relative local error of the state (`_numerics/sensitivity.py`). Default 0.1.
     - `time_derivative`: whether the stages carry the γ_i h ∂f/∂t term (the module docstring). Default
-      False; True took a third of the steps on paper-4.2 (docs/performance.md, "The time derivative").
+      True; False (the default until 2026-11-27) took 2.4x the steps on paper-4.2 at the same accuracy
+      (docs/performance.md, "The time derivative").
 
     f at each step's end is kept for the next step's first stage, so a step costs four evaluations of the
     vector field, one linearisation and one 6x6 factorisation (and, with `time_derivative`, one derivative
@@ -222,7 +224,7 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
     quadrature: Callable | None = eqx.field(static=True, default=elastic_quadratures)
     tableau: WTableau = ROS34PW2
     tangent_weight: float = eqx.field(static=True, default=0.1)
-    time_derivative: bool = eqx.field(static=True, default=False)
+    time_derivative: bool = eqx.field(static=True, default=True)
 
     term_structure: ClassVar = AbstractTerm
     interpolation_cls: ClassVar = diffrax.ThirdOrderHermitePolynomialInterpolation
