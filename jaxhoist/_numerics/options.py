@@ -22,26 +22,26 @@ from .._errors import ScenarioError
 DEFAULT_TOLERANCES = {"RosenbrockW": (5e-4, 1e-5)}
 DEFAULT_RTOL = 1e-6
 DEFAULT_ATOL = 1e-8
-#: Default coefficients of diffrax's PID controller where they differ from diffrax's own (pcoeff = 0,
-#: icoeff = 1: the integral controller): a PI controller for the Rosenbrock-W solver.
-DEFAULT_CONTROLLER_COEFFICIENTS = {"RosenbrockW": {"pcoeff": 0.3, "icoeff": 0.3}}
+#: Default (pcoeff, icoeff) of diffrax's PID controller where they differ from diffrax's own (0, 1: the
+#: integral controller): a PI controller for the Rosenbrock-W solver.
+DEFAULT_CONTROLLER_COEFFICIENTS = {"RosenbrockW": (0.3, 0.3)}
 
 
 def default_tolerances(solver) -> tuple[float, float]:
     """(rtol, atol) used when a solver is given without tolerances: 5e-4, 1e-5 for the Rosenbrock-W
-    solver (with its PI controller as accurate as Tsit5 at rtol 1e-8 on the tests' 2 s of paper-4.2, and
-    within 0.1 cm of an rtol 1e-10 reference on the default scan, docs/performance.md), 1e-6, 1e-8
-    otherwise."""
+    solver (with its PI controller within 0.1 % of the rope tension and 0.1 mm of the mass centre of Tsit5
+    at rtol 1e-8 over the tests' 2 s of paper-4.2, and within 0.1 cm of an rtol 1e-10 reference on the
+    default scan over 25 s, docs/performance.md), 1e-6, 1e-8 otherwise."""
     return DEFAULT_TOLERANCES.get(type(solver).__name__, (DEFAULT_RTOL, DEFAULT_ATOL))
 
 
-def default_controller_coefficients(solver) -> dict[str, float]:
-    """Keyword arguments of `diffrax.PIDController` besides the tolerances used when a solver is given
-    without a controller: for the Rosenbrock-W solver diffrax's PI coefficients pcoeff = icoeff = 0.3 (the
-    integral controller oscillated between long and rejected steps where a corner sticks: half the steps
-    rejected at ε = 1e-4 m/s, docs/performance.md "The time derivative"); none (diffrax's integral
-    controller) otherwise."""
-    return dict(DEFAULT_CONTROLLER_COEFFICIENTS.get(type(solver).__name__, {}))
+def default_controller_coefficients(solver) -> tuple[float, float]:
+    """(pcoeff, icoeff) of the `diffrax.PIDController` used when a solver is given without a controller:
+    for the Rosenbrock-W solver diffrax's PI coefficients pcoeff = icoeff = 0.3 (the integral controller
+    oscillated between long and rejected steps where a corner sticks: half the steps rejected at
+    ε = 1e-4 m/s, docs/performance.md "The time derivative"); diffrax's integral controller (0, 1)
+    otherwise."""
+    return DEFAULT_CONTROLLER_COEFFICIENTS.get(type(solver).__name__, (0.0, 1.0))
 
 
 #: Default step budget of one solve.
@@ -115,10 +115,12 @@ class SolverOptions(eqx.Module):
                 stepsize_controller = diffrax.ConstantStepSize()
             else:
                 d_rtol, d_atol = default_tolerances(self.solver)
+                pcoeff, icoeff = default_controller_coefficients(self.solver)
                 stepsize_controller = diffrax.PIDController(
                     rtol=_positive("rtol", d_rtol if rtol is None else rtol),
                     atol=_positive("atol", d_atol if atol is None else atol),
-                    **default_controller_coefficients(self.solver),
+                    pcoeff=pcoeff,
+                    icoeff=icoeff,
                 )
         elif isinstance(stepsize_controller, diffrax.PIDController):
             _positive("rtol", stepsize_controller.rtol)
