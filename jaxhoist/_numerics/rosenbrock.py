@@ -114,7 +114,10 @@ ROS34PW2 = w_tableau(
 )
 
 
-def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None, time_derivative=False):
+def w_step(
+    f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None, time_derivative=False,
+    time_column=None,
+):  # fmt: skip
     """One Rosenbrock-W step of size h from (t, y).
 
     - `f(t, y, args)`: the vector field; `linearise(t, y, args)`: an object with `factor(hγ)` and
@@ -128,6 +131,9 @@ def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None,
       factor 3 for the foundation and rope dampers' loss on paper-4.2.
     - `time_derivative`: add γ_i h ∂f/∂t(t, y) to each stage (module docstring); False (the default here, a
       plain W-method step) leaves it out. `RosenbrockW` passes True by default.
+    - `time_column`: with `time_derivative`, `(f, t, y, args) -> ∂f/∂t` (a pytree like y); None: the
+      forward-mode derivative of f in t. Like W, it may be any approximation: it is the time column of the
+      autonomous system's W, and the method keeps its order for any W.
 
     **Returns** `(y1, error, f1)`: the order-3 solution, the difference to the embedded solution, and
     f(t + h, y1) (for the next step's first stage and the dense output).
@@ -145,7 +151,10 @@ def w_step(f, linearise, tab: WTableau, t, y, h, args, f0=None, quadrature=None,
     f_t = None
     if time_derivative:
         y_, args_, t_ = jax.lax.stop_gradient((y, args, t))
-        f_t = jax.jvp(lambda tt: f(tt, y_, args_), (t_,), (jnp.ones_like(t_),))[1]
+        if time_column is None:
+            f_t = jax.jvp(lambda tt: f(tt, y_, args_), (t_,), (jnp.ones_like(t_),))[1]
+        else:
+            f_t = time_column(f, t_, y_, args_)
     lin, lu, f_t = jax.lax.optimization_barrier((lin, lin.factor(hg), f_t))
     us = []
     for i in range(len(tab.m)):
@@ -200,6 +209,9 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
     - `time_derivative`: whether the stages carry the γ_i h ∂f/∂t term (the module docstring). Default
       True; False (the default until 2026-11-27) took 2.4x the steps on paper-4.2 at the same accuracy
       (docs/performance.md, "The time derivative").
+    - `time_column`: how ∂f/∂t is taken (`w_step`); None (default): forward mode in t of the whole vector
+      field. The forward sensitivities' augmented system takes it of the state's block only
+      (`_numerics/sensitivity.py`).
 
     f at each step's end is kept for the next step's first stage, so a step costs four evaluations of the
     vector field, one linearisation and one 6x6 factorisation (and, with `time_derivative`, one derivative
@@ -225,6 +237,7 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
     tableau: WTableau = ROS34PW2
     tangent_weight: float = eqx.field(static=True, default=0.1)
     time_derivative: bool = eqx.field(static=True, default=True)
+    time_column: Callable | None = eqx.field(static=True, default=None)
 
     term_structure: ClassVar = AbstractTerm
     interpolation_cls: ClassVar = diffrax.ThirdOrderHermitePolynomialInterpolation
@@ -244,7 +257,7 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
         del made_jump
         y1, err, f1 = w_step(
             terms.vf, self.linearise, self.tableau, t0, y0, t1 - t0, args, solver_state, self.quadrature,
-            time_derivative=self.time_derivative,
+            time_derivative=self.time_derivative, time_column=self.time_column,
         )  # fmt: skip
         h = t1 - t0
         k0 = jax.tree_util.tree_map(lambda d: h * d, solver_state)

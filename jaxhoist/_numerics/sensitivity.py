@@ -85,6 +85,14 @@ class _Augmented:
         assert self.quadrature is not None
         return (*self.quadrature(y[0]), *self.quadrature(y[1]))
 
+    @staticmethod
+    def time_column(f, t, y, args):
+        """∂f/∂t of the state's block and zero for the tangents' (their time column would be the time
+        derivative of the variational equations, a second derivative of the vector field; W-methods keep
+        their order with any column, `rosenbrock.w_step`)."""
+        f_t = jax.jvp(lambda tt: f(tt, y, args)[0], (t,), (jnp.ones_like(t),))[1]
+        return (f_t, jax.tree_util.tree_map(jnp.zeros_like, y[1]))
+
 
 def uses_tangent_solve(options: SolverOptions) -> bool:
     """Whether forward-mode derivatives of a solve with `options` take the augmented route (the
@@ -123,6 +131,7 @@ def augmented_solver(solver: RosenbrockW, many: bool = False) -> RosenbrockW:
         tableau=solver.tableau,
         tangent_weight=solver.tangent_weight,
         time_derivative=solver.time_derivative,
+        time_column=aug.time_column if solver.time_column is None else solver.time_column,
     )
 
 
