@@ -20,6 +20,16 @@ Measured 2026-11-25 at 65642d2 (load average 2-3): reference μ* = 0.3635004;
     w rtol 1e-3       0.3635064 (+6.1e-6), 5 solves, 11.8 s
     w rtol 1e-4       0.3635015 (+1.1e-6), 5 solves, 26.9 s
 and before the W fix (01e8863): w rtol 1e-3 +1.4e-5 in 13.2 s, rtol 1e-5 -7.9e-8 in 44.0 s (Tsit5 6.4 s).
+
+Measured 2026-11-27 at 61d5f46 (the ∂f/∂t term and the PI controller the W default; Intel machine, nothing
+else running): reference μ* = 0.3635004 (30.0 s);
+    tsit5 rtol 1e-6          0.3635002 (-1.4e-7), 4 solves, 123 946 steps,  8.46 s (first call 12.6 s)
+    w before (rtol 1e-3)     0.3634944 (-6.0e-6), 5 solves,  21 038 steps, 10.66 s (first call 28.1 s)
+    w default (rtol 5e-4)    0.3634937 (-6.6e-6), 9 solves,  15 157 steps,  7.01 s (first call 29.3 s)
+    w rtol 1e-4              0.3634998 (-5.9e-7), 4 solves,  13 445 steps,  5.87 s (first call 27.5 s)
+    w rtol 1e-5              0.3635002 (-1.4e-7), 4 solves,  27 851 steps, 16.49 s (first call 57.7 s)
+W at rtol 1e-4 is now 1.4x faster than Tsit5 after compilation but 4x less accurate, and its first call
+(what a user of `locate_bifurcation` waits for) takes 2.2x Tsit5's: the locator keeps Tsit5.
 """
 
 from __future__ import annotations
