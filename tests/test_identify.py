@@ -135,7 +135,7 @@ def test_covariance_matches_scatter(scenario, clean):
 
 
 def test_rosenbrock_w_fit_agrees_with_tsit5_and_central_differences(scenario, clean):
-    """`options=SolverOptions()` (RosenbrockW at its default rtol): the state and its sensitivity share W in one
+    """`options=SolverOptions()` (RosenbrockW, its defaults): the state and its sensitivity share W in one
     error-controlled solve. On the same draw as the default (Tsit5, rtol 1e-6) fit, μ̂ and its standard
     error agree to a small fraction of the standard error, and the Jacobian at μ̂ agrees with central
     differences. Measured on draws 0-2: |Δμ̂| = 0.004-0.005 SE, the standard errors 0.1-0.2 % apart, the

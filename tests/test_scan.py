@@ -568,6 +568,35 @@ def test_fingerprint_sees_constants_and_closures_of_custom_observables():
     assert fp(closure(1.0)) == fp(closure(1.0))
 
 
+def test_fingerprint_sees_solver_settings_beyond_the_tolerances():
+    """Chunks of a scan solved with other solver settings at the same tolerances (the ∂f/∂t term off, other
+    PI coefficients) are not reused: the fingerprint has the solver's and the controller's fields."""
+    import diffrax
+
+    from jaxhoist._apps.scan import _fingerprint
+    from jaxhoist._numerics.batch import BatchSpec as _Spec
+    from jaxhoist._numerics.observables import resolve
+
+    def fp(options):
+        spec = _Spec(
+            paths=(MU,),
+            observables=tuple(resolve(KW["observables"])),
+            histories=(),
+            options=options,
+            lanes=2,
+            devices=(),
+            derivatives=False,
+        )
+        return _fingerprint(oblique_box(), spec, MUS[:, None], np.linspace(0.0, T1, 3), True)
+
+    default = jh.SolverOptions()
+    ctrl = default.stepsize_controller
+    assert fp(default) == fp(jh.SolverOptions())
+    assert fp(default) != fp(jh.SolverOptions(jh.RosenbrockW(time_derivative=False), ctrl))
+    integral = diffrax.PIDController(rtol=5e-4, atol=1e-5)
+    assert fp(default) != fp(jh.SolverOptions(stepsize_controller=integral))
+
+
 def test_a_damaged_or_foreign_store_is_recomputed_with_a_warning(box, clean, tmp_path):
     """Issue 14: chunk files are verified on resume (content checksum from the manifest, the scan's
     fingerprint and the member indices inside the file); a truncated or emptied chunk, a chunk copied over

@@ -51,6 +51,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
+import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
@@ -307,7 +308,11 @@ def _settings(spec: BatchSpec, sort: bool) -> tuple:
         spec.histories,
         spec.lanes,
         sort,
-        type(o.solver).__name__,
+        # the solver's and the controller's fields that differ from their defaults (no memory addresses:
+        # functions print by name), so that e.g. `RosenbrockW(time_derivative=False)` or other PI
+        # coefficients at the same tolerances do not reuse the chunks of another setting
+        eqx.tree_pformat(o.solver),
+        eqx.tree_pformat(o.stepsize_controller),
         o.rtol,
         o.atol,
         o.dt0,

@@ -176,10 +176,13 @@ class SolverOptions(eqx.Module):
         return out
 
     def describe(self) -> dict:
-        """A JSON-ready summary (solver class, controller, tolerances, dt0, step budget, adjoint)."""
+        """A JSON-ready summary (solver class, controller, tolerances, dt0, step budget, adjoint, and the
+        solver's and controller's settings that differ from their defaults, e.g. the PI coefficients)."""
         return {
             "solver": type(self.solver).__name__,
             "stepsize_controller": type(self.stepsize_controller).__name__,
+            "solver_settings": eqx.tree_pformat(self.solver),
+            "controller_settings": eqx.tree_pformat(self.stepsize_controller),
             "rtol": self.rtol,
             "atol": self.atol,
             "dt0": self.dt0,
