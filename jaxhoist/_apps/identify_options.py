@@ -86,7 +86,9 @@ def fit_solver_options(options: SolverOptions | None) -> SolverOptions:
     sensitivities' error control needs 22 500 W steps against Tsit5's 16 500) and 2.0x over 3 s, and it
     compiles 1.8x longer.
     With 10x stiffer friction (regularisation velocity 1e-4 m/s) W's fit was 1.7x faster instead (Tsit5 at
-    its stability limit: 69 000-158 000 steps); docs/identification.md.
+    its stability limit: 69 000-158 000 steps); docs/identification.md. With W's default of 2026-11-27
+    (the ∂f/∂t term, rtol 5e-4) the 25 s fit took 20.0 s + 24.3 s compile against Tsit5's 74.9 s + 15.8 s
+    (estimates within 0.018 SE), the 3 s fit 2.7 s + 32.0 s against 3.9 s + 16.6 s: not yet switched.
 
     **Raises** `ScenarioError` for options that are not a `SolverOptions`.
     """
