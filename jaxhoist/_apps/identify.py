@@ -9,10 +9,10 @@ The fit is weighted nonlinear least squares, solved by optimistix's Levenberg-Ma
 (`optimistix.least_squares` with `optimistix.LevenbergMarquardt`) through the differentiable solver. The
 Jacobian comes from forward-mode sensitivities, no finite differences: the state and its p sensitivities are
 integrated together as one ODE whose step-size control also watches the sensitivities (see
-`_sensitivity_solve` for why `jax.jacfwd` through `diffrax.ForwardMode` is not used by default), by Tsit5
-(default) or, with `SolverOptions()`, by the Rosenbrock-W solver with one W for every block. It enters
-optimistix through a `jax.custom_jvp` whose rule returns the whole Jacobian once, so each LM step costs one
-augmented solve and the damped linear solves reuse the matrix.
+`_sensitivity_solve` for why `jax.jacfwd` through `diffrax.ForwardMode` is not used by default), by the
+Rosenbrock-W solver with one W for every block (default) or by any diffrax Runge-Kutta method
+(`SolverOptions(diffrax.Tsit5())`). It enters optimistix through a `jax.custom_jvp` whose rule returns the
+whole Jacobian once, so each LM step costs one augmented solve and the damped linear solves reuse the matrix.
 
 Positivity and bounds are kept by reparameterisation: a positive leaf θ = θ_ref exp(z) (log), a bounded
 leaf θ = lo + (hi - lo) sigmoid(z) (scaled logit), any other θ = θ_ref + scale z. The covariance is the
@@ -220,12 +220,11 @@ def identify(
     - `t1`: end of the simulated span [s] (default `scenario.t1`); every sample time must lie in [0, t1].
       The solver runs only to the last sample time.
     - `options`: `SolverOptions` of the simulations (solver, tolerances, step budget); default
-      `SolverOptions(diffrax.Tsit5())` (rtol 1e-6, atol 1e-8). Forward mode is always used: the state is
-      integrated with its sensitivities as one error-controlled system. `SolverOptions()`, the Rosenbrock-W
-      solver, works too (one W for the state and every sensitivity); on paper-4.2 (at rtol 1e-3, without
-      the ∂f/∂t term: its default until 2026-11-27) its estimates lie within 0.031 standard errors of
-      Tsit5's, but the fit took 1.4-2x the wall time and 1.8x the compile time, so it is not the default
-      here; with 10x stiffer friction it was 1.7x faster
+      `SolverOptions()`, the Rosenbrock-W solver at rtol 5e-4, atol 1e-5 (one W for the state and every
+      sensitivity). Forward mode is always used: the state is integrated with its sensitivities as one
+      error-controlled system. `SolverOptions(diffrax.Tsit5())` (rtol 1e-6, atol 1e-8; the default until
+      2026-11-27) compiles in about half the time and wins on short records (3 s of paper-4.2: 20 s against
+      35 s in all); over 25 s W took 44 s against Tsit5's 91 s, the estimates within 0.018 standard errors
       (`identify_options.fit_solver_options`, docs/identification.md).
     - `fit`: `FitOptions` (extra random starts, Levenberg-Marquardt termination and step budget,
       identifiability thresholds, and `weights`: signal or group -> residual weight [1/unit] for signals
@@ -449,16 +448,17 @@ def synthetic_measurement(
     - `noise`: signal or group -> standard deviation [SI unit] or "x%" of the true signal's RMS value;
       signals not named are noise-free. The noise levels are stored in the returned `Measurement`.
     - `seed`: of `numpy.random.default_rng`; `source`: a label stored in the `Measurement`.
-    - `options`: `SolverOptions` of the simulation; default `SolverOptions(diffrax.Tsit5())` (rtol 1e-6),
-      the default solver of `identify`'s model, so that a fit to noise-free data with the default recovers
-      the parameters to the solver's accuracy (with the Rosenbrock-W solver at rtol 1e-3 to ~1e-4
-      relative). The earlier `rtol`, `atol`, `max_steps` still work, with a `DeprecationWarning`.
+    - `options`: `SolverOptions` of the simulation; default `SolverOptions()` (the Rosenbrock-W solver,
+      rtol 5e-4), the default solver of `identify`'s model, so that a fit to noise-free data with the
+      defaults recovers the parameters to the solver's accuracy. For data that stand in for a real lift,
+      whose model error should be far below the fit's, pass tighter tolerances (`SolverOptions(rtol=1e-8,
+      atol=1e-10)`). The earlier `rtol`, `atol`, `max_steps` still work, with a `DeprecationWarning`.
     """
     require_x64()
     options, _ = convert_legacy(
         "synthetic_measurement", deprecated, options, None, allow_fit=False, forward=False
     )
-    options = SolverOptions(diffrax.Tsit5()) if options is None else options
+    options = SolverOptions() if options is None else options
     t = np.asarray(t, dtype=np.float64)
     names: list[str] = []
     check_signal_names(signals, "synthetic_measurement: signals", groups=True)

@@ -74,26 +74,23 @@ class FitOptions(eqx.Module):
 
 
 def fit_solver_options(options: SolverOptions | None) -> SolverOptions:
-    """The fit's `SolverOptions`: default `SolverOptions(diffrax.Tsit5())` (rtol 1e-6, atol 1e-8), always
-    with forward mode (`diffrax.ForwardMode`).
+    """The fit's `SolverOptions`: default `SolverOptions(adjoint="forward")`, the Rosenbrock-W solver at its
+    defaults (rtol 5e-4, atol 1e-5, PI controller, the ∂f/∂t term), always with forward mode
+    (`diffrax.ForwardMode`).
 
     The state and its parameter sensitivities are integrated as one system under one step-size control
     (`identify_core._sensitivity_solve`); with `jaxhoist.RosenbrockW` its W serves every block, factorised
-    once per step. That solver is not the default here (unlike `simulate` and `scan`): on paper-4.2
-    (`experiments/identify_paper42.py --solver tsit5 --solver rosenbrock-w`, μ, k, h, c_l, b_l from 5 mm /
-    1 % noise) RosenbrockW at rtol 1e-3 (its default until 2026-11-27) puts the estimates within 0.031
-    standard errors of Tsit5's at rtol 1e-6, but its fit took 1.37x Tsit5's wall time over 25 s (the
-    sensitivities' error control needs 22 500 W steps against Tsit5's 16 500) and 2.0x over 3 s, and it
-    compiles 1.8x longer.
-    With 10x stiffer friction (regularisation velocity 1e-4 m/s) W's fit was 1.7x faster instead (Tsit5 at
-    its stability limit: 69 000-158 000 steps); docs/identification.md. With W's default of 2026-11-27
-    (the ∂f/∂t term, rtol 5e-4) the 25 s fit took 20.0 s + 24.3 s compile against Tsit5's 74.9 s + 15.8 s
-    (estimates within 0.018 SE), the 3 s fit 2.7 s + 32.0 s against 3.9 s + 16.6 s: not yet switched.
+    once per step. It became the default on 2026-11-27: on paper-4.2 (`python experiments/identify_paper42.py
+    --no-scipy --solver tsit5 --solver rosenbrock-w`, μ, k, h, c_l, b_l from 5 mm / 1 % noise) the 25 s fit
+    took 20.0 s + 24.3 s compile against Tsit5's (rtol 1e-6, the default until then) 74.9 s + 15.8 s, the
+    estimates within 0.018 standard errors of Tsit5's; with 10x stiffer friction W was faster still (Tsit5
+    at its stability limit). It loses on short records, where the compile dominates: over 3 s 2.7 s + 32.0 s
+    against 3.9 s + 16.6 s; pass `SolverOptions(diffrax.Tsit5())` there (docs/identification.md).
 
     **Raises** `ScenarioError` for options that are not a `SolverOptions`.
     """
     if options is None:
-        return SolverOptions(diffrax.Tsit5(), adjoint="forward")
+        return SolverOptions(adjoint="forward")
     if not isinstance(options, SolverOptions):
         raise ScenarioError(f"options must be a jaxhoist.SolverOptions, got {type(options).__name__}")
     return options if options.forward_mode else options.replace(adjoint=diffrax.ForwardMode())
