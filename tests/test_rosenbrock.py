@@ -76,6 +76,42 @@ def test_order_three_for_exact_and_wrong_jacobians(which, time_derivative):
     assert np.all(orders > 2.7), (errs, orders)
 
 
+def test_looped_stages_equal_the_unrolled_ones():
+    """`w_step(stage_loop=True)` (the stages after the first in a `fori_loop`, the forward sensitivities'
+    augmented system) is the same step as the unrolled stages: on a pytree state (the smooth problem and a
+    copy of it scaled by 2, as a tuple) with a wrong W and the ∂f/∂t term, y1, the error and f1 agree to
+    rounding (the sums run in another order)."""
+
+    def rhs(t, y, args):
+        return (_smooth_rhs(t, y[0], args), 2.0 * _smooth_rhs(t, 0.5 * y[1], args))
+
+    def lin(t, y, a):
+        J = jax.jacfwd(lambda yy: _smooth_rhs(t, yy, None))(y[0])
+        d = _DenseW(0.7 * jnp.diag(jnp.diag(J)))
+        return _TupleW(d)
+
+    y0 = (jnp.array([1.0, 0.5]), jnp.array([2.0, 1.0]))
+    t, h = jnp.asarray(0.3), 0.05
+    unrolled = w_step(rhs, lin, ROS34PW2, t, y0, h, None, time_derivative=True)
+    looped = w_step(rhs, lin, ROS34PW2, t, y0, h, None, time_derivative=True, stage_loop=True)
+    for a, b in zip(jax.tree_util.tree_leaves(unrolled), jax.tree_util.tree_leaves(looped), strict=True):
+        np.testing.assert_allclose(np.asarray(b), np.asarray(a), rtol=1e-13, atol=1e-15)
+    # the step is a real one: it moved the state, and its error estimate is not zero
+    assert float(jnp.abs(unrolled[0][0] - y0[0]).max()) > 1e-3 and float(jnp.abs(unrolled[1][0]).max()) > 0
+
+
+class _TupleW(eqx.Module):
+    """The same W on both blocks of a (y, y') tuple state."""
+
+    inner: _DenseW
+
+    def factor(self, hg):
+        return self.inner.factor(hg)
+
+    def solve(self, lu, r, hg):
+        return (self.inner.solve(lu, r[0], hg), self.inner.solve(lu, r[1], hg))
+
+
 def test_time_derivative_on_a_ramped_stiff_system():
     """y' = λ (y - c t), λ = -1e6 1/s (a stiff spring pulled at a constant rate, like the hoisted rope), from
     its particular solution y_p = c t + c/λ, five steps with |hλ| = 1e4. With the exact W the steps stay on

@@ -132,6 +132,7 @@ def augmented_solver(solver: RosenbrockW, many: bool = False) -> RosenbrockW:
         tangent_weight=solver.tangent_weight,
         time_derivative=solver.time_derivative,
         time_column=aug.time_column if solver.time_column is None else solver.time_column,
+        stage_loop=True,
     )
 
 
