@@ -30,6 +30,12 @@ else running): reference μ* = 0.3635004 (30.0 s);
     w rtol 1e-5              0.3635002 (-1.4e-7), 4 solves,  27 851 steps, 16.49 s (first call 57.7 s)
 W at rtol 1e-4 is now 1.4x faster than Tsit5 after compilation but 4x less accurate, and its first call
 (what a user of `locate_bifurcation` waits for) takes 2.2x Tsit5's: the locator keeps Tsit5.
+
+Measured 2026-11-27 at 9de8159 (the sensitivities' W stages in a loop; `--only tsit5 --no-reference` and
+`--only "w default" --no-reference`, a process each, Intel machine):
+    tsit5 rtol 1e-6          0.3635002, 4 solves, 123 946 steps, 7.80 s (first call 13.3 s)
+    w default (rtol 5e-4)    0.3634941, 7 solves,  11 801 steps, 6.20 s (first call 24.1 s)
+W's first call is still 1.8x Tsit5's, and μ* 6.3e-6 off: the locator keeps Tsit5.
 """
 
 from __future__ import annotations
