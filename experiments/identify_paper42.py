@@ -165,7 +165,7 @@ def main(argv=None):
     # ---- scipy: the same whitened residuals, 2-point finite differences in z = log(θ/θ_start)
     sp = None
     if not args.no_scipy:
-        # the accurate solve of the data: finite differences of identify's default rtol 1e-6 are too noisy
+        # the accurate solve of the data: finite differences of Tsit5 at rtol 1e-6 were too noisy
         # for a relative step of 1e-4 (scipy stopped at the start, `xtol` satisfied, cost 83 685 against 285)
         fn, theta0 = fn_ref, np.array([start[k] for k in PARAMS])
         fn(theta0)  # the forward solve compiled outside the timing

@@ -166,7 +166,10 @@ def residual_function(
     order of `IdentificationResult.names`), for comparisons with other optimisers (e.g. scipy with finite
     differences). Takes `identify`'s `signals`, `noise`, `start`, `bounds`, `t1`, `options` and `fit` (only
     its `weights` are read); the earlier `weights`, `rtol`, `atol`, `max_steps` still work, with a
-    `DeprecationWarning`. A failed solve gives non-finite residuals.
+    `DeprecationWarning`. A failed solve gives non-finite residuals. `options` defaults to `identify`'s (the
+    Rosenbrock-W solver at rtol 5e-4): its residuals carry that tolerance, too noisy for finite differences
+    with small steps; for those pass a tight solve, e.g. `SolverOptions(diffrax.Tsit5(), rtol=1e-8,
+    atol=1e-10)` (`experiments/identify_paper42.py` does).
 
     **Returns** `(fn, theta0)`: `fn(theta) -> r` (n_residuals,) and the start θ0.
     """

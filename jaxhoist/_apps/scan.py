@@ -128,9 +128,9 @@ def scan(
     - `derivatives`: also compute forward-mode sensitivities of every observable with respect to the swept
       parameters (`jax.jacfwd`, through `diffrax.ForwardMode` or the fixed-step loop), stored as `d_<name>`
       with a last axis over the parameters [unit of the observable per unit of the parameter]. Through the
-      Rosenbrock-W solver sensitivities are not reliable yet at high friction, hence the Tsit5 default.
-      Cost for one parameter, measured in `experiments/benchmark_scan.py`: 1.3-2x a plain scan with
-      adaptive steps, 3.1-3.8x with fixed steps (docs/performance.md).
+      default Rosenbrock-W solver they are solved as their own error-controlled ODE beside the state
+      (`numerics/sensitivity.py`): 8.9x the plain scan's time for one parameter on paper-4.2 over 25 s
+      (`experiments/w_sensitivity.py`, docs/performance.md); with fixed steps the steps are differentiated.
     - `batch`: `BatchOptions` (lanes, chunk size, memory cap [B], devices, sort order, wait for other
       processes [s]); default `BatchOptions()`.
     - `out_dir`: write each finished chunk there (`chunk_#####.npz` + `manifest.json`) and the final

@@ -208,7 +208,9 @@ def _looped_stages(f, lin, lu, hg, tab: WTableau, t, y, h, args, f0, f_t):
     stacked along a leading axis (zeros for the stages not yet taken, which the zero-padded coefficient rows
     a_ij, c_ij (j >= i) leave out)."""
     n = len(tab.m)
-    a, c = np.asarray(tab.a), np.asarray(tab.c)
+    # a and c are strictly lower triangular up to the rounding of the tableau's inverse (|x| < 1e-15 above):
+    # zeroed, so that the loop sums exactly the unrolled stages' terms j < i
+    a, c = np.tril(np.asarray(tab.a), -1), np.tril(np.asarray(tab.c), -1)
     alpha, gamma_t = np.asarray(tab.alpha), np.asarray(tab.gamma_t)
     f_start = f(t, y, args) if f0 is None else f0
     r0 = f_start
@@ -223,11 +225,11 @@ def _looped_stages(f, lin, lu, hg, tab: WTableau, t, y, h, args, f0, f_t):
                 lambda b, u: b + jnp.tensordot(jnp.asarray(coef, u.dtype)[i], u, axes=1) * scale, base, us
             )
 
-        fi = f(t + jnp.asarray(alpha)[i] * h, comb(a, y), args)
+        t_i = t + jnp.asarray(alpha, jnp.result_type(t))[i] * h
+        fi = f(t_i, comb(a, y), args)
         ri = comb(c, fi, 1.0 / h)
-        if f_t is not None:
-            g_i = jnp.asarray(gamma_t)[i]
-            ri = jax.tree_util.tree_map(lambda r, d: r + (g_i * h) * d, ri, f_t)
+        if f_t is not None:  # γ_i in each leaf's dtype (a float32 state stays float32 under x64)
+            ri = jax.tree_util.tree_map(lambda r, d: r + (jnp.asarray(gamma_t, d.dtype)[i] * h) * d, ri, f_t)
         ui = jax.lax.optimization_barrier(lin.solve(lu, ri, hg))
         return jax.tree_util.tree_map(lambda s_, u: s_.at[i].set(u), us, ui)
 
