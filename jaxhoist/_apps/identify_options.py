@@ -30,7 +30,8 @@ class FitOptions(eqx.Module):
       spread s [-]: θ·(1+s)^U(-1,1) for positive leaves) from `numpy.random.default_rng(seed)`; the lowest
       cost wins, all are reported in `IdentificationResult.starts`.
     - `lm_rtol`, `lm_atol`: Levenberg-Marquardt termination, the Cauchy test on the fit variables z and on
-      the whitened residuals [-] (optimistix `rtol`, `atol`).
+      the whitened residuals [-] (optimistix `rtol`, `atol`); the fit also stops when, after a rejected
+      step, the next trial step in z is below that test's resolution (`identify_core._LevenbergMarquardt`).
     - `max_iterations`: the step budget of each Levenberg-Marquardt run.
     - `max_relative_se`: a parameter whose standard error exceeds this fraction of its value [-] is not
       identifiable; `condition_limit`: nor are the parameters when the condition number of JᵀJ (in relative
