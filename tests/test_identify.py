@@ -28,6 +28,7 @@ from jaxhoist._numerics import compile_cache  # noqa: E402
 MU = 0.25  # paper-4.2's friction coefficient
 T = np.linspace(0.0, 0.4, 21)  # 50 Hz
 SIGMA = 0.005  # position noise [m]
+TSIT5 = jh.SolverOptions(diffrax.Tsit5())  # identify's solver until 2026-11-27 (rtol 1e-6, atol 1e-8)
 
 
 @pytest.fixture(scope="session")
@@ -60,15 +61,14 @@ def test_mu_recovered_noise_free(scenario):
     the data and of the fit, which Tsit5 at rtol 1e-6 gives; the default W solver at rtol 5e-4 gives μ̂
     4.6e-4 off (the data's plain solve and the fit's augmented solve take different steps), 0.01 standard
     errors at this test's noise (the other fits here use the default)."""
-    t5 = jh.SolverOptions(diffrax.Tsit5())
-    clean = synthetic_measurement(scenario, T, ["position"], options=t5)
+    clean = synthetic_measurement(scenario, T, ["position"], options=TSIT5)
     res = identify(
         scenario,
         clean,
         ["mu"],
         start={"mu": 0.3},
         noise={"position": SIGMA},
-        options=t5,  # with these fit settings, the compiled core of test_earlier_keywords_warn_...
+        options=TSIT5,  # with these fit settings, the compiled core of test_earlier_keywords_warn_...
         fit=jh.FitOptions(lm_rtol=1e-10, lm_atol=1e-10),
     )
     assert res.converged
@@ -152,7 +152,7 @@ def test_default_w_fit_agrees_with_tsit5_and_central_differences(scenario, clean
     m = _noisy(clean, 0)
     kw = dict(noise={"position": SIGMA})
     w = identify(scenario, m, ["mu"], **kw)
-    t5 = identify(scenario, m, ["mu"], options=jh.SolverOptions(diffrax.Tsit5()), **kw)
+    t5 = identify(scenario, m, ["mu"], options=TSIT5, **kw)
     assert w.converged and w.identifiable and w.solve_status == jh.SolveStatus.OK
     # The fit stops once a rejected step leaves a next trial below the resolution in z
     # (`identify_core._LevenbergMarquardt`): 3 rejected of 9 here; optimistix's own test alone went on
@@ -165,9 +165,8 @@ def test_default_w_fit_agrees_with_tsit5_and_central_differences(scenario, clean
     # to 3e-5 (those of the default W solve are 0.35 % off them, measured at μ = 0.2512).
     h = 3e-3 * w.values[0]
     mu_path = "foundation.friction_coefficient"
-    tsit5 = jh.SolverOptions(diffrax.Tsit5())
     paths = [
-        synthetic_measurement(jh.set_param(scenario, mu_path, w.values[0] + s), T, m.names, options=tsit5)
+        synthetic_measurement(jh.set_param(scenario, mu_path, w.values[0] + s), T, m.names, options=TSIT5)
         for s in (h, -h)
     ]
     j_cd = np.concatenate([(paths[0].signals[n] - paths[1].signals[n]) / (2 * h * SIGMA) for n in m.names])

@@ -156,10 +156,7 @@ def w_step(
     f_t = None
     if time_derivative:
         y_, args_, t_ = jax.lax.stop_gradient((y, args, t))
-        if time_column is None:
-            f_t = jax.jvp(lambda tt: f(tt, y_, args_), (t_,), (jnp.ones_like(t_),))[1]
-        else:
-            f_t = time_column(f, t_, y_, args_)
+        f_t = (time_derivative_of if time_column is None else time_column)(f, t_, y_, args_)
     lin, lu, f_t = jax.lax.optimization_barrier((lin, lin.factor(hg), f_t))
     if stage_loop:
         us, f_start = _looped_stages(f, lin, lu, hg, tab, t, y, h, args, f0, f_t)
@@ -235,6 +232,11 @@ def _looped_stages(f, lin, lu, hg, tab: WTableau, t, y, h, args, f0, f_t):
 
     stacked = jax.lax.fori_loop(1, n, stage, stacked)
     return [jax.tree_util.tree_map(lambda s_, k=k: s_[k], stacked) for k in range(n)], f_start
+
+
+def time_derivative_of(f, t, y, args):
+    """∂f/∂t(t, y): the forward-mode derivative of the vector field in t (`w_step`'s default time column)."""
+    return jax.jvp(lambda tt: f(tt, y, args), (t,), (jnp.ones_like(t),))[1]
 
 
 def elastic_quadratures(y):

@@ -47,7 +47,7 @@ from .._physics.linearise import linearise as elastic_linearise
 from .._physics.linearise import linearise_exact_slope
 from .._physics.params import Scenario
 from .options import SolverOptions
-from .rosenbrock import RosenbrockW
+from .rosenbrock import RosenbrockW, time_derivative_of
 
 
 class _TangentLinearisation(eqx.Module):
@@ -90,7 +90,7 @@ class _Augmented:
         """∂f/∂t of the state's block and zero for the tangents' (their time column would be the time
         derivative of the variational equations, a second derivative of the vector field; W-methods keep
         their order with any column, `rosenbrock.w_step`)."""
-        f_t = jax.jvp(lambda tt: f(tt, y, args)[0], (t,), (jnp.ones_like(t),))[1]
+        f_t = time_derivative_of(lambda tt, yy, aa: f(tt, yy, aa)[0], t, y, args)
         return (f_t, jax.tree_util.tree_map(jnp.zeros_like, y[1]))
 
 
