@@ -30,6 +30,11 @@ FORMAT = "jaxhoist-scan/1"
 MANIFEST = "manifest.json"
 
 
+class DifferentScanError(ScenarioError):
+    """The output folder holds the chunks of a different scan (another scenario, values, times, observables
+    or solver options) and `resume` is on."""
+
+
 class ScanStoreWarning(UserWarning):
     """A chunk file or the manifest in a scan's `out_dir` was damaged, foreign or stale; it is recomputed."""
 
@@ -207,7 +212,7 @@ class ScanStore:
             )
             return None
         if old.get("fingerprint") != self.fingerprint:
-            raise ScenarioError(
+            raise DifferentScanError(
                 f"{self.out} holds chunks of a different scan (other scenario, values, times, "
                 f"observables or solver options): use another out_dir, or resume=False to "
                 f"overwrite it"

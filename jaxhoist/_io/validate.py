@@ -187,7 +187,13 @@ def parse_values(spec, flag: str = "--values") -> np.ndarray:
     items = [x for x in s.split(",") if x.strip()]
     if not items:
         raise ScenarioError(f"{flag}: no values in {brief(spec)}; expected 'start:stop:num' or 'v1,v2,...'")
-    return np.array([parse_number(x, flag) for x in items])
+    try:
+        return np.array([parse_number(x, flag) for x in items])
+    except ScenarioError:
+        raise ScenarioError(
+            f"{flag}: expected a range 'start:stop:num' (inclusive, e.g. 0.2:0.4:11) or a list 'v1,v2,...' "
+            f"(e.g. 0.2,0.3,0.4), got {brief(spec)}"
+        ) from None
 
 
 def number_arg(text: str) -> float:
