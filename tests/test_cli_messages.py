@@ -69,6 +69,19 @@ def test_out_folder_rule(tmp_path):
         prepare_out_dir(out / "notes.txt", "simulate")
 
 
+def test_a_scan_folder_written_from_python_is_the_scan_command_s(tmp_path):
+    """`jaxhoist.scan(..., out_dir=)` marks its folder as `jaxhoist scan` does, so the command line can
+    resume or recompute there (docs/bifurcation.md runs both into out/mu)."""
+    from jaxhoist._io.scan_store import ScanStore
+
+    store = ScanStore(tmp_path / "mu", "fingerprint")
+    store.open(
+        np.arange(4), 2, {"n_members": 4, "params": ["p"], "mode": "sweep", "t1": 1.0, "lanes": 2}, True
+    )
+    assert marker_command(tmp_path / "mu") == "scan"
+    assert prepare_out_dir(tmp_path / "mu", "scan") == tmp_path / "mu"
+
+
 def test_default_out_comes_from_the_file_name():
     assert default_out("paper-4.2") == default_out("paper-4.2", "") and str(default_out("paper-4.2")) == (
         os.path.join("out", "paper-4.2")

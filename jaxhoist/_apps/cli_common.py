@@ -7,6 +7,8 @@ from pathlib import Path
 
 import diffrax
 
+from .._io.validate import MARKER as MARKER
+from .._io.validate import mark_folder, marker_command
 from .._numerics.rosenbrock import RosenbrockW
 
 PROG = "jaxhoist"
@@ -44,17 +46,6 @@ _ATOL_HELP = (
 # command's own and a re-run replaces its results there (scan resumes the same scan, recomputes another);
 # a non-empty folder without it (or with another command's) is refused unless --overwrite. Only the files
 # the command writes are ever removed; anything else in the folder stays.
-
-MARKER = ".jaxhoist"
-
-
-def marker_command(folder: Path) -> str | None:
-    """The command named by `folder`'s marker file, or None if it has none (or an unreadable one)."""
-    try:
-        text = (Path(folder) / MARKER).read_text()
-    except (OSError, UnicodeDecodeError):
-        return None
-    return text.splitlines()[0].strip() if text.strip() else None
 
 
 def default_out(scenario_arg: str, prefix: str = "") -> Path:
@@ -114,10 +105,7 @@ def claim_out_dir(path, command: str, outputs=()) -> Path:
         for f in p.glob(pattern):
             if f.is_symlink() or f.is_file():
                 f.unlink()
-    (p / MARKER).write_text(
-        f"{command}\nThis folder holds the results of `{PROG} {command}`; running the command again "
-        f"replaces them.\n"
-    )
+    mark_folder(p, command)
     return p
 
 

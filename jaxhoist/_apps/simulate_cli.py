@@ -351,8 +351,7 @@ def configure_simulate(subparsers) -> None:
         action="append",
         metavar="PATH=VALUE",
         help="replace a scenario value by dotted path, e.g. foundation.friction_coefficient=0.3 "
-        "or "
-        "'load.mass_centre=[1, 2.5, 1]' (repeatable); checked before compiling",
+        "or, for a vector, load.mass_centre=1,2.5,1 (x,y,z) (repeatable); checked before compiling",
     )
     p.add_argument(
         "--out",

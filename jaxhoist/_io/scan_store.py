@@ -223,7 +223,11 @@ class ScanStore:
         """Read back an earlier run's verified chunks (members `order[k*chunk:(k+1)*chunk]` in chunk k; the
         files' chunk size wins over `chunk`) and write the manifest (`header`: n_members, params, mode, t1,
         lanes). **Returns** `(chunk size, {k: arrays})`."""
+        from .validate import mark_folder, marker_command
+
         self.out.mkdir(parents=True, exist_ok=True)
+        if marker_command(self.out) is None:  # a scan's folder, as `jaxhoist scan` marks it
+            mark_folder(self.out, "scan")
         old = self._old_manifest(resume)
         done: dict[int, dict[str, np.ndarray]] = {}
         if old is not None:

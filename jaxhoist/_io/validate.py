@@ -289,6 +289,29 @@ def check_out_dir(
     return p
 
 
+# The file that marks a results folder as written by a jaxhoist command (its first line names the command):
+# the command may replace its own results there when it runs again (see `jaxhoist._apps.cli_common`).
+MARKER = ".jaxhoist"
+
+
+def marker_command(folder: str | Path) -> str | None:
+    """The command named by `folder`'s marker file `MARKER`, or None if it has none (or an unreadable one)."""
+    try:
+        text = (Path(folder) / MARKER).read_text()
+    except (OSError, UnicodeDecodeError):
+        return None
+    return text.splitlines()[0].strip() if text.strip() else None
+
+
+def mark_folder(folder: str | Path, command: str) -> None:
+    """Write the marker file `MARKER` into the existing folder `folder`: its results are `jaxhoist
+    command`'s, which replaces them when it runs again."""
+    (Path(folder) / MARKER).write_text(
+        f"{command}\nThis folder holds the results of `jaxhoist {command}`; running the command again "
+        f"replaces them.\n"
+    )
+
+
 def clean_outputs(folder: str | Path, names: Iterable[str]) -> list[Path]:
     """Remove a previous run's output files from `folder`: only the files called `names`, nothing else
     (no sub-folders, no other files).
