@@ -306,10 +306,12 @@ def test_every_help_shows_the_defaults():
             assert "default" in helptext, f"{name} {action.option_strings[0]}: {helptext!r}"
         assert text.count("default") >= 2
     sim = " ".join(subs["simulate"].format_help().split())
-    assert "out/<scenario name>" in sim and "(default 501)" in sim and "atol + rtol |y|" in sim
+    assert "out/<preset name or scenario file name>" in sim
+    assert "(default 501)" in sim and "atol + rtol |y|" in sim
     if "scan" in subs:
         scan = " ".join(subs["scan"].format_help().split())
-        assert "out/scan-<scenario name>" in scan and "atol + rtol |y|" in scan and "(default: 201)" in scan
+        assert "out/scan-<preset name or scenario file name>" in scan
+        assert "atol + rtol |y|" in scan and "(default: 201)" in scan
 
 
 def test_library_hints_use_the_flag_names(monkeypatch, capsys):

@@ -817,7 +817,8 @@ def test_measurement_path_that_is_a_folder(tmp_path):
 
 def test_cli_overwrite_replaces_a_previous_run(tmp_path, capsys):
     """End to end (the short solve of tests/test_cli.py, compiled once per process): a second run into the
-    same folder is refused; with --overwrite and --no-plots the old PNGs are gone and the data is new."""
+    folder that simulate wrote replaces its results (with --no-plots the old PNGs are gone, the data is
+    new, the user's own file stays); a folder simulate did not write needs --overwrite."""
     from jaxhoist._apps import cli
     from jaxhoist._io import results
 
@@ -827,9 +828,11 @@ def test_cli_overwrite_replaces_a_previous_run(tmp_path, capsys):
     assert list(out.glob("*.png"))
     (out / "notes.txt").write_text("mine")
     mu = ["--set", "foundation.friction_coefficient=0.3"]
+    (out / ".jaxhoist").unlink()  # as if written by hand or by another program
     assert cli.main([*short, *mu]) == 2
     assert "--overwrite" in capsys.readouterr().err
     assert cli.main([*short, *mu, "--overwrite", "--no-plots"]) == 0
     assert not list(out.glob("*.png")) and (out / "notes.txt").read_text() == "mine"
     md = results.load_metadata(out / "trajectory.npz")
     assert md["scenario"]["leaves"]["foundation.friction_coefficient"] == 0.3
+    assert cli.main([*short, "--no-plots"]) == 0  # marked now: the same command runs again

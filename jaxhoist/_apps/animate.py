@@ -332,7 +332,8 @@ def animate(
     `trajectory.npz` + `trajectory.json` of `jaxhoist simulate` (either model, any scenario).
 
     **Arguments**
-    - `result_dir`: the folder holding `trajectory.npz` and `trajectory.json`.
+    - `result_dir`: the folder holding `trajectory.npz` and `trajectory.json`, or the path of a
+      `.npz` result file (its `.json` beside it); the files are written into its folder.
     - `fps`: frames per second [1/s]; `duration`: length of the animation [s] (default min(t1, 10 s));
       `stride`: instead, show every `stride`-th saved time.
     - `fmt`: "gif" or "mp4" (default mp4 when ffmpeg is on PATH, else gif).
@@ -350,6 +351,7 @@ def animate(
     if fmt == "mp4" and not ffmpeg_available():
         raise ScenarioError("--format mp4 needs ffmpeg on PATH; install it or use --format gif")
     out = Path(result_dir)
+    out = out if out.is_dir() else out.parent  # a result file: its folder
     paths = []
     if keyframes:
         from .plots import save_figure

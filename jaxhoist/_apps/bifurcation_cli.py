@@ -21,7 +21,9 @@ from .bifurcation_eval import resolve_one
 from .bifurcation_jumps import find_crossings, find_jumps
 from .bifurcation_locate import locate_bifurcation, locate_jumps
 from .bifurcation_options import SearchOptions
+from .bifurcation_result import fmt_located
 from .bifurcation_trace import trace_boundary
+from .cli_common import claim_out_dir, prepare_out_dir, rerun_scan
 from .scan import scan
 
 
@@ -82,6 +84,12 @@ def configure_parser(subparsers) -> None:
         help="folder for bifurcation.json, locator_<k>.png per located value (and, with --scan, the scan "
         "and scan_<observable>.png with the located values marked)",
     )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="write into a non-empty --out that `jaxhoist bifurcation` did not write (only the files it "
+        "writes are replaced); without it, such a folder is refused",
+    )
     p.add_argument("--no-plots", action="store_true", help="write no PNGs")
     p.add_argument(
         "--classify",
@@ -111,11 +119,15 @@ def _cli_observable(name: str):
 
 def _check_cli_args(args, scenario) -> np.ndarray | None:
     """Every argument of `jaxhoist bifurcation` checked before any solve; returns the --along values."""
-    from .._io.validate import check_count, check_out_dir, check_param_path, check_scalar_observable
+    from .._io.validate import check_count, check_param_path, check_scalar_observable
     from .._io.validate import parse_values as strict_values
 
     check_count(args.scan, "--scan", 2, allow_zero=True)
-    check_scalar_observable(resolve_one(_cli_observable(args.observable)), "--observable")
+    try:
+        (obs,) = obs_mod.resolve(_cli_observable(args.observable))
+    except ValueError as e:
+        raise ScenarioError(f"--observable: {e}") from None
+    check_scalar_observable(obs, "--observable")
     check_param_path(scenario, args.param, "--param")
     along = None
     if args.along is not None:
@@ -123,7 +135,7 @@ def _check_cli_args(args, scenario) -> np.ndarray | None:
     if args.along_values is not None:
         along = strict_values(args.along_values, "--along-values")
     if args.out:
-        check_out_dir(args.out, "--out")
+        prepare_out_dir(args.out, "bifurcation", overwrite=getattr(args, "overwrite", False))
     return along
 
 
@@ -211,18 +223,26 @@ def _run_locator(args, scenario, observable, along_values, lo, hi, out, kw, bar)
             bar.close()
         found = [b for b in boundary.points if b is not None]
         for r in boundary.rows():
-            v = "lost or not found" if r["value"] is None else f"{r['value']:.10g}"
+            v = "lost or not found" if r["value"] is None else fmt_located(r["value"], args.tol)
             print(f"{args.along} = {r['along_value']:.6g}: {args.param}* = {v}")
         print(f"{boundary.n_solves} solves in all; a dense grid at {args.tol:g}: {boundary.n_dense}")
     elif args.scan:
         name = resolve_one(observable).name
-        res = scan(
-            scenario,
-            {args.param: np.linspace(lo, hi, args.scan)},
-            observables={name: observable},
-            out_dir=None if out is None else out / "scan",
-            progress=not quiet,
-            **kw,
+        if out is not None:
+            claim_out_dir(out, "bifurcation", _BIFURCATION_OUTPUTS)
+        res = rerun_scan(
+            lambda resume: scan(
+                scenario,
+                {args.param: np.linspace(lo, hi, args.scan)},
+                observables={name: observable},
+                out_dir=None if out is None else out / "scan",
+                resume=resume,
+                progress=not quiet,
+                **kw,
+            ),
+            None if out is None else out / "scan",
+            True,
+            lambda msg: None if quiet else print(msg, file=sys.stderr, flush=True),
         )
         found = locate_jumps(scenario, res, name, level=args.level, progress=bar, **loc)
         if bar is not None:
@@ -241,9 +261,13 @@ def _run_locator(args, scenario, observable, along_values, lo, hi, out, kw, bar)
     return found, boundary, res
 
 
+# What `jaxhoist bifurcation` writes into --out (its scan/ sub-folder resumes or is recomputed by the scan)
+_BIFURCATION_OUTPUTS = ("bifurcation.json", "locator_*.png", "boundary.png", "scan_*.png")
+
+
 def _write_cli(args, scenario, overrides, found, boundary, res, out, classes=None) -> int:
     if out is not None:
-        out.mkdir(parents=True, exist_ok=True)
+        claim_out_dir(out, "bifurcation", _BIFURCATION_OUTPUTS)
         rec = {
             "scenario": scenario.name,
             "overrides": overrides,

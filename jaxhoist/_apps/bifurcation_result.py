@@ -64,10 +64,14 @@ class Bifurcation:
         return "jump" if self.jump_fraction > 0.1 else "crossing"
 
     def summary(self) -> str:
+        """One line: the located value to the digits its bracket supports (`fmt_located`), the bracket
+        rounded outward, the change of the observable and the solves it took."""
         unit = "" if self.unit in ("-", "") else f" {self.unit}"
+        lo, hi = self.bracket
         return (
-            f"{self.param} * = {self.value:.10g}{unit} (bracket [{self.bracket[0]:.10g}, "
-            f"{self.bracket[1]:.10g}], width {self.width:.2g}): {self.observable} changes from "
+            f"{self.param} * = {fmt_located(self.value, self.width)}{unit} (bracket "
+            f"[{fmt_located(lo, self.width, -1)}, {fmt_located(hi, self.width, +1)}], width "
+            f"{self.width:.2g}): {self.observable} changes from "
             f"{self.y_lo:.6g} to {self.y_hi:.6g} across it, {self.kind} ({100 * self.jump_fraction:.3g} % of "
             f"the change across the initial bracket); {self.n_solves} solves ({self.n_derivative_solves} "
             f"with derivatives, method {self.method}) vs {self.n_uniform} for a uniform grid at spacing "
@@ -83,6 +87,27 @@ class Bifurcation:
             del d["history"]
         d["kind"] = self.kind
         return d
+
+
+def fmt_located(x: float, width: float, direction: int = 0) -> str:
+    """`x` written to the digits that a bracket of `width` supports: down to the decimal place of `width`'s
+    leading digit (width 4.5e-7 -> 1e-7: 0.2795234), no more. `direction` -1 or +1 rounds down or up (a
+    bracket's ends, so the printed bracket holds the computed one), 0 to nearest.
+
+    **Arguments**
+    - `x`: the value; `width`: the bracket width, in `x`'s unit (0 or not finite: 10 significant digits).
+    - `direction`: the rounding, -1 down, 0 nearest, +1 up.
+
+    **Returns** the text.
+    """
+    if not (np.isfinite(x) and np.isfinite(width) and width > 0):
+        return f"{x:.10g}"
+    e = int(np.floor(np.log10(width)))  # the decimal place of width's leading digit
+    q = 10.0**e
+    r = {-1: np.floor, 0: np.round, 1: np.ceil}[direction](x / q) * q
+    if e < 0:
+        return f"{r:.{-e}f}"
+    return f"{r:.0f}"
 
 
 def jump_fraction(ya, yb, y_a, y_b) -> float:

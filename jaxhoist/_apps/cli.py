@@ -49,8 +49,8 @@ _EXTRA_HELP = {
     "t1": "end time [s] (default: the scenario's t1)",
     "n_save": "number of equally spaced saved times from 0 to t1",
     "max_steps": "solver step budget per solve; reaching it is reported as status max_steps",
-    ("scan", "out"): "output folder (chunk files, manifest, scan.npz/json/nc); resumable "
-    "(default out/scan-<scenario name>)",
+    ("scan", "out"): "output folder (chunk files, manifest, scan.npz/json/nc); a re-run of the same scan "
+    "resumes, a different one is recomputed (default out/scan-<preset name or scenario file name>)",
     ("bifurcation", "out"): "folder for bifurcation.json and the PNGs (default: none, nothing is written)",
     ("bifurcation", "bracket"): "the parameter interval LO HI in which to locate the change",
 }

@@ -17,7 +17,7 @@ from .._io.measurement import (
 )
 from .._io.scenario import apply_overrides, load_scenario
 from .._numerics.options import SolverOptions
-from .cli_common import _ATOL_HELP, _RTOL_HELP, CLI_SOLVERS
+from .cli_common import _ATOL_HELP, _RTOL_HELP, CLI_SOLVERS, claim_out_dir, default_out, prepare_out_dir
 from .identify import identify
 from .identify_options import FitOptions
 from .identify_params import ALIASES
@@ -117,7 +117,18 @@ def configure_parser(subparsers) -> None:
         help="replace a scenario value by dotted path before fitting, e.g. hoist.speed=0.25 (repeatable; "
         "as in `jaxhoist simulate --set`); checked before compiling",
     )
-    p.add_argument("--out", default=None, help="output folder (default out/identify-<scenario name>)")
+    p.add_argument(
+        "--out",
+        default=None,
+        help="output folder (default out/identify-<preset name or scenario file name>); a folder an earlier "
+        "`jaxhoist identify` wrote is reused, its results replaced",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="write into a non-empty --out that `jaxhoist identify` did not write (only estimates.json and "
+        "fit.png are replaced); without it, such a folder is refused",
+    )
     p.add_argument("--no-plots", action="store_true", help="write only the JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress line or bar on stderr")
     p.set_defaults(func=run)
@@ -144,7 +155,8 @@ def run(args: argparse.Namespace) -> int:
         except ValueError:
             raise ScenarioError(f"--start {k}: value must be a number, got {v!r}") from None
     signals = [s.strip() for s in args.signals.split(",")] if args.signals else None
-    out_dir = Path(args.out) if args.out else Path("out") / f"identify-{scenario.name}"
+    out_dir = Path(args.out) if args.out else default_out(args.scenario, "identify-")
+    prepare_out_dir(out_dir, "identify", overwrite=getattr(args, "overwrite", False))
     note(
         f"fitting {', '.join(params)} of {scenario.name} to {len(measurement.names)} signals x "
         f"{measurement.t.size} samples of {args.measurement} (compiles once, then iterates) ..."
@@ -171,7 +183,7 @@ def run(args: argparse.Namespace) -> int:
     finally:
         if bar is not None:
             bar.close()
-    out_dir.mkdir(parents=True, exist_ok=True)
+    claim_out_dir(out_dir, "identify", ["estimates.json", "fit.png"])
     doc = res.to_dict() | {
         "command": ["jaxhoist", *args.argv] if getattr(args, "argv", None) is not None else sys.argv,
         "scenario": scenario.name,

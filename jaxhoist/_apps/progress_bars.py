@@ -89,8 +89,29 @@ class _LineSink:
         pass
 
 
+class _Eta:
+    """The remaining time of a bar from the progress made since its first report, so that the compile
+    before that report (and the solve's own start) does not enter the rate: empty text until a second
+    report has moved the bar, then "ETA m:ss". (tqdm's own `{remaining}` divides by the whole elapsed
+    time, and showed hours while the first phase compiled.)"""
+
+    def __init__(self):
+        self.t0, self.n0 = None, 0.0
+
+    def __call__(self, n: float, total: float) -> str:
+        now = time.perf_counter()
+        if self.t0 is None:
+            self.t0, self.n0 = now, n
+            return ""
+        if n <= self.n0 or now <= self.t0:
+            return ""
+        return f"ETA {_fmt_seconds((total - n) * (now - self.t0) / (n - self.n0))}"
+
+
 def _percent_to_bar(bar):
-    """`on_line` for diffrax's TextProgressMeter: lines "12.34%" move `bar` (total 100) to 12.34."""
+    """`on_line` for diffrax's TextProgressMeter: lines "12.34%" move `bar` (total 100) to 12.34, with the
+    ETA of `_Eta` in the postfix."""
+    eta = _Eta()
 
     def on_line(line: str) -> None:
         try:
@@ -99,6 +120,7 @@ def _percent_to_bar(bar):
             print(line, file=sys.stderr)
             return
         bar.n = round(min(max(value, 0.0), 100.0), 2)
+        bar.set_postfix_str(eta(bar.n, 100.0), refresh=False)
         bar.refresh()
 
     return on_line
@@ -106,7 +128,9 @@ def _percent_to_bar(bar):
 
 def _phase_to_bar(bar):
     """`on_line` for the rigid model's verbose phase log ("t0 - t1 s  modes -> end [n steps so far]"): moves
-    `bar` (total t1 [s]) to the phase's end time and shows the phase in the postfix."""
+    `bar` (total t1 [s]) to the phase's end time and shows the ETA of `_Eta` (none before the second
+    phase: each new phase compiles on first use) and the phase in the postfix."""
+    eta = _Eta()
 
     def on_line(line: str) -> None:
         head, sep, rest = line.partition(" s ")
@@ -115,7 +139,9 @@ def _phase_to_bar(bar):
         except ValueError:
             return
         bar.n = min(round(t_end, 4), bar.total)
-        bar.set_postfix_str(rest.split("[")[0].strip(), refresh=False)
+        remaining = eta(bar.n, bar.total)
+        phase = rest.split("[")[0].strip()
+        bar.set_postfix_str(f"{remaining}, {phase}" if remaining else phase, refresh=False)
         bar.refresh()
 
     return on_line
@@ -240,6 +266,8 @@ class FitProgressBar(_TqdmReport):
                 file=self.stream or sys.stderr,
                 disable=self.quiet,
                 dynamic_ncols=True,
+                # no rate or ETA: the first evaluation carries the compile, and the total is a budget
+                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} evals [{elapsed}{postfix}]",
             )
             self.start = r["start"]
         self.bar.n = r["iteration"]

@@ -3,16 +3,17 @@ plots it writes)."""
 
 from __future__ import annotations
 
+import sys
 from pathlib import Path
 
 import jax
 import numpy as np
 
 from .._errors import ScenarioError
-from .._io.validate import check_out_dir, parse_values
+from .._io.validate import parse_values
 from .._numerics.options import SolverOptions
 from .._numerics.times import Times
-from .cli_common import CLI_SOLVERS
+from .cli_common import CLI_SOLVERS, claim_out_dir, default_out, prepare_out_dir, rerun_scan
 from .scan import scan
 from .scan_layout import BatchOptions
 from .sweep import as_sweep
@@ -99,6 +100,12 @@ def configure_parser(subparsers) -> None:
         "--out", default=None, help="output folder (chunk files, manifest, scan.npz/json/nc); resumable"
     )
     p.add_argument("--no-resume", action="store_true", help="recompute even if --out holds finished chunks")
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="write into a non-empty --out that `jaxhoist scan` did not write (only the files scan writes "
+        "are replaced); without it, such a folder is refused",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument(
         "--no-plots",
@@ -118,7 +125,8 @@ def run_cli(args) -> int:
         )
     scenario, _ = apply_overrides(load_scenario(args.scenario), args.set)
     params = {p: parse_values(v, "--values") for p, v in zip(args.param, args.values, strict=True)}
-    out = check_out_dir(Path(args.out) if args.out else Path("out") / f"scan-{scenario.name}", "--out")
+    out = Path(args.out) if args.out else default_out(args.scenario, "scan-")
+    prepare_out_dir(out, "scan", overwrite=args.overwrite)
     options = SolverOptions(
         CLI_SOLVERS[args.solver](),
         rtol=args.rtol,
@@ -127,17 +135,25 @@ def run_cli(args) -> int:
         max_steps=args.max_steps,
         fixed_step=args.fixed_step is not None,
     )
-    res = scan(
-        scenario,
-        as_sweep(params, args.mode),
-        Times(args.t1, n=args.n_save),
-        observables=args.observable,
-        options=options,
-        histories=args.history,
-        batch=BatchOptions(lanes=args.lanes, chunk_size=args.chunk_size),
-        out_dir=out,
-        resume=not args.no_resume,
-        progress=not args.quiet,
+    sweep = as_sweep(params, args.mode)
+    _check_before_writing(scenario, args)
+    claim_out_dir(out, "scan", ["scan.npz", "scan.json", "scan.nc", "scan_*.png"])
+    res = rerun_scan(
+        lambda resume: scan(
+            scenario,
+            sweep,
+            Times(args.t1, n=args.n_save),
+            observables=args.observable,
+            options=options,
+            histories=args.history,
+            batch=BatchOptions(lanes=args.lanes, chunk_size=args.chunk_size),
+            out_dir=out,
+            resume=resume,
+            progress=not args.quiet,
+        ),
+        out,
+        not args.no_resume,
+        lambda msg: None if args.quiet else print(msg, file=sys.stderr, flush=True),
     )
     n_fail = int(np.sum(~res.ok))
     t = res.attrs["timings_s"]
@@ -153,11 +169,27 @@ def run_cli(args) -> int:
     )
     pngs = []
     if not args.no_plots:
-        from .scan_plots import save_scan_plots
+        from .scan_plots import plot_skips, save_scan_plots
 
         pngs = save_scan_plots(res, out)
+        for name, why in plot_skips(res).items():
+            print(f"no plot       scan_{name}.png: {why}")
     print(
         f"wrote         {out / 'scan.npz'}, {out / 'scan.json'}, {out / 'scan.nc'}"
         + (f", {len(pngs)} PNGs (scan_<observable>.png)" if pngs else "")
     )
     return 0 if n_fail == 0 else 1
+
+
+def _check_before_writing(scenario, args) -> None:
+    """The --param paths and --observable names, checked before the output folder is made (`scan` checks
+    them again, with everything else, before compiling)."""
+    from .._io.validate import check_param_path
+    from .._numerics import observables as obs_mod
+
+    for path in args.param:
+        check_param_path(scenario, path, "--param")
+    try:
+        obs_mod.resolve(args.observable)
+    except ValueError as e:
+        raise ScenarioError(f"--observable: {e}") from None

@@ -253,6 +253,22 @@ def plot_boundary(boundary, *, title: str | None = None) -> Figure:
     return fig
 
 
+def plot_skips(result: ScanResult) -> dict[str, str]:
+    """Observable name -> why `save_scan_plots` draws no `scan_<name>.png` for it (no entry: it draws one)."""
+    if not (len(result.params) == 1 or (result.mode == "grid" and len(result.params) == 2)):
+        n = len(result.params)
+        why = f"scan plots are drawn for one parameter or a grid of two, not a {result.mode} of {n}"
+        return dict.fromkeys(result.data, why)
+    t1 = result.attrs.get("t1")
+    within = "" if t1 is None else f" within t1 = {float(t1):g} s"
+    return {
+        name: f"{name} is inf or NaN in every successful member (an event that no member reaches{within}; "
+        "a longer --t1 may reach it)"
+        for name in result.data
+        if not _has_values(result, name)
+    }
+
+
 def save_scan_plots(result: ScanResult, out_dir: str | Path, *, located=(), dpi: int = 110) -> list[Path]:
     """Write `<out_dir>/scan_<observable>.png` for every observable: against the parameter for a sweep of
     one parameter (with `located` critical values drawn), a colour map for a grid of two; angles in degrees.

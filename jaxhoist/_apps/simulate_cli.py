@@ -11,7 +11,7 @@ from pathlib import Path
 
 from .._io.scenario import preset_names
 from .animate_cli import _animate
-from .cli_common import _ATOL_HELP, _RTOL_HELP, PROG, _enable_x64
+from .cli_common import _ATOL_HELP, _RTOL_HELP, PROG, _enable_x64, claim_out_dir, default_out, prepare_out_dir
 from .progress_bars import StepTimer, _bar, _LineSink, _percent_to_bar, _phase_to_bar
 
 # ---------------------------------------------------------------------------------------- simulate
@@ -43,8 +43,10 @@ def _fmt_vec(v) -> str:
     return "(" + ", ".join(f"{x:.4g}" for x in v) + ")"
 
 
-# Files `simulate` writes into --out besides the plots' PNGs (removed first with --overwrite).
+# Files `simulate` writes into --out besides the plots' PNGs (removed first when it writes there again),
+# with those of `--animate`.
 SIMULATE_OUTPUTS = ("trajectory.npz", "trajectory.json", "trajectory.csv", "trajectory.nc")
+ANIMATE_OUTPUTS = ("animation.gif", "animation.mp4", "keyframes.png")
 
 
 def summary_status(arrays: dict):
@@ -62,17 +64,54 @@ def summary_status(arrays: dict):
     return status
 
 
-def event_lines(status, ts, normal_forces) -> list[str]:
+def transient_detachments(phases, ts) -> list[tuple[float, float, list[str]]]:
+    """The rigid model's detachments shorter than the save interval: `(start [s], end [s], corners)` for
+    every run of consecutive phases in which a corner is free, lasts less than `ts[1] - ts[0]` and ends
+    with the corner back on the ground (e.g. the first 0.2 ms of paper-4.1 with the inextensible rope,
+    where only F touches until the rope's start jerk settles D, E and H). A saved time inside one shows
+    N_i = 0 although the corner is on the ground before and after it."""
+    import numpy as np
+
+    ts = np.asarray(ts)
+    dt = float(ts[1] - ts[0]) if ts.size > 1 else 0.0
+    found: dict[tuple[float, float], list[str]] = {}
+    for i, corner in enumerate("DEFH"):
+        start = None
+        for k, ph in enumerate(phases):
+            free = ph["contact"][i] == "free"
+            if free and start is None:
+                start = ph["t_start"]
+            last = k == len(phases) - 1
+            if start is not None and (not free or last):
+                end = ph["t_start"] if not free else ph["t_end"]
+                if not free and end - start < dt:
+                    found.setdefault((float(start), float(end)), []).append(corner)
+                start = None
+    return [(a, b, cs) for (a, b), cs in sorted(found.items())]
+
+
+def event_lines(status, ts, normal_forces, phases=None) -> list[str]:
     """The summary's lift-off and first-detachment lines; a failed run has no event times to report (its
-    arrays past the failure are inf or NaN), so it says so instead of reading times from them."""
+    arrays past the failure are inf or NaN), so it says so instead of reading times from them. With the
+    rigid model's `phases` (`jaxhoist._io.results.phase_records`), detachments shorter than the save
+    interval (`transient_detachments`) are left out of the first N_i = 0 times and named on a line of
+    their own."""
+    import numpy as np
+
     from .._errors import SolveStatus
     from .._io.results import corner_detach_times, liftoff_time
 
     if status != SolveStatus.OK:
         return ["lift-off      not available (the solve failed)", "first N_i = 0 not available"]
     lift = liftoff_time(ts, normal_forces)
-    detach = corner_detach_times(ts, normal_forces)
-    return [
+    transients = transient_detachments(phases, ts) if phases else []
+    normal = np.array(normal_forces, dtype=float)
+    for a, b, corners in transients:  # a sample inside a transient does not count as a detachment
+        inside = (np.asarray(ts) >= a) & (np.asarray(ts) <= b)
+        for c in corners:
+            normal[inside, "DEFH".index(c)] = np.inf
+    detach = corner_detach_times(ts, normal)
+    lines = [
         "lift-off      "
         + (
             f"{lift:g} s (first saved time with every N_i = 0)"
@@ -80,15 +119,26 @@ def event_lines(status, ts, normal_forces) -> list[str]:
             else "none within the horizon"
         ),
         "first N_i = 0 "
-        + ", ".join(f"{c}: {'-' if t is None else f'{t:g} s'}" for c, t in zip("DEFH", detach, strict=True)),
+        + ", ".join(f"{c}: {'-' if t is None else f'{t:g} s'}" for c, t in zip("DEFH", detach, strict=True))
+        + (" (after the transients below)" if transients else ""),
     ]
+    for a, b, corners in transients:
+        lines.append(
+            f"transient     {', '.join(corners)} off the ground from {a:g} s for {_fmt_duration(b - a)}, "
+            "shorter than the save interval (then back in contact)"
+        )
+    return lines
+
+
+def _fmt_duration(seconds: float) -> str:
+    return f"{seconds * 1e3:.2g} ms" if seconds < 1.0 else f"{seconds:.3g} s"
 
 
 def run_simulate(args: argparse.Namespace) -> int:
     """`jaxhoist simulate`: load, validate, compile, solve, save npz+json (+ PNGs), print a summary."""
     _enable_x64()
     from .._errors import SolveStatus, require_x64
-    from .._io.validate import check_out_dir
+    from .._io.results import phase_records
 
     require_x64()
     progress = StepTimer(quiet=args.quiet)
@@ -97,8 +147,8 @@ def run_simulate(args: argparse.Namespace) -> int:
     # ---- host side: everything is checked before anything is compiled
     with progress(f"loading scenario {args.scenario}"):
         scenario, overrides, t1, options, ts = _load_checked(args)
-    out_dir = Path(args.out) if args.out else Path("out") / scenario.name
-    check_out_dir(out_dir, "--out", refuse_existing=True, overwrite=args.overwrite)
+    out_dir = Path(args.out) if args.out else default_out(args.scenario)
+    prepare_out_dir(out_dir, "simulate", overwrite=args.overwrite)
     progress.note(
         f"scenario {scenario.name}: t1 = {t1:g} s, {args.n_save} saved times, "
         f"{type(options.solver).__name__}, rtol = {options.rtol:g}, atol = {options.atol:g}"
@@ -123,7 +173,8 @@ def run_simulate(args: argparse.Namespace) -> int:
     # ---- summary (stdout)
     status = summary_status(arrays)
     wall_total = time.perf_counter() - wall0
-    lines = _summary_lines(scenario, arrays, status, wall_solve, wall_total, written, pngs, animation)
+    phases = phase_records(traj) if hasattr(traj, "phases") else None
+    lines = _summary_lines(scenario, arrays, status, wall_solve, wall_total, written, pngs, animation, phases)
     print("\n".join(lines), flush=True)
     return 0 if status == SolveStatus.OK else 1
 
@@ -175,9 +226,7 @@ def _solve_rigid(args, scenario, t1, ts, options, progress):
             "rigid model",
             "s",
             quiet=args.quiet,
-            bar_format=(
-                "{desc}: {percentage:3.0f}%|{bar}| t = {n:.3f}/{total:.3g} s [{elapsed}<{remaining}{postfix}]"
-            ),
+            bar_format=("{desc}: {percentage:3.0f}%|{bar}| t = {n:.3f}/{total:.3g} s [{elapsed}{postfix}]"),
         ) as bar,
     ):
         with contextlib.redirect_stdout(_LineSink(_phase_to_bar(bar))):
@@ -215,7 +264,7 @@ def _solve_elastic(args, scenario, ts, options, progress):
             "solving",
             "%",
             quiet=args.quiet,
-            bar_format=("{desc}: {percentage:3.0f}%|{bar}| t = {n:.0f}% of t1 [{elapsed}<{remaining}]"),
+            bar_format=("{desc}: {percentage:3.0f}%|{bar}| t = {n:.0f}% of t1 [{elapsed}{postfix}]"),
         ) as bar,
     ):
         with contextlib.redirect_stdout(_LineSink(_percent_to_bar(bar))):
@@ -223,7 +272,9 @@ def _solve_elastic(args, scenario, ts, options, progress):
     return traj, progress.times["solving"]
 
 
-def _summary_lines(scenario, arrays, status, wall_solve, wall_total, written, pngs, animation) -> list[str]:
+def _summary_lines(
+    scenario, arrays, status, wall_solve, wall_total, written, pngs, animation, phases=None
+) -> list[str]:
     """The run's summary for stdout: final state, events, rope tension, energy check, steps, timings."""
     import numpy as np
 
@@ -236,7 +287,7 @@ def _summary_lines(scenario, arrays, status, wall_solve, wall_total, written, pn
         f"status        {status.name.lower()}" + ("" if status == SolveStatus.OK else f": {status.message}"),
         f"final C       {_fmt_vec(arrays['position'][-1])} m",
         f"final angles  (φ, ψ, ϑ) = {_fmt_vec(np.degrees(arrays['euler'][-1]))} deg",
-        *event_lines(status, ts_np, arrays["normal_forces"]),
+        *event_lines(status, ts_np, arrays["normal_forces"], phases),
         f"max S         {arrays['rope_tension'].max() / 1e3:.4g} kN",
         f"energy check  max |residual| = {resid:.3g} J (hoist work {arrays['hoist_work'][-1]:.4g} J)",
         f"steps         {int(arrays['num_accepted_steps'])} accepted, "
@@ -300,15 +351,20 @@ def configure_simulate(subparsers) -> None:
         action="append",
         metavar="PATH=VALUE",
         help="replace a scenario value by dotted path, e.g. foundation.friction_coefficient=0.3 "
-        "or "
-        "'load.mass_centre=[1, 2.5, 1]' (repeatable); checked before compiling",
+        "or, for a vector, load.mass_centre=1,2.5,1 (x,y,z) (repeatable); checked before compiling",
     )
-    p.add_argument("--out", default=None, metavar="DIR", help="output folder (default out/<scenario name>)")
+    p.add_argument(
+        "--out",
+        default=None,
+        metavar="DIR",
+        help="output folder (default out/<preset name or scenario file name>); a folder an earlier "
+        "`jaxhoist simulate` wrote is reused, its results replaced",
+    )
     p.add_argument(
         "--overwrite",
         action="store_true",
-        help="replace the results of a previous run in --out (its trajectory files and PNGs are removed "
-        "first); without it, an existing non-empty --out is refused",
+        help="write into a non-empty --out that `jaxhoist simulate` did not write (only the files simulate "
+        "writes are replaced); without it, such a folder is refused",
     )
     p.add_argument(
         "--model",
@@ -341,13 +397,12 @@ def _write_results(args, out_dir: Path, traj, scenario, options, t1, overrides, 
         save_trajectory_netcdf,
         trajectory_arrays,
     )
-    from .._io.validate import clean_outputs
+    from .plots import PLOTS
 
     with progress(f"writing results to {out_dir}"):
-        if args.overwrite:
-            from .plots import PLOTS
-
-            clean_outputs(out_dir, [*SIMULATE_OUTPUTS, *(f"{n}.png" for n in PLOTS)])
+        claim_out_dir(
+            out_dir, "simulate", [*SIMULATE_OUTPUTS, *(f"{n}.png" for n in PLOTS), *ANIMATE_OUTPUTS]
+        )
         arrays = trajectory_arrays(traj)
         npz, meta = save_trajectory(
             out_dir / "trajectory",

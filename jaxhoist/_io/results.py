@@ -203,8 +203,22 @@ def scenario_metadata(scenario) -> dict[str, Any]:
 
 
 def _stem(path: str | Path) -> Path:
+    """The stem of a result file: `path` without a `.npz`/`.json` suffix (any other dot stays part of the
+    name: `out/paper-4.2` is a stem)."""
     p = Path(path)
     return p.with_suffix("") if p.suffix in (".npz", ".json") else p
+
+
+def _read_stem(path: str | Path) -> Path:
+    """The stem of a result file to read: as `_stem`, and a folder stands for `<folder>/trajectory` (the
+    result of `jaxhoist simulate --out <folder>`)."""
+    p = _stem(path)
+    return p / "trajectory" if p.is_dir() else p
+
+
+def _file(stem: Path, suffix: str) -> Path:
+    """`stem` + `suffix` (`with_suffix` would replace the ".2" of "paper-4.2")."""
+    return stem.with_name(stem.name + suffix)
 
 
 def _versions() -> dict[str, str]:
@@ -261,7 +275,7 @@ def save_arrays(
         u = units[k]
         unit, meaning = (u, "") if isinstance(u, str) else u
         described[k] = {"unit": unit, "meaning": meaning, "shape": list(a.shape), "dtype": str(a.dtype)}
-    npz_path, json_path = stem.with_suffix(".npz"), stem.with_suffix(".json")
+    npz_path, json_path = _file(stem, ".npz"), _file(stem, ".json")
     # atomically (temporary file, then rename): a run killed while saving leaves the old file or none,
     # never a truncated one
     tmp = npz_path.with_name(npz_path.name + ".tmp.npz")
@@ -323,8 +337,9 @@ def save_trajectory(
 
 
 def load_arrays(path: str | Path) -> dict[str, np.ndarray]:
-    """The arrays of a `.npz` result file (give the `.npz`, the `.json` or the stem) as a dict."""
-    with np.load(_stem(path).with_suffix(".npz"), allow_pickle=False) as f:
+    """The arrays of a `.npz` result file (give the `.npz`, the `.json`, the stem, or the folder of a
+    `jaxhoist simulate` result, which holds `trajectory.npz`) as a dict."""
+    with np.load(_file(_read_stem(path), ".npz"), allow_pickle=False) as f:
         return {k: f[k] for k in f.files}
 
 
@@ -332,8 +347,8 @@ load_trajectory = load_arrays
 
 
 def load_metadata(path: str | Path) -> dict[str, Any]:
-    """The JSON sidecar of a result file (give the `.npz`, the `.json` or the stem)."""
-    return json.loads(_stem(path).with_suffix(".json").read_text())
+    """The JSON sidecar of a result file (give the `.npz`, the `.json`, the stem or a result folder)."""
+    return json.loads(_file(_read_stem(path), ".json").read_text())
 
 
 def units(path: str | Path) -> dict[str, str]:

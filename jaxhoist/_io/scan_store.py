@@ -30,6 +30,11 @@ FORMAT = "jaxhoist-scan/1"
 MANIFEST = "manifest.json"
 
 
+class DifferentScanError(ScenarioError):
+    """The output folder holds the chunks of a different scan (another scenario, values, times, observables
+    or solver options) and `resume` is on."""
+
+
 class ScanStoreWarning(UserWarning):
     """A chunk file or the manifest in a scan's `out_dir` was damaged, foreign or stale; it is recomputed."""
 
@@ -207,7 +212,7 @@ class ScanStore:
             )
             return None
         if old.get("fingerprint") != self.fingerprint:
-            raise ScenarioError(
+            raise DifferentScanError(
                 f"{self.out} holds chunks of a different scan (other scenario, values, times, "
                 f"observables or solver options): use another out_dir, or resume=False to "
                 f"overwrite it"
@@ -218,7 +223,11 @@ class ScanStore:
         """Read back an earlier run's verified chunks (members `order[k*chunk:(k+1)*chunk]` in chunk k; the
         files' chunk size wins over `chunk`) and write the manifest (`header`: n_members, params, mode, t1,
         lanes). **Returns** `(chunk size, {k: arrays})`."""
+        from .validate import mark_folder, marker_command
+
         self.out.mkdir(parents=True, exist_ok=True)
+        if marker_command(self.out) is None:  # a scan's folder, as `jaxhoist scan` marks it
+            mark_folder(self.out, "scan")
         old = self._old_manifest(resume)
         done: dict[int, dict[str, np.ndarray]] = {}
         if old is not None:

@@ -273,7 +273,7 @@ def parse_overrides(items) -> dict[str, float | list]:
     """Command-line overrides `["rope.stiffness=1e7", "load.mass_centre=[1, 2.5, 1]"]` -> {path: value}.
 
     Numbers are read strictly (`jaxhoist._io.validate.parse_number`: `0_3` is refused, not read as 3);
-    lists in JSON syntax, nested at most 2 deep.
+    lists in JSON syntax, nested at most 2 deep, or a vector as comma-separated numbers (`1,2.5,1`).
 
     **Raises** `ScenarioError` naming `--set` and the path.
     """
@@ -286,7 +286,17 @@ def parse_overrides(items) -> dict[str, float | list]:
                 f"--set expects PATH=VALUE (e.g. foundation.friction_coefficient=0.3), got {brief(item)}"
             )
         where = f"--set {brief(path, 60)}"
-        out[path] = parse_list(value, where) if value.strip().startswith("[") else parse_number(value, where)
+        v = value.strip()
+        if v.startswith("["):
+            out[path] = parse_list(v, where)
+            continue
+        try:  # a number, or a vector typed as x,y,z
+            out[path] = [parse_number(x, where) for x in v.split(",")] if "," in v else parse_number(v, where)
+        except ScenarioError:
+            raise ScenarioError(
+                f"{where}: expected a number like 0.3 or 1.5e7, or for a vector field x,y,z like 1,2.5,1 "
+                f"(or [1, 2.5, 1]), got {brief(value)}"
+            ) from None
     return out
 
 

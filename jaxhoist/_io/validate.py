@@ -187,7 +187,13 @@ def parse_values(spec, flag: str = "--values") -> np.ndarray:
     items = [x for x in s.split(",") if x.strip()]
     if not items:
         raise ScenarioError(f"{flag}: no values in {brief(spec)}; expected 'start:stop:num' or 'v1,v2,...'")
-    return np.array([parse_number(x, flag) for x in items])
+    try:
+        return np.array([parse_number(x, flag) for x in items])
+    except ScenarioError:
+        raise ScenarioError(
+            f"{flag}: expected a range 'start:stop:num' (inclusive, e.g. 0.2:0.4:11) or a list 'v1,v2,...' "
+            f"(e.g. 0.2,0.3,0.4), got {brief(spec)}"
+        ) from None
 
 
 def number_arg(text: str) -> float:
@@ -281,6 +287,29 @@ def check_out_dir(
                 f"replace a previous run's results, or choose another {flag}"
             )
     return p
+
+
+# The file that marks a results folder as written by a jaxhoist command (its first line names the command):
+# the command may replace its own results there when it runs again (see `jaxhoist._apps.cli_common`).
+MARKER = ".jaxhoist"
+
+
+def marker_command(folder: str | Path) -> str | None:
+    """The command named by `folder`'s marker file `MARKER`, or None if it has none (or an unreadable one)."""
+    try:
+        text = (Path(folder) / MARKER).read_text()
+    except (OSError, UnicodeDecodeError):
+        return None
+    return text.splitlines()[0].strip() if text.strip() else None
+
+
+def mark_folder(folder: str | Path, command: str) -> None:
+    """Write the marker file `MARKER` into the existing folder `folder`: its results are `jaxhoist
+    command`'s, which replaces them when it runs again."""
+    (Path(folder) / MARKER).write_text(
+        f"{command}\nThis folder holds the results of `jaxhoist {command}`; running the command again "
+        f"replaces them.\n"
+    )
 
 
 def clean_outputs(folder: str | Path, names: Iterable[str]) -> list[Path]:

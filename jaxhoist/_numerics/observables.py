@@ -425,14 +425,29 @@ def _indexed(base: Observable, index: int, name: str | None = None) -> Observabl
     )
 
 
+def closest_name(name: str, names) -> str | None:
+    """The name among `names` closest to `name` by meaning first, then by spelling: the shortest name that
+    starts with `name` (`final_pos` -> `final_position`), else the shortest that contains it (`tilt` ->
+    `max_tilt`), else difflib's closest spelling, else None."""
+    import difflib
+
+    names = sorted(names, key=lambda n: (len(n), n))
+    key = name.strip().lower()
+    if key:
+        for match in (lambda n: n.startswith(key), lambda n: key in n):
+            hits = [n for n in names if match(n)]
+            if hits:
+                return hits[0]
+    close = difflib.get_close_matches(name, names, n=1)
+    return close[0] if close else None
+
+
 def get(name: str) -> Observable:
     """The built-in observable called `name`; `name[i]` selects component i of a vector observable."""
     base, _, rest = name.partition("[")
     if base not in BUILTIN:
-        import difflib
-
-        close = difflib.get_close_matches(base, list(BUILTIN), n=1)
-        hint = f" (did you mean {close[0]!r}?)" if close else ""
+        close = closest_name(base, BUILTIN)
+        hint = f" (did you mean {close!r}?)" if close else ""
         raise ValueError(f"unknown observable {name!r}{hint}; built-in observables are {sorted(BUILTIN)}")
     obs = BUILTIN[base]
     if rest:
@@ -443,7 +458,12 @@ def get(name: str) -> Observable:
             try:
                 i = int(idx)
             except ValueError:
-                raise ValueError(f"observable {name!r}: bad component {idx!r}") from None
+                c = obs.components
+                what = "the corners " if c == CORNERS else ""
+                which = f"{what}{', '.join(c)} (or an index 0..{len(c) - 1})" if c else "an index"
+                raise ValueError(
+                    f"observable {name!r}: bad component {idx!r}; the components of {base} are {which}"
+                ) from None
         n = len(obs.components) if obs.components else None
         if n is not None and not 0 <= i < n:
             raise ValueError(f"observable {name!r}: component index must be in 0..{n - 1}")

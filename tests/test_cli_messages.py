@@ -1,0 +1,318 @@
+"""The command line runs, and runs again: one rule for output folders (a `.jaxhoist` marker names the
+command that wrote a folder; a re-run of that command replaces its results, a folder with other files is
+refused unless --overwrite), default folders from the scenario FILE's name, result paths with dots and
+folders, `animate` on a file; one-line messages naming the expected form (ranges, vectors, corners, the
+closest observable); summaries that say what happened (transient detachments of the rigid model, no ETA
+while compiling, located values to the digits their bracket supports, why a scan plot is skipped)."""
+
+import jax
+
+jax.config.update("jax_enable_x64", True)
+
+import inspect  # noqa: E402
+import io  # noqa: E402
+import os  # noqa: E402
+from importlib import resources  # noqa: E402
+
+import numpy as np  # noqa: E402
+import pytest  # noqa: E402
+
+from jaxhoist._apps import bifurcation_cli, cli, identify_cli, scan_cli, simulate_cli  # noqa: E402
+from jaxhoist._apps.cli_common import (  # noqa: E402
+    MARKER,
+    claim_out_dir,
+    default_out,
+    marker_command,
+    prepare_out_dir,
+)
+from jaxhoist._errors import ScenarioError  # noqa: E402
+from jaxhoist._io import results  # noqa: E402
+
+SHORT = ["--t1", "0.5", "--n-save", "11"]  # the short solve of tests/test_cli.py (compiled once per process)
+
+
+def _boom(*a, **k):
+    raise AssertionError("the computation ran despite the refusal")
+
+
+def _error(capsys) -> str:
+    err = capsys.readouterr().err
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert "Traceback" not in err and lines, err
+    assert lines[-1].startswith("jaxhoist: error:"), err
+    return lines[-1]
+
+
+# ------------------------------------------------------------------------------------- output folders
+
+
+def test_out_folder_rule(tmp_path):
+    out = tmp_path / "o"
+    assert prepare_out_dir(out, "simulate") == out  # not there yet
+    out.mkdir()
+    assert prepare_out_dir(out, "simulate") == out  # empty
+    (out / "notes.txt").write_text("mine")
+    with pytest.raises(ScenarioError, match=r"--out .*did not write.*notes\.txt.*--overwrite"):
+        prepare_out_dir(out, "simulate")
+    assert prepare_out_dir(out, "simulate", overwrite=True) == out
+    # marked by the same command: reused; by another command: refused, naming it
+    for name in ("trajectory.npz", "overview.png", "scan_x.png"):
+        (out / name).write_text("old")
+    claim_out_dir(out, "simulate", ["trajectory.npz", "*.png"])
+    assert marker_command(out) == "simulate" and (out / MARKER).is_file()
+    assert sorted(p.name for p in out.iterdir()) == [MARKER, "notes.txt"]  # only the listed files went
+    assert prepare_out_dir(out, "simulate") == out
+    with pytest.raises(ScenarioError, match=r"results of `jaxhoist simulate`.*--overwrite"):
+        prepare_out_dir(out, "scan")
+    assert prepare_out_dir(out, "scan", overwrite=True) == out
+    with pytest.raises(ScenarioError, match="is a file"):
+        prepare_out_dir(out / "notes.txt", "simulate")
+
+
+def test_a_scan_folder_written_from_python_is_the_scan_command_s(tmp_path):
+    """`jaxhoist.scan(..., out_dir=)` marks its folder as `jaxhoist scan` does, so the command line can
+    resume or recompute there (docs/bifurcation.md runs both into out/mu)."""
+    from jaxhoist._io.scan_store import ScanStore
+
+    store = ScanStore(tmp_path / "mu", "fingerprint")
+    store.open(
+        np.arange(4), 2, {"n_members": 4, "params": ["p"], "mode": "sweep", "t1": 1.0, "lanes": 2}, True
+    )
+    assert marker_command(tmp_path / "mu") == "scan"
+    assert prepare_out_dir(tmp_path / "mu", "scan") == tmp_path / "mu"
+
+
+def test_default_out_comes_from_the_file_name():
+    assert default_out("paper-4.2") == default_out("paper-4.2", "") and str(default_out("paper-4.2")) == (
+        os.path.join("out", "paper-4.2")
+    )
+    assert default_out("lifts/my-lift.toml") == default_out("my-lift.toml")
+    assert str(default_out("lifts/my-lift.toml")) == os.path.join("out", "my-lift")
+    assert str(default_out("my-lift.toml", "scan-")) == os.path.join("out", "scan-my-lift")
+
+
+def test_result_paths_with_dots_and_folders(tmp_path):
+    npz, js = results.save_arrays(tmp_path / "paper-4.2", {"a": [1.0, 2.0]}, {"a": "m"})
+    assert npz.name == "paper-4.2.npz" and js.name == "paper-4.2.json"  # ".2" is no suffix
+    np.testing.assert_array_equal(results.load_arrays(tmp_path / "paper-4.2")["a"], [1.0, 2.0])
+    run = tmp_path / "run-4.2"
+    results.save_arrays(run / "trajectory", {"b": [3.0]}, {"b": "s"})
+    np.testing.assert_array_equal(results.load_trajectory(run)["b"], [3.0])  # a result folder
+    assert results.load_metadata(run)["arrays"]["b"]["unit"] == "s"
+
+
+def test_simulate_runs_twice_and_refuses_foreign_folders(tmp_path, capsys, monkeypatch):
+    """End to end: the same command twice into one folder (the worked example of docs/cli.md, short),
+    a copied preset's default folder named after the file, `animate` on the trajectory file, and the
+    refusals (before any solve) of a folder holding the user's files or another command's results."""
+    monkeypatch.chdir(tmp_path)
+    out = tmp_path / "out" / "mu-0.3"
+    argv = ["simulate", "paper-4.2", "--set", "foundation.friction_coefficient=0.3", *SHORT, "--quiet"]
+    assert cli.main([*argv, "--out", str(out), "--no-plots"]) == 0
+    (out / "notes.txt").write_text("mine")
+    assert cli.main([*argv, "--out", str(out)]) == 0  # again, now with plots: replaced, not refused
+    assert marker_command(out) == "simulate" and (out / "notes.txt").read_text() == "mine"
+    assert list(out.glob("*.png"))
+    assert cli.main([*argv, "--out", str(out), "--no-plots"]) == 0  # the third run leaves no stale PNGs
+    assert not list(out.glob("*.png"))
+    assert results.load_trajectory(out)["ts"].shape == (11,)
+    capsys.readouterr()
+
+    # animate on the file works as on its folder
+    assert (
+        cli.main(["animate", str(out / "trajectory.npz"), "--quiet", "--format", "gif", "--stride", "5"]) == 0
+    )
+    assert (out / "animation.gif").is_file() and (out / "keyframes.png").is_file()
+    capsys.readouterr()
+
+    # a copy of a preset keeps name = "paper-4.2"; its default folder is the file's name
+    (tmp_path / "my-lift.toml").write_text(
+        resources.files("jaxhoist._io.presets").joinpath("paper-4.2.toml").read_text()
+    )
+    assert cli.main(["simulate", "my-lift.toml", *SHORT, "--quiet", "--no-plots"]) == 0
+    assert (tmp_path / "out" / "my-lift" / "trajectory.npz").is_file()
+    assert not (tmp_path / "out" / "paper-4.2").exists()
+    capsys.readouterr()
+
+    # refusals, exit 2 before anything is computed
+    monkeypatch.setattr(simulate_cli, "_compiled_solve", _boom)
+    monkeypatch.setattr(scan_cli, "scan", _boom)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("mine")
+    assert cli.main([*argv, "--out", str(mine)]) == 2
+    assert "notes.txt" in _error(capsys) and (mine / "notes.txt").read_text() == "mine"
+    scan = ["scan", "paper-4.2", "--param", "foundation.friction_coefficient", "--values", "0.2:0.3:2"]
+    assert cli.main([*scan, "--t1", "0.5", "--out", str(out)]) == 2
+    assert "`jaxhoist simulate`" in _error(capsys)
+
+
+def test_identify_and_bifurcation_keep_the_rule(tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(identify_cli, "identify", _boom)
+    for name in ("locate_bifurcation", "scan", "trace_boundary"):
+        monkeypatch.setattr(bifurcation_cli, name, _boom)
+    csv = tmp_path / "lift.csv"
+    csv.write_text("t [s],position_x [m]\n0.1,1.0\n0.2,1.0\n0.3,1.0\n")
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "estimates.json").write_text("{}")  # not written by jaxhoist: no marker
+    assert cli.main(["identify", "paper-4.2", str(csv), "--fit", "mu", "--quiet", "--out", str(mine)]) == 2
+    assert "--overwrite" in _error(capsys) and (mine / "estimates.json").read_text() == "{}"
+    claim_out_dir(mine, "simulate")
+    bif = [
+        "bifurcation",
+        "paper-4.2",
+        "--param",
+        "foundation.friction_coefficient",
+        "--bracket",
+        "0.2",
+        "0.4",
+    ]
+    assert cli.main([*bif, "--quiet", "--out", str(mine)]) == 2
+    assert "`jaxhoist simulate`" in _error(capsys)
+
+
+# ------------------------------------------------------------------------------------------- messages
+
+
+@pytest.mark.parametrize(
+    "argv,words",
+    [
+        (["scan", "paper-4.2", "--param", "foundation.friction_coefficient", "--values", "0.2-0.4"],
+         ["start:stop:num", "'0.2-0.4'"]),
+        (["simulate", "paper-4.2", "--set", "load.mass_centre=1;2.5;1"], ["x,y,z", "load.mass_centre"]),
+        (["bifurcation", "paper-4.2", "--param", "foundation.friction_coefficient", "--bracket", "0.2", "0.4",
+          "--observable", "contact_margin[G]"], ["D, E, F, H", "--observable"]),
+        (["bifurcation", "paper-4.2", "--param", "foundation.friction_coefficient", "--bracket", "0.2", "0.4",
+          "--observable", "final_pos"], ["did you mean 'final_position'"]),
+        (["scan", "paper-4.2", "--param", "foundation.friction_coefficient", "--values", "0.2:0.3:2",
+          "--observable", "final_pos"], ["did you mean 'final_position'"]),
+    ],
+)  # fmt: skip
+def test_messages_name_the_expected_form(argv, words, tmp_path, capsys, monkeypatch):
+    monkeypatch.setattr(simulate_cli, "_compiled_solve", _boom)
+    monkeypatch.setattr(scan_cli, "scan", _boom)
+    for name in ("locate_bifurcation", "scan", "trace_boundary"):
+        monkeypatch.setattr(bifurcation_cli, name, _boom)
+    monkeypatch.chdir(tmp_path)
+    assert cli.main([*argv, "--quiet"]) == 2
+    assert not (tmp_path / "out").exists()  # refused before any folder was made
+    line = _error(capsys)
+    assert all(w in line for w in words), line
+    assert "locate_bifurcation" not in line  # the CLI's words, not a Python function's
+
+
+def test_vector_override_as_x_y_z():
+    from jaxhoist._io.scenario import apply_overrides, load_scenario
+
+    sc, overrides = apply_overrides(load_scenario("paper-4.2"), ["load.mass_centre=1,2.5,1"])
+    np.testing.assert_array_equal(np.asarray(sc.load.mass_centre), [1.0, 2.5, 1.0])
+    assert overrides == {"load.mass_centre": [1.0, 2.5, 1.0]}
+
+
+def test_closest_observable_by_meaning_then_spelling():
+    from jaxhoist._numerics.observables import BUILTIN, closest_name
+
+    assert closest_name("final_pos", BUILTIN) == "final_position"  # difflib alone says final_psi
+    assert closest_name("tilt", BUILTIN) == "max_tilt"
+    assert closest_name("liftof_time", BUILTIN) == "liftoff_time"  # spelling, when no name contains it
+    assert closest_name("zzz", BUILTIN) is None
+
+
+# ------------------------------------------------------------------------------------------ summaries
+
+
+def test_rigid_summary_names_a_start_transient_and_reports_the_sustained_detachment():
+    from jaxhoist._errors import SolveStatus
+
+    ts = np.linspace(0.0, 1.0, 11)
+    normal = np.full((11, 4), 9e4)
+    normal[0, [0, 1, 3]] = 0.0  # only F touches in the first 0.2 ms (the rope's start jerk)
+    normal[7:, 0] = 0.0  # D leaves the ground for good at 0.65 s
+    free, stick = "free", "stick"
+    phases = [
+        {"t_start": 0.0, "t_end": 2e-4, "contact": [free, free, "slide", free]},
+        {"t_start": 2e-4, "t_end": 0.65, "contact": [stick] * 4},
+        {"t_start": 0.65, "t_end": 1.0, "contact": [free, stick, stick, stick]},
+    ]
+    before = simulate_cli.event_lines(SolveStatus.OK, ts, normal)  # without the phase log: as sampled
+    assert "D: 0 s, E: 0 s, F: -, H: 0 s" in before[1]
+    lines = simulate_cli.event_lines(SolveStatus.OK, ts, normal, phases)
+    assert "D: 0.7 s, E: -, F: -, H: -" in lines[1], lines
+    assert lines[2].startswith("transient") and "D, E, H" in lines[2] and "0.2 ms" in lines[2], lines
+    # a detachment longer than the save interval is no transient
+    assert simulate_cli.transient_detachments(phases, np.linspace(0.0, 1.0, 100_001)) == []
+
+
+def test_progress_bars_show_no_eta_while_compiling(monkeypatch):
+    from tqdm import tqdm
+
+    from jaxhoist._apps import progress_bars
+
+    clock = iter([100.0, 101.0, 102.0])  # the first phase line comes after 100 s of compile
+    monkeypatch.setattr(progress_bars.time, "perf_counter", lambda: next(clock))
+    stream = io.StringIO()
+    bar = tqdm(total=10.0, file=stream, bar_format="{n:.3f} [{elapsed}{postfix}]")
+    on_line = progress_bars._phase_to_bar(bar)
+    on_line("  0.000000 -   0.000200 s  F slide -> tangential:F [12 steps so far]")
+    assert "ETA" not in str(bar) and "F slide" in str(bar)
+    on_line("  0.000200 -   1.000000 s  rest -> rest:slip [40 steps so far]")
+    assert "ETA 0:09" in str(bar), str(bar)  # 1 s of t per second of wall time since the first line
+    # the bars of `simulate` carry no tqdm {remaining} (elapsed over the whole time, compile included)
+    assert "{remaining}" not in inspect.getsource(simulate_cli)
+
+
+def test_located_value_printed_to_the_digits_its_bracket_supports():
+    from jaxhoist._apps.bifurcation_result import Bifurcation, fmt_located
+
+    assert fmt_located(0.27952341234, 4.5e-7) == "0.2795234"
+    assert fmt_located(0.27952322, 4.5e-7, -1) == "0.2795232"
+    assert fmt_located(0.27952367, 4.5e-7, +1) == "0.2795237"
+    assert fmt_located(14028942.3, 250.0) == "14028900"
+    b = Bifurcation(
+        param="foundation.friction_coefficient",
+        unit="-",
+        observable="contact_margin[E]",
+        value=0.279523412345,
+        bracket=(0.279523189, 0.279523636),
+        width=4.47e-7,
+        level=0.0,
+        y_lo=1e-3,
+        y_hi=-1e-3,
+        tol=1e-6,
+        n_solves=6,
+        n_derivative_solves=3,
+        n_uniform=200_001,
+        history=[],
+        converged=True,
+        method="newton",
+    )
+    text = b.summary()
+    assert "* = 0.2795234 (bracket [0.2795231, 0.2795237]" in text, text
+    assert "0.279523412" not in text
+
+
+def test_scan_says_why_a_plot_is_skipped():
+    from jaxhoist._apps import scan_plots
+    from jaxhoist._apps.scan_result import ScanResult
+
+    mu = np.linspace(0.2, 0.4, 3)
+    res = ScanResult(
+        params=["foundation.friction_coefficient"],
+        mode="sweep",
+        coords={"foundation.friction_coefficient": mu},
+        shape=(3,),
+        data={"liftoff_time": np.full(3, np.inf), "final_x": mu},
+        components={},
+        status=np.zeros(3, dtype=np.int32),
+        reasons={},
+        num_accepted_steps=np.full(3, 100),
+        num_rejected_steps=np.zeros(3, dtype=int),
+        ts=None,
+        histories={},
+        units={"liftoff_time": "s", "final_x": "m"},
+        descriptions={},
+        attrs={"t1": 5.0},
+    )
+    skips = scan_plots.plot_skips(res)
+    assert list(skips) == ["liftoff_time"] and "t1 = 5 s" in skips["liftoff_time"]
