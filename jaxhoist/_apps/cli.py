@@ -149,6 +149,18 @@ def _use_devices(argv: list[str]) -> list[str]:
     return rest
 
 
+def _use_cache(argv: list[str]) -> list[str]:
+    """Take `--no-cache` (anywhere on the command line) out of `argv`; without it, switch on the persistent
+    compilation cache (`enable_compilation_cache`: `$JAXHOIST_CACHE_DIR`, else the per-user cache folder;
+    `JAXHOIST_CACHE_DIR=""` leaves it off), so that a repeated command loads its compiled programs."""
+    rest = [a for a in argv if a != "--no-cache"]
+    if len(rest) == len(argv):
+        from .._numerics.persistent_cache import enable_compilation_cache
+
+        enable_compilation_cache()
+    return rest
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser: `simulate`, plus every subcommand module of `EXTENSIONS` that exists."""
     from .._version import __version__
@@ -166,6 +178,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="split the CPU into N JAX devices for scans (any position on the command line; default: one "
         "per CPU core)",
+    )
+    parser.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="do not read or write the persistent compilation cache (any position on the command line; "
+        "default: on, in $JAXHOIST_CACHE_DIR or the per-user cache folder, ~/.cache/jaxhoist on Linux)",
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     configure_simulate(subparsers)
@@ -201,6 +219,7 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
+    argv = _use_cache(argv)
     parser = build_parser()
     args = parser.parse_args(argv)
     args.argv = argv
