@@ -149,16 +149,19 @@ def _use_devices(argv: list[str]) -> list[str]:
     return rest
 
 
-def _use_cache(argv: list[str]) -> list[str]:
-    """Take `--no-cache` (anywhere on the command line) out of `argv`; without it, switch on the persistent
-    compilation cache (`enable_compilation_cache`: `$JAXHOIST_CACHE_DIR`, else the per-user cache folder;
-    `JAXHOIST_CACHE_DIR=""` leaves it off), so that a repeated command loads its compiled programs."""
+def _take_no_cache(argv: list[str]) -> tuple[list[str], bool]:
+    """`(argv without --no-cache, whether it was there)`: the flag may stand anywhere on the command line."""
     rest = [a for a in argv if a != "--no-cache"]
-    if len(rest) == len(argv):
-        from .._numerics.persistent_cache import enable_compilation_cache
+    return rest, len(rest) < len(argv)
 
-        enable_compilation_cache()
-    return rest
+
+def _use_cache() -> None:
+    """Switch on the persistent compilation cache (`enable_compilation_cache`: `$JAXHOIST_CACHE_DIR`, else
+    the per-user cache folder; `JAXHOIST_CACHE_DIR=""` leaves it off), so that a repeated command loads
+    its compiled programs instead of compiling them."""
+    from .._numerics.persistent_cache import enable_compilation_cache
+
+    enable_compilation_cache()
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -219,13 +222,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
-    argv = _use_cache(argv)
+    argv, no_cache = _take_no_cache(argv)
     parser = build_parser()
     args = parser.parse_args(argv)
     args.argv = argv
     if getattr(args, "func", None) is None:
         parser.print_help(sys.stderr)
         return 2
+    if not no_cache:
+        _use_cache()
     try:
         if args.command in ("simulate", "animate"):
             code = args.func(args)
