@@ -78,8 +78,9 @@ def prune(folder: Path, max_bytes: int) -> int:
 
 def enable_compilation_cache(path: str | os.PathLike | None = None, *, max_bytes: int = DEFAULT_MAX_BYTES):
     """Switch on JAX's persistent compilation cache for this process, so that compiled programs are stored
-    on disk and later processes load them instead of compiling (a repeated `simulate` of another parameter
-    value starts in about a second instead of ten). Call it once, before the first compilation.
+    on disk and later processes load them instead of compiling: for `simulate`, about 10 s of XLA
+    compilation on a 2-core machine become a load of about a second (each process still traces the program
+    into JAX's form, which the cache does not store). Call it once, before the first compilation.
 
     Sets JAX's `jax_compilation_cache_dir` to the folder and `jax_persistent_cache_min_compile_time_secs` to
     0 (every program is stored, the small ones too), and keeps the folder below `max_bytes` by deleting the
