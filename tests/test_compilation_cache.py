@@ -171,16 +171,22 @@ def _cli(tmp_path: Path, out: str, *extra: str, cache: str) -> subprocess.Comple
 
 
 def test_cli_no_cache_writes_nothing_and_the_default_writes_the_cache(tmp_path):
+    # (JAXHOIST_CACHE_DIR="" is checked in-process: test_empty_cache_dir_switches_the_cache_off)
     cache = tmp_path / "cache"
     _cli(tmp_path, "a", "--no-cache", cache=str(cache))
     assert not cache.exists()
-    _cli(tmp_path, "b", cache="")  # JAXHOIST_CACHE_DIR="" switches it off too
-    assert not cache.exists()
-    _cli(tmp_path, "c", cache=str(cache))
+    _cli(tmp_path, "b", cache=str(cache))
     assert any(p.name.startswith("jit_solve-") for p in _entries(cache))
 
 
 # ------------------------------------------------------------------------------------ folder and bound
+
+
+def test_empty_cache_dir_switches_the_cache_off(monkeypatch):
+    before = jax.config.jax_compilation_cache_dir
+    monkeypatch.setenv(pc.ENV_VAR, "")
+    assert pc.enable_compilation_cache() is None
+    assert jax.config.jax_compilation_cache_dir == before
 
 
 def test_cache_folder_location(monkeypatch, tmp_path):
