@@ -46,6 +46,7 @@ from ._numerics.options import ElasticRope as ElasticRope
 from ._numerics.options import InextensibleRope as InextensibleRope
 from ._numerics.options import RigidGround as RigidGround
 from ._numerics.options import SolverOptions as SolverOptions
+from ._numerics.persistent_cache import enable_compilation_cache as enable_compilation_cache
 from ._numerics.rigid_compiled import StallRule as StallRule
 from ._numerics.rigid_compliant import ChatterRule as ChatterRule
 from ._numerics.rigid_options import RigidOptions as RigidOptions

@@ -11,6 +11,11 @@ import os
 
 import jax
 
+# The command line's `main()`, run in this process by the CLI tests, switches the persistent compilation cache
+# on: keep it off here (and in the subprocesses that inherit this environment), never the user's cache folder.
+# tests/test_compilation_cache.py gives its subprocesses a folder of their own.
+os.environ["JAXHOIST_CACHE_DIR"] = ""
+
 # Two CPU devices so that sharding code paths are exercised; this must happen before the backend starts.
 try:
     jax.config.update("jax_num_cpu_devices", 2)

@@ -149,6 +149,21 @@ def _use_devices(argv: list[str]) -> list[str]:
     return rest
 
 
+def _take_no_cache(argv: list[str]) -> tuple[list[str], bool]:
+    """`(argv without --no-cache, whether it was there)`: the flag may stand anywhere on the command line."""
+    rest = [a for a in argv if a != "--no-cache"]
+    return rest, len(rest) < len(argv)
+
+
+def _use_cache() -> None:
+    """Switch on the persistent compilation cache (`enable_compilation_cache`: `$JAXHOIST_CACHE_DIR`, else
+    the per-user cache folder; `JAXHOIST_CACHE_DIR=""` leaves it off), so that a repeated command loads
+    its compiled programs instead of compiling them."""
+    from .._numerics.persistent_cache import enable_compilation_cache
+
+    enable_compilation_cache()
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The argument parser: `simulate`, plus every subcommand module of `EXTENSIONS` that exists."""
     from .._version import __version__
@@ -166,6 +181,12 @@ def build_parser() -> argparse.ArgumentParser:
         metavar="N",
         help="split the CPU into N JAX devices for scans (any position on the command line; default: one "
         "per CPU core)",
+    )
+    parser.add_argument(
+        "--no-cache",
+        action="store_true",
+        help="do not read or write the persistent compilation cache (any position on the command line; "
+        "default: on, in $JAXHOIST_CACHE_DIR or the per-user cache folder, ~/.cache/jaxhoist on Linux)",
     )
     subparsers = parser.add_subparsers(dest="command", metavar="COMMAND")
     configure_simulate(subparsers)
@@ -201,12 +222,15 @@ def main(argv: Sequence[str] | None = None) -> int:
     except ValueError as e:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
+    argv, no_cache = _take_no_cache(argv)
     parser = build_parser()
     args = parser.parse_args(argv)
     args.argv = argv
     if getattr(args, "func", None) is None:
         parser.print_help(sys.stderr)
         return 2
+    if not no_cache:
+        _use_cache()
     try:
         if args.command in ("simulate", "animate"):
             code = args.func(args)

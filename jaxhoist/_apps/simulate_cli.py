@@ -202,10 +202,9 @@ def _load_checked(args: argparse.Namespace):
 
         options = SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     else:
-        # diffrax's progress meter (TextProgressMeter) unless --quiet; its lines become a bar on stderr
-        options = SolverOptions(
-            rtol=args.rtol, atol=args.atol, max_steps=args.max_steps, progress=not args.quiet
-        )
+        # no in-loop progress meter: a compiled program with a host callback cannot be stored in the
+        # persistent compilation cache (the solve's bar shows it done once the program returns)
+        options = SolverOptions(rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     return scenario, overrides, t1, options, ts
 
 
@@ -247,8 +246,8 @@ def _solve_rigid(args, scenario, t1, ts, options, progress):
 
 
 def _solve_elastic(args, scenario, ts, options, progress):
-    """The elastic model: compile (cached in the process) and solve, diffrax's progress drawn as a bar;
-    (trajectory, solve time [s])."""
+    """The elastic model: compile (cached in the process, and on disk where the persistent compilation
+    cache is on) and solve, drawn as a bar; (trajectory, solve time [s])."""
     import jax
 
     from .._numerics.compile_cache import is_cached
@@ -269,6 +268,8 @@ def _solve_elastic(args, scenario, ts, options, progress):
     ):
         with contextlib.redirect_stdout(_LineSink(_percent_to_bar(bar))):
             traj = jax.block_until_ready(solve_fn(scenario, ts, options))
+        bar.n = bar.total
+        bar.refresh()
     return traj, progress.times["solving"]
 
 

@@ -16,6 +16,7 @@ import optimistix as optx
 
 from .._errors import ScenarioError
 from .._physics import rigid
+from .callback_free import callback_free
 
 
 @dataclasses.dataclass(frozen=True)
@@ -141,7 +142,7 @@ def _controller(options: _Options):
     )
 
 
-_phase_solve_jit = eqx.filter_jit(_phase_solve)
+_phase_solve_jit = eqx.filter_jit(callback_free(_phase_solve))  # no host callback: storable on disk
 _raw_guards_jit = eqx.filter_jit(rigid.raw_guards)
 
 

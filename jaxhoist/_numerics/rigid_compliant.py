@@ -42,6 +42,7 @@ from .._errors import ScenarioError
 from .._physics import elastic, forces, kinematics, rigid
 from .._physics import energy as energy_mod
 from .._physics.params import RegularisedCoulomb, Scenario
+from .callback_free import callback_free
 from .rigid_compiled import _rope_state
 from .rigid_records import RigidContactError
 
@@ -189,7 +190,7 @@ def _chunk_solve(scenario, c, y0, t0, t1, ts_user, ts_dense, rtol, atol, max_ste
     return ys[0], ys[1], sol.result, sol.stats["num_accepted_steps"], sol.stats["num_rejected_steps"]
 
 
-_chunk_solve_jit = eqx.filter_jit(_chunk_solve)
+_chunk_solve_jit = eqx.filter_jit(callback_free(_chunk_solve))  # no host callback: storable on disk
 
 
 @eqx.filter_jit

@@ -17,6 +17,7 @@ from .._physics import kinematics
 from .._physics.elastic import Constants, State, snapshot, vector_field
 from .._physics.equilibrium import initial_state
 from .._physics.params import Scenario
+from .callback_free import callback_free, raise_on_status
 from .options import AbstractModel, ElasticFoundation, RigidGround, SolverOptions, as_model
 from .rigid_options import RigidOptions
 from .rigid_solve import simulate_rigid
@@ -82,8 +83,10 @@ def step_size_controller(options: SolverOptions, ts):
     return ctrl
 
 
+@callback_free
 def solve(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOptions) -> Trajectory:
-    """The traceable core: initial state, one diffeqsolve with `throw=False`, outputs. Never raises.
+    """The traceable core: initial state, one diffeqsolve with `throw=False`, outputs. Never raises, and
+    carries no host callback unless `options.progress_meter` asks for one (`callback_free`).
     With the Rosenbrock-W solver in forward mode, derivatives are the error-controlled sensitivities of
     `sensitivity.solve_forward`."""
     if uses_tangent_solve(options):
@@ -117,8 +120,7 @@ _solve_jit = eqx.filter_jit(solve)
 
 
 def _raise_on_failure(traj: Trajectory) -> Trajectory:
-    msgs = [s.message for s in SolveStatus]
-    return eqx.branched_error_if(traj, traj.status != SolveStatus.OK, traj.status, msgs)
+    return raise_on_status(traj, traj.status, SolveStatus.OK, [s.message for s in SolveStatus])
 
 
 def as_float64_leaves(scenario: Scenario) -> Scenario:
