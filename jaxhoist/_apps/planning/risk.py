@@ -18,7 +18,7 @@ from ..._physics.params import Scenario
 from ..._physics.paths import check_path, param_unit
 from ..scan import BatchOptions, Grid, Points, ScanResult, ScanStatus, Sweep, scan
 from .hazards import Hazard
-from .uncertain import AbstractDistribution, check_uncertain, sample
+from .uncertain import check_uncertain, sample
 
 #: The file format tag of `LiftRisk.save` and `to_netcdf`.
 FORMAT = "jaxhoist-lift-risk-1"
@@ -26,7 +26,7 @@ FORMAT = "jaxhoist-lift-risk-1"
 
 def lift_risk(
     scenario: Scenario,
-    uncertain: Mapping[str, AbstractDistribution | float],
+    uncertain: Mapping[str, Any],  # checked by check_uncertain, with messages naming the path
     hazards: Hazard | Sequence[Hazard],
     design: Sweep | Grid | Points | Mapping[str, Any] | None = None,
     *,
@@ -60,9 +60,11 @@ def lift_risk(
     estimate is their mean p̄ and the interval the Student-t interval over the replicates,
     p̄ ± t_{(1+c)/2, R-1} s / √R (s the sample standard deviation of the p_r, c = `confidence`), clipped to
     [0, 1]. It is honest for randomised QMC because the replicates are independent and identically
-    distributed. When no member (or every member) of a design point shows the hazard, the replicates
-    cannot measure their spread; the interval is then the exact binomial (Clopper-Pearson) one for 0 of N
-    (or N of N) independent draws, [0, 1 - ((1-c)/2)^(1/N)] (or its mirror), N the successful members.
+    distributed. Where every replicate gives the same share (no member shows the hazard, every member does,
+    or the strata of the Sobol points split alike in every scramble) the replicates cannot measure their
+    spread and the t-interval would have zero width; the interval is then the exact binomial
+    (Clopper-Pearson) one of the pooled count k of N successful members, as if they were independent
+    draws (for k = 0: [0, 1 - ((1-c)/2)^(1/N)]), which is wider than the RQMC error.
 
     Failures: a member whose solve fails (a `ScanStatus` other than OK, e.g. a step budget exhausted, or a
     sample outside a leaf's valid range) is left out and counted: `LiftRisk.n_failed` per design point.
@@ -236,26 +238,33 @@ def _observables(hazards, extra) -> dict[str, Any]:
 # ------------------------------------------------------------------------------------------ statistics
 
 
-def _interval(p_rep: np.ndarray, n_ok_rep: np.ndarray, confidence: float):
-    """Estimate and interval from replicate shares `p_rep` (..., R) over `n_ok_rep` members each."""
+def _interval(k_rep: np.ndarray, n_ok_rep: np.ndarray, confidence: float):
+    """Estimate and interval from the hazardous-member counts `k_rep` (..., R) of the replicates, of
+    `n_ok_rep` successful members each: the mean of the replicate shares with the Student-t interval over
+    them, or, where every replicate gives the same share, the Clopper-Pearson interval of the pooled count.
+    NaN where fewer than two replicates have a successful member."""
     from scipy import stats
 
     has = n_ok_rep > 0
     r_eff = has.sum(axis=-1)
     with np.errstate(invalid="ignore", divide="ignore"):
-        p = np.where(has, p_rep, 0.0).sum(axis=-1) / r_eff
+        p_rep = np.where(has, k_rep / np.where(has, n_ok_rep, 1), 0.0)
+        p = p_rep.sum(axis=-1) / r_eff
         dev = np.where(has, p_rep - p[..., None], 0.0)
         s = np.sqrt((dev**2).sum(axis=-1) / (r_eff - 1))
         t = stats.t.ppf(0.5 * (1 + confidence), np.maximum(r_eff - 1, 1))
         half = t * s / np.sqrt(r_eff)
     lo, hi = np.clip(p - half, 0.0, 1.0), np.clip(p + half, 0.0, 1.0)
-    n_ok = n_ok_rep.sum(axis=-1)
+    # Replicates that all agree cannot measure their spread (an indicator's share is discrete: with every
+    # replicate at 0, or at the same k/m, the t-interval has zero width): the exact binomial interval of
+    # the pooled k of N members instead, as if they were independent draws (wider than RQMC needs).
+    k, n = np.sum(np.where(has, k_rep, 0), axis=-1), np.sum(n_ok_rep, axis=-1)
     alpha = 1 - confidence
-    with np.errstate(divide="ignore"):
-        edge = np.where(n_ok > 0, (0.5 * alpha) ** (1.0 / np.maximum(n_ok, 1)), 0.0)
-    none, every = (p == 0) & (r_eff >= 2), (p == 1) & (r_eff >= 2)
-    lo = np.where(every, edge, lo)
-    hi = np.where(none, 1.0 - edge, hi)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        cp_lo = np.where(k > 0, stats.beta.ppf(0.5 * alpha, k, n - k + 1), 0.0)
+        cp_hi = np.where(k < n, stats.beta.ppf(1 - 0.5 * alpha, k + 1, n - k), 1.0)
+    agree = (s == 0) & (r_eff >= 2)
+    lo, hi = np.where(agree, cp_lo, lo), np.where(agree, cp_hi, hi)
     bad = r_eff < 2
     return np.where(bad, np.nan, p), np.where(bad, np.nan, lo), np.where(bad, np.nan, hi)
 
@@ -287,9 +296,10 @@ def _summarise(
         v = res.data[h.observable_name].reshape(n_design, replicates, m, -1)
         with np.errstate(invalid="ignore"):
             ev = np.any(v > h.threshold if h.above else v < h.threshold, axis=-1) & ok
+        k_rep = ev.sum(axis=-1)
         with np.errstate(invalid="ignore", divide="ignore"):
-            p_rep = ev.sum(axis=-1) / n_ok_rep
-        p, a, b = _interval(p_rep, n_ok_rep, confidence)
+            p_rep = k_rep / n_ok_rep
+        p, a, b = _interval(k_rep, n_ok_rep, confidence)
         prob[h.name], lo[h.name], hi[h.name] = (
             np.where(too_many, np.nan, x).reshape(d_shape) for x in (p, a, b)
         )

@@ -263,7 +263,11 @@ def sample(
         with warnings.catch_warnings():  # "balance properties ... power of 2": documented in lift_risk
             warnings.simplefilter("ignore", UserWarning)
             for r, rng in enumerate(rngs):
-                u[r] = qmc.Sobol(len(random), scramble=True, seed=rng).random(m)
+                try:  # scipy >= 1.15 names the generator `rng`
+                    sobol = qmc.Sobol(len(random), scramble=True, rng=rng)
+                except TypeError:  # scipy 1.13, 1.14: `seed`
+                    sobol = qmc.Sobol(len(random), scramble=True, seed=rng)  # pyright: ignore[reportCallIssue]
+                u[r] = sobol.random(m)
     # Sobol points may be exactly 0 (probability 2^-32 per point after scrambling): keep every u inside (0, 1)
     u = np.clip(u, 0.5 / 2**53, 1.0 - 0.5 / 2**53)
     out = {}
