@@ -83,7 +83,7 @@ class Fixed(AbstractDistribution):
 
 @dataclasses.dataclass(frozen=True)
 class Uniform(AbstractDistribution):
-    """Uniform on [low, high] [SI unit of the leaf].
+    """Uniform on [low, high], in the SI unit of the leaf.
 
     **Raises** `ScenarioError` unless low and high are finite and low < high.
     """
@@ -139,8 +139,8 @@ class Normal(AbstractDistribution):
 @dataclasses.dataclass(frozen=True)
 class TruncatedNormal(AbstractDistribution):
     """A normal distribution of mean `mean` and standard deviation `std` (those of the normal before
-    truncation) restricted to [low, high] [SI unit of the leaf]; low = -inf or high = +inf leave that side
-    open.
+    truncation) restricted to [low, high], in the SI unit of the leaf; low = -inf or high = +inf leave that
+    side open.
 
     **Raises** `ScenarioError` unless mean and std are finite, std > 0, low < high and the interval holds
     some probability (it lies within 30 std of the mean).
