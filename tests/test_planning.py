@@ -373,3 +373,65 @@ def test_bad_lift_risk_inputs_fail_before_compiling(box, kwargs, field):
     with mock.patch.object(risk_mod, "scan", _trap), pytest.raises(jh.ScenarioError, match=field) as info:
         jh.lift_risk(box, **args)
     assert "\n" not in str(info.value)
+
+
+# ------------------------------------------------------------------------------------------ layouts
+
+
+def _fake_scan(scenario, points, times, *, observables, **kwargs):
+    """A stand-in for `scan` (nothing solved): observable `mu` is the member's μ, `hoist_speed` its hoist
+    speed (the box's 0.2 m/s if not a design path), every other observable 0; members with μ > 0.45 fail."""
+    vals = points.values
+    n = points.size
+    status = np.where(vals[MU] > 0.45, int(jh.ScanStatus.MAX_STEPS), 0).astype(np.int32)
+    data = {}
+    for name in observables:
+        v = (
+            vals[MU]
+            if name == "mu"
+            else vals.get("hoist.speed", np.full(n, 0.2))
+            if name == "hoist_speed"
+            else np.zeros(n)
+        )
+        data[name] = np.where(status == 0, v, np.nan)
+    return jh.ScanResult(
+        params=tuple(vals),
+        mode="points",
+        coords=vals,
+        shape=(n,),
+        data=data,
+        components={k: None for k in data},
+        status=status,
+        reasons={},
+        num_accepted_steps=np.zeros(n),
+        num_rejected_steps=np.zeros(n),
+        ts=None,
+        histories={},
+        units={k: "-" for k in data},
+        descriptions={k: "" for k in data},
+        attrs={},
+    )
+
+
+SPEED_OBS = jh.Observable("hoist_speed", lambda traj, sc: sc.hoist.speed, "m/s")
+
+
+def test_grid_design_and_no_design_lay_out_the_map(box):
+    """A 2 x 3 grid (tip x by hoist speed) and no design at all, with the scan replaced by a stand-in whose
+    observables are the inputs: the probabilities are those of the inputs, on the grid's axes."""
+    unc = {MU: jh.Uniform(0.2, 0.5), MC: jh.Fixed(1.0)}
+    hz = [jh.Hazard("low_mu", MU_OBS, 0.3, above=False), jh.Hazard("fast", SPEED_OBS, 0.25)]
+    grid = jh.Grid({TIP: [2.0, 4.0], "hoist.speed": [0.1, 0.2, 0.3]})
+    with mock.patch.object(risk_mod, "scan", _fake_scan):
+        r = jh.lift_risk(box, unc, hz, grid, samples=128, max_failed=0.5, **KW)
+        r0 = jh.lift_risk(box, unc, hz, samples=128, max_failed=0.5, **KW)
+    assert r.shape == (2, 3) and r0.shape == ()
+    # μ > 0.45 fails (1/6 of the members): P(μ < 0.3 | μ <= 0.45) = 0.1 / 0.25
+    n_fail = int(np.sum(r.draws[MU] > 0.45))
+    assert np.all(r.n_failed == n_fail) and int(r0.n_failed) == n_fail
+    np.testing.assert_allclose(r.probability("low_mu"), 0.4, atol=0.02)
+    np.testing.assert_allclose(float(r0.probability("low_mu")), float(r.probability("low_mu")[0, 0]))
+    np.testing.assert_array_equal(r.probability("fast"), [[0, 0, 1], [0, 0, 1]])
+    assert float(r0.probability("fast")) == 0.0
+    np.testing.assert_array_equal(r.quantile("hoist_speed", 0.5), [[0.1, 0.2, 0.3], [0.1, 0.2, 0.3]])
+    assert "hoist.speed = 0.3" in r.summary() and "failed" in r0.summary()

@@ -414,7 +414,7 @@ class LiftRisk:
     @property
     def n_failed(self) -> np.ndarray:
         """Failed members per design point (shape `shape`): left out of every probability and quantile."""
-        return self.samples - self.n_ok
+        return np.asarray(self.samples - self.n_ok)
 
     def _name(self, hazard: Hazard | str) -> str:
         name = hazard.name if isinstance(hazard, Hazard) else str(hazard)
