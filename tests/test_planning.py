@@ -13,7 +13,9 @@ import jax
 
 jax.config.update("jax_enable_x64", True)  # tests/conftest.py also does this
 
+import json  # noqa: E402
 import math  # noqa: E402
+import re  # noqa: E402
 from unittest import mock  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -435,3 +437,109 @@ def test_grid_design_and_no_design_lay_out_the_map(box):
     assert float(r0.probability("fast")) == 0.0
     np.testing.assert_array_equal(r.quantile("hoist_speed", 0.5), [[0.1, 0.2, 0.3], [0.1, 0.2, 0.3]])
     assert "hoist.speed = 0.3" in r.summary() and "failed" in r0.summary()
+
+
+# ------------------------------------------------------------------------------------------ command line
+
+
+def test_cli_specs_parse_to_the_library_objects():
+    from jaxhoist._apps.risk_cli import parse_distribution, parse_hazard
+
+    assert parse_distribution("uniform(0.2, 0.4)") == jh.Uniform(0.2, 0.4)
+    assert parse_distribution("normal(1,0.05)") == jh.Normal(1.0, 0.05)
+    assert parse_distribution("truncnormal(1,0.05,0.8,1.2)") == jh.TruncatedNormal(1.0, 0.05, 0.8, 1.2)
+    assert parse_distribution("lognormal(2,0.1)") == jh.LogNormal(2.0, 0.1)
+    assert parse_distribution("0.3") == parse_distribution("fixed(0.3)") == jh.Fixed(0.3)
+    assert parse_hazard("slide=0.5") == jh.slide(0.5)
+    assert parse_hazard("tilt=10deg") == jh.tilt(degrees=10.0)
+    assert parse_hazard("tilt=0.1") == jh.tilt(0.1)
+    assert parse_hazard("strike") == jh.strike()
+    assert parse_hazard("overload=12000") == jh.overload(12000.0)
+    assert parse_hazard("no-liftoff=2.5") == jh.no_liftoff(2.5)
+    assert parse_hazard("edge:contact_margin[E]<0") == jh.Hazard(
+        "edge", "contact_margin[E]", 0.0, above=False
+    )
+    for bad, field in [
+        ("uniform(0.4,0.2)", "low"),
+        ("gauss(1,2)", "no distribution"),
+        ("normal(1)", "number of arguments"),
+        ("normal(a,1)", "numbers"),
+    ]:
+        with pytest.raises(jh.ScenarioError, match=re.escape(field)):
+            parse_distribution(bad)
+    for bad, field in [("slide", "expected"), ("tilt=xdeg", "not a number"), ("x:max_tilt>-1", "threshold")]:
+        with pytest.raises(jh.ScenarioError, match=field):
+            parse_hazard(bad)
+
+
+BOX_TOML = """
+name = "drag-box"
+t1 = 2.5
+[load]
+size = [2.0, 2.0, 0.5]
+mass = 1000.0
+[foundation]
+stiffness = 1.5e7
+damping = 2.0e5
+friction_coefficient = 0.3
+[foundation.friction]
+law = "regularised-coulomb"
+regularisation_velocity = 1e-3
+[rope]
+stiffness = 3e4
+damping = 3e3
+attachment = [1.0, 1.0, 0.5]
+[hoist]
+law = "constant-speed"
+speed = 0.2
+[boom]
+tip_position = [4.0, 1.0, 8.5]
+tip_mass = 500.0
+stiffness = 5.0e6
+damping = 5.0e3
+"""
+CLI_ARGS = ["--uncertain", "foundation.friction_coefficient=uniform(0.2,0.4)", "--hazard", "slide=1.1"]
+
+
+@pytest.mark.parametrize(
+    ("extra", "field"),
+    [
+        (["--uncertain", "foundation.friction_coefficient=uniform(0.4,0.2)"], "low"),
+        (["--uncertain", "load.mass_centre[7]=normal(1,0.1)"], "load.mass_centre"),
+        (["--hazard", "tilt=-3deg"], "degrees"),
+        (["--design", "boom.tip_position[0]"], "--design"),
+        (["--samples", "30"], "samples"),
+    ],
+)
+def test_cli_bad_input_exits_2_before_compiling(tmp_path, capsys, extra, field):
+    from jaxhoist._apps import cli
+
+    toml = tmp_path / "box.toml"
+    toml.write_text(BOX_TOML)
+    with mock.patch.object(risk_mod, "scan", _trap):
+        code = cli.main(["risk", str(toml), *CLI_ARGS, *extra, "--out", str(tmp_path / "out")])
+    err = capsys.readouterr().err
+    assert code == 2 and field in err, err
+
+
+def test_cli_writes_the_map(tmp_path, capsys):
+    """Two tip positions, μ uniform: the table, risk.json, risk.nc and one map per hazard; the slide 3 m
+    aside is likelier than 1 m aside."""
+    from jaxhoist._apps import cli
+
+    toml = tmp_path / "box.toml"
+    toml.write_text(BOX_TOML)
+    out = tmp_path / "out"
+    args = ["risk", str(toml), *CLI_ARGS, "--hazard", "tilt=3deg", "--design", "boom.tip_position[0]=2,4"]
+    args += ["--samples", "16", "--replicates", "2", "--n-save", "126", "--quiet", "--out", str(out)]
+    assert cli.main(args) == 0
+    printed = capsys.readouterr().out
+    assert "boom.tip_position[0] = 4" in printed and "failed 0/16" in printed
+    summary = json.loads((out / "risk.json").read_text())
+    p = summary["hazards"]["slide"]["probability"]
+    assert summary["shape"] == [2] and 0.0 <= p[0] < p[1]
+    assert (
+        (out / "risk.nc").is_file()
+        and (out / "risk_slide.png").is_file()
+        and (out / "risk_tilt.png").is_file()
+    )
