@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import dataclasses
 import math
+import numbers
 import warnings
 from collections.abc import Mapping
 
@@ -54,7 +55,10 @@ class AbstractDistribution:
         return False
 
     def describe(self) -> str:
-        fields = ", ".join(f"{f.name}={getattr(self, f.name)!r}" for f in dataclasses.fields(self))  # pyright: ignore[reportArgumentType]  # subclasses are dataclasses
+        """The distribution as text, e.g. `Uniform(low=0.2, high=0.4)`."""
+        if not dataclasses.is_dataclass(self):
+            return repr(self)
+        fields = ", ".join(f"{f.name}={getattr(self, f.name)!r}" for f in dataclasses.fields(self))
         return f"{type(self).__name__}({fields})"
 
 
@@ -230,9 +234,9 @@ def check_uncertain(uncertain) -> dict[str, AbstractDistribution]:
     for path, dist in uncertain.items():
         if not isinstance(path, str) or not path.strip():
             raise ScenarioError(f"uncertain: a parameter path must be a dotted name, got {path!r}")
-        if isinstance(dist, int | float) and not isinstance(dist, bool):
+        if isinstance(dist, numbers.Real) and not isinstance(dist, bool | np.bool_):
             try:
-                dist = Fixed(dist)
+                dist = Fixed(float(dist))
             except ScenarioError as e:
                 raise ScenarioError(f"uncertain[{path!r}]: {e}") from None
         if not isinstance(dist, AbstractDistribution):
