@@ -36,6 +36,7 @@ EXTENSIONS = {
     "scan": "jaxhoist._apps.scan_cli",
     "bifurcation": "jaxhoist._apps.bifurcation_cli",
     "identify": "jaxhoist._apps.identify_cli",
+    "risk": "jaxhoist._apps.risk_cli",
 }
 
 

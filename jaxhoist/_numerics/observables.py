@@ -242,6 +242,28 @@ def _slide_distance(traj):
     return jnp.sqrt(jnp.sum(d**2) + 1e-300)
 
 
+def _ground_slide(traj, scenario):
+    """Largest horizontal distance of C from its start [m] over the saved times at which some corner is in
+    contact (max_i f_i > 0): how far the load is dragged over the ground, not how far it swings when free."""
+    on = jnp.max(contact_function(traj, scenario), axis=-1) > 0.0
+    d2 = jnp.sum((traj.position[:, :2] - traj.position[0, :2]) ** 2, axis=-1)
+    d2 = jnp.where(on, d2, 0.0)
+    pos = d2 > 0.0
+    d = jnp.where(pos, jnp.sqrt(jnp.where(pos, d2, 1.0)), 0.0)  # finite gradient where C has not moved
+    return jnp.max(d)
+
+
+def _swing_amplitude(traj, scenario):
+    """Largest horizontal distance [m] of C from the boom tip A at the saved times after the last contact
+    (0 if the load is still on the ground at t1)."""
+    t_free = _last_contact_time(traj, scenario)
+    d2 = jnp.sum((traj.position[:, :2] - traj.tip_position[:, :2]) ** 2, axis=-1)
+    d2 = jnp.where(traj.ts > t_free, d2, 0.0)
+    pos = d2 > 0.0
+    d = jnp.where(pos, jnp.sqrt(jnp.where(pos, d2, 1.0)), 0.0)
+    return jnp.max(d)
+
+
 def _component(fn, i):
     def get(traj, scenario):
         return _call(fn, traj, scenario)[i]
@@ -392,6 +414,24 @@ _register(
     )
 )
 _register(Observable("slide_distance", _slide_distance, "m", "horizontal distance of C from its start at t1"))
+_register(
+    Observable(
+        "ground_slide",
+        _ground_slide,
+        "m",
+        "largest horizontal distance of C from its start while some corner touches the ground (on the saved "
+        "grid): the drag over the ground, not the swing in the air",
+    )
+)
+_register(
+    Observable(
+        "swing_amplitude",
+        _swing_amplitude,
+        "m",
+        "largest horizontal distance of C from the boom tip A after the last contact (on the saved grid; 0 "
+        "if still on the ground at t1)",
+    )
+)
 
 
 def detachment_time_difference(first: str, second: str) -> Observable:
