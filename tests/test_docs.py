@@ -1,0 +1,157 @@
+"""Every shell and Python block of README.md and docs/ runs, as a reader would run it, and every shell
+command runs twice in a row (a documented command must work again on its own output).
+
+Blocks are read with pytest-codeblocks' parser, so its markers apply: `<!--pytest.mark.skip(reason="...")-->`
+before a block skips it, `<!--pytest-codeblocks:cont-->` joins a block to the one before. A block too long for
+CI carries `<!--pytest.mark.twin("NAME")-->`: the test runs `TWINS["NAME"]` instead, a shortened twin of the
+same calls (shorter horizon, fewer members), and fails if the twin is missing.
+
+Each block runs in a fresh process (a Python block with `python -c`, so that it must enable float64 itself,
+as a reader's script must), in a working folder of its own page: the blocks of one page share their files, in
+page order, as a reader who follows the page does. The folder links `experiments/` and `jaxhoist/` of this
+checkout and `.venv/` to the environment running the tests, so commands that name them work; nothing is
+written into the checkout.
+"""
+
+from __future__ import annotations
+
+import os
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from pytest_codeblocks.main import CodeBlock, extract_from_file
+
+ROOT = Path(__file__).resolve().parents[1]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").rglob("*.md"))]
+RUNNABLE = {"python", "sh", "bash"}
+#: The wall-clock limit of one run of one block [s].
+TIMEOUT = 600
+
+#: Shortened twins of the blocks marked `twin(NAME)`: the same calls on a shorter horizon or fewer members.
+TWINS: dict[str, str] = {
+    # The set-up is the environment the tests run in; the run command as written after it.
+    "readme-run": ".venv/bin/jaxhoist simulate paper-4.2 --out out/paper-4.2\n",
+    # 64 values of μ instead of 4000, the first candidate only: the same calls and horizon.
+    "bifurcation-scan-locate": """\
+import jax
+
+jax.config.update("jax_enable_x64", True)
+import numpy as np
+import jaxhoist as jh
+
+sc = jh.load_scenario("paper-4.2")
+res = jh.scan(
+    sc,
+    {"foundation.friction_coefficient": np.linspace(0.1, 0.6, 64)},
+    jh.Times(25.0, n=2501),
+    observables=["final_psi", "liftoff_time", "impacts"],
+    out_dir="out/mu",
+    progress=True,
+)
+for j in jh.find_jumps(res, "liftoff_time")[:1]:
+    b = jh.locate_bifurcation(
+        sc,
+        j.param,
+        "liftoff_time",
+        (j.lo, j.hi),
+        times=jh.Times(25.0, n=2501),
+        search=jh.SearchOptions(jh.Bisection(), tol=1e-6),
+    )
+    print(b.summary())
+""",
+    # The page fits the measurement of docs/cli.md's identify example (made here first), as written.
+    "identify-five": """\
+import jax
+
+jax.config.update("jax_enable_x64", True)
+import numpy as np
+import jaxhoist as jh
+
+m = jh.synthetic_measurement(
+    jh.load_scenario("paper-4.2"),
+    np.arange(0.02, 5.0, 0.02),
+    ["position", "rope_tension"],
+    noise={"position": 0.005, "rope_tension": "1%"},
+)
+jh.write_measurement("lift.csv", m)
+res = jh.identify(
+    "paper-4.2",
+    "lift.csv",
+    ["mu", "k", "h", "c_l", "b_l"],
+    start={"mu": 0.3},
+    noise={"position": 0.005, "rope_tension": "1%"},
+)
+print(res.summary())
+""",
+    # The full runs take minutes to hours: their --quick lines.
+    "rigid-convergence": "python experiments/rigid_convergence.py --out out/rigid_convergence --quick\n",
+    "rigid-sweep": "python experiments/rigid_sweep.py --out out/rigid_sweep --quick\n",
+}
+
+
+def _blocks() -> list:
+    params = []
+    for page in PAGES:
+        rel = page.relative_to(ROOT).as_posix()
+        for block in extract_from_file(page):
+            if block.syntax not in RUNNABLE:
+                continue
+            marks = [eval(m, {"pytest": pytest, "sys": sys}) for m in block.marks]
+            params.append(pytest.param(rel, block, marks=marks, id=f"{rel}:{block.lineno}"))
+    return params
+
+
+@pytest.fixture(scope="module")
+def page_dirs(tmp_path_factory) -> dict[str, Path]:
+    return {}
+
+
+@pytest.fixture(scope="module")
+def environment(tmp_path_factory) -> dict[str, str]:
+    env = dict(os.environ)
+    env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
+    env["MPLBACKEND"] = "Agg"
+    env["JAXHOIST_CACHE_DIR"] = str(tmp_path_factory.mktemp("compilation-cache"))
+    env.pop("PYTEST_CURRENT_TEST", None)
+    return env
+
+
+def _workdir(page: str, page_dirs: dict[str, Path], tmp_path_factory) -> Path:
+    if page not in page_dirs:
+        d = tmp_path_factory.mktemp(page.replace("/", "-").removesuffix(".md"))
+        for name in ("experiments", "jaxhoist"):
+            (d / name).symlink_to(ROOT / name, target_is_directory=True)
+        # `.venv/bin/jaxhoist ...` as the pages write it: the environment running the tests.
+        (d / ".venv").symlink_to(Path(sys.executable).parent.parent, target_is_directory=True)
+        page_dirs[page] = d
+    return page_dirs[page]
+
+
+def _run(syntax: str, code: str, cwd: Path, env: dict[str, str]) -> subprocess.CompletedProcess:
+    if syntax == "python":
+        cmd = [sys.executable, "-c", code]
+    else:
+        cmd = ["bash", "-euo", "pipefail", "-c", code]
+    return subprocess.run(cmd, cwd=cwd, env=env, capture_output=True, text=True, timeout=TIMEOUT)
+
+
+@pytest.mark.parametrize("page, block", _blocks())
+def test_documented_block_runs(
+    page: str, block: CodeBlock, request, page_dirs, environment, tmp_path_factory
+):
+    code = block.code
+    twin = request.node.get_closest_marker("twin")
+    if twin is not None:
+        name = twin.args[0]
+        assert name in TWINS, f"{page}:{block.lineno} names twin {name!r}, which tests/test_docs.py lacks"
+        code = TWINS[name]
+    cwd = _workdir(page, page_dirs, tmp_path_factory)
+    runs = 1 if block.syntax == "python" else 2  # a documented command must also run again
+    for attempt in range(runs):
+        proc = _run(block.syntax, code, cwd, environment)
+        assert proc.returncode == 0, (
+            f"{page}:{block.lineno} (run {attempt + 1} of {runs}) exited {proc.returncode}\n"
+            f"--- code\n{code}--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"
+        )
