@@ -33,3 +33,13 @@ _ATOL_HELP = (
     "absolute tolerance of the adaptive step-size control, in the state's SI units (m, m/s, rad, ...); "
     "it matters where a component is near zero"
 )
+
+
+def add_allow_implausible(parser) -> None:
+    """The `--allow-implausible` flag of the commands that read a scenario."""
+    parser.add_argument(
+        "--allow-implausible",
+        action="store_true",
+        help="accept scenario values outside their plausible ranges (a typo like rope.stiffness=1e16 is "
+        "refused without it); the solve's own checks, e.g. the energy balance, still apply",
+    )

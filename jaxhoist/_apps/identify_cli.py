@@ -17,7 +17,7 @@ from .._io.measurement import (
 )
 from .._io.scenario import apply_overrides, load_scenario
 from .._numerics.options import SolverOptions
-from .cli_common import _ATOL_HELP, _RTOL_HELP, CLI_SOLVERS
+from .cli_common import _ATOL_HELP, _RTOL_HELP, CLI_SOLVERS, add_allow_implausible
 from .identify import identify
 from .identify_options import FitOptions
 from .identify_params import ALIASES
@@ -117,6 +117,7 @@ def configure_parser(subparsers) -> None:
         help="replace a scenario value by dotted path before fitting, e.g. hoist.speed=0.25 (repeatable; "
         "as in `jaxhoist simulate --set`); checked before compiling",
     )
+    add_allow_implausible(p)
     p.add_argument("--out", default=None, help="output folder (default out/identify-<scenario name>)")
     p.add_argument("--no-plots", action="store_true", help="write only the JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress line or bar on stderr")
@@ -133,7 +134,10 @@ def run(args: argparse.Namespace) -> int:
         if not quiet:
             print(msg, file=sys.stderr, flush=True)
 
-    scenario, overrides = apply_overrides(load_scenario(args.scenario), getattr(args, "set", None) or [])
+    scenario, overrides = apply_overrides(
+        load_scenario(args.scenario, allow_implausible=args.allow_implausible),
+        getattr(args, "set", None) or [],
+    )
     measurement = read_measurement(args.measurement)
     params = [s.strip() for s in args.fit.split(",") if s.strip()]
     noise = _parse_kv(args.noise, "--noise")

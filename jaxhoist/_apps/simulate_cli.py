@@ -11,7 +11,7 @@ from pathlib import Path
 
 from .._io.scenario import preset_names
 from .animate_cli import _animate
-from .cli_common import _ATOL_HELP, _RTOL_HELP, PROG, _enable_x64
+from .cli_common import _ATOL_HELP, _RTOL_HELP, PROG, _enable_x64, add_allow_implausible
 from .progress_bars import StepTimer, _bar, _LineSink, _percent_to_bar, _phase_to_bar
 
 # ---------------------------------------------------------------------------------------- simulate
@@ -137,7 +137,7 @@ def _load_checked(args: argparse.Namespace):
     from .._numerics.options import SolverOptions
     from .._numerics.times import Times
 
-    scenario = load_scenario(args.scenario)
+    scenario = load_scenario(args.scenario, allow_implausible=args.allow_implausible)
     scenario, overrides = apply_overrides(scenario, args.set)
     if args.n_save < 2:
         raise ScenarioError(f"--n-save must be >= 2, got {args.n_save}")
@@ -303,6 +303,7 @@ def configure_simulate(subparsers) -> None:
         "or "
         "'load.mass_centre=[1, 2.5, 1]' (repeatable); checked before compiling",
     )
+    add_allow_implausible(p)
     p.add_argument("--out", default=None, metavar="DIR", help="output folder (default out/<scenario name>)")
     p.add_argument(
         "--overwrite",
