@@ -260,6 +260,19 @@ def test_each_range_refuses_outside_and_admits_its_ends(paper42, path):
             assert "plausible range" not in str(e), (path, value, str(e))
 
 
+def test_the_documented_table_is_the_metadata(paper42):
+    """docs/scenario-files.md lists every range as the metadata has it (the docs state what is true)."""
+    from pathlib import Path
+
+    text = (Path(__file__).parents[1] / "docs" / "scenario-files.md").read_text()
+    seen, *_ = _all_ranges(paper42)
+    for path, rng in seen.items():
+        m = re.search(r"\| `" + re.escape(path) + r"` \| (\S+) – (\S+)", text)
+        assert m, path
+        low, high = (float(x.replace("−", "-")) for x in m.groups())
+        assert (low, high) == (rng.low, rng.high), (path, low, high, rng)
+
+
 def test_zero_is_a_switch_where_the_range_says_so(paper42):
     """No damping, no slack, no friction, no hoisting: 0 is admitted where it switches a term off."""
     paper42.replace(
@@ -353,7 +366,8 @@ def test_cli_refuses_the_typo_and_marks_the_opted_in_solve(tmp_path):
     code, _, err = _cli([*base, "--out", str(tmp_path / "a"), "--set", "rope.stiffness=1e16"])
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert code == 2 and len(lines) == 1, (code, lines)
-    assert "rope.stiffness" in lines[0] and "--allow-implausible" in lines[0], lines[0]
+    assert "rope.stiffness" in lines[0] and "pass --allow-implausible" in lines[0], lines[0]
+    assert "allow_implausible=True" not in lines[0], lines[0]  # the CLI's words, not Python's
     assert not (tmp_path / "a").exists()
     code, out, _ = _cli(
         [*base, "--out", str(tmp_path / "b"), "--set", "rope.stiffness=1e16", "--allow-implausible"]
