@@ -231,7 +231,9 @@ def simulate(
       strings "elastic" and "rigid" still work, with a `DeprecationWarning`.
     - `options`: `SolverOptions` (solver, step-size controller, adjoint, dt0, max_steps, progress meter).
       The rigid model reads only its tolerances and step budget.
-    - `throw`: raise if the solve fails (max steps, non-finite state); with False, read `Trajectory.status`.
+    - `throw`: raise if the solve fails (max steps, non-finite state, or an energy balance that does not
+      close: `SolveStatus.ENERGY_BALANCE`, the solver's success contradicted by the result); with False,
+      read `Trajectory.status`.
     - `**deprecated`: the earlier keywords `t1`, `ts`, `n_save` (converted to `Times`: the same saved
       times), `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`, `progress`, `fixed_step` (converted
       to `SolverOptions` exactly as before; not together with `options`) and `rope` ("elastic" or

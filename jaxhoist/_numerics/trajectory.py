@@ -55,7 +55,7 @@ class Trajectory(eqx.Module):
 
     @property
     def ok(self):
-        """True where the solve reached t1 with a finite state."""
+        """True where the solve reached t1 with a finite state and a closed energy balance."""
         return self.status == SolveStatus.OK
 
     def energy_residual(self) -> Float[Array, "*batch n_t"]:
