@@ -62,12 +62,21 @@ def require_x64() -> None:
 
 
 class SolveStatus(enum.IntEnum):
-    """Outcome of one solve, stored as an int in `Trajectory.status` (one per member in a scan)."""
+    """Outcome of one solve, stored as an int in `Trajectory.status` (one per member in a scan).
+
+    - `OK`: the solve reached t1 with a finite state and passed the a-posteriori checks.
+    - `MAX_STEPS`, `NONFINITE`, `SOLVER_FAILED`: the solver failed (diffrax's result, a non-finite state).
+    - `ENERGY_BALANCE`: the solver reported success, but the energy balance
+      E(t) - E(0) = W_hoist - D_damping - W_friction does not close: its residual relative to the energy
+      that flowed exceeds `jaxhoist._physics.energy.BALANCE_BOUND` (the solution is wrong, e.g. a rope so
+      stiff that the solver stepped over its force entirely).
+    """
 
     OK = 0
     MAX_STEPS = 1
     NONFINITE = 2
     SOLVER_FAILED = 3
+    ENERGY_BALANCE = 4
 
     @property
     def message(self) -> str:
@@ -79,6 +88,10 @@ _MESSAGES = {
     SolveStatus.MAX_STEPS: "the solver reached max_steps before t1 (raise max_steps, or loosen rtol/atol)",
     SolveStatus.NONFINITE: "the state became non-finite (NaN or inf): check the parameters and tolerances",
     SolveStatus.SOLVER_FAILED: "the solver failed (step size collapsed or an internal error)",
+    SolveStatus.ENERGY_BALANCE: (
+        "the solver reported success but the energy balance does not close (residual above 5 % of the "
+        "energy that flowed): the result is wrong; check implausible parameters, or tighten rtol/atol"
+    ),
 }
 
 

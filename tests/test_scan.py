@@ -161,9 +161,12 @@ def test_layout_independent_and_failing_group_mate_isolated(paper42, solver):
     def batch(**b):
         return jh.BatchOptions(lanes=4, sort=False, **b)
 
-    two = scan(paper42, jh.Points(bad), jh.Times(0.5, n=11), batch=batch(chunk_size=8), **kw)
+    opted = paper42.replace(
+        allow_implausible=True
+    )  # the bad member's values are outside their plausible ranges
+    two = scan(opted, jh.Points(bad), jh.Times(0.5, n=11), batch=batch(chunk_size=8), **kw)
     one = scan(
-        paper42,
+        opted,
         jh.Points(bad),
         jh.Times(0.5, n=11),
         batch=batch(chunk_size=4, devices=jax.devices()[:1]),
@@ -186,7 +189,8 @@ def test_poisoned_members_are_marked_and_the_rest_unchanged(box, clean):
     shares its vmapped lock-step group with a healthy one (μ = 0.4 and 0.6), which must not notice."""
     mus = MUS.copy()
     mus[2], mus[4] = np.nan, 1e4
-    res = scan(box, {MU: mus}, TIMES, **kw(chunk_size=4, sort=False))
+    opted = box.replace(allow_implausible=True)  # μ = 1e4 is outside its plausible range
+    res = scan(opted, {MU: mus}, TIMES, **kw(chunk_size=4, sort=False))
     assert res.status[2] == ScanStatus.INVALID_PARAMETER and res.status[4] == ScanStatus.MAX_STEPS
     assert "friction_coefficient" in res.reason(2) and "must be finite" in res.reason(2)
     assert "max_steps" in res.reason(4)
@@ -206,7 +210,8 @@ def test_a_blown_up_member_is_marked_nonfinite_and_its_group_mate_kept(box):
     k = "boom.stiffness[2]"
     fixed = jh.SolverOptions(diffrax.Bosh3(), diffrax.ConstantStepSize(), dt0=2e-4, max_steps=3000)
     kw = dict(KW, options=fixed, batch=jh.BatchOptions(lanes=2, sort=False))
-    bad = scan(box, jh.Sweep(k, [5e6, 1e14, 6e6, 7e6]), TIMES, **kw)
+    opted = box.replace(allow_implausible=True)  # 1e14 N/m is outside the boom's plausible range
+    bad = scan(opted, jh.Sweep(k, [5e6, 1e14, 6e6, 7e6]), TIMES, **kw)
     ref = scan(box, jh.Sweep(k, [5e6, 5.5e6, 6e6, 7e6]), TIMES, **kw)
     assert list(bad.status) == [ScanStatus.OK, ScanStatus.NONFINITE, ScanStatus.OK, ScanStatus.OK]
     assert "non-finite" in bad.reason(1) and np.all(np.isnan(bad["final_position"][1]))

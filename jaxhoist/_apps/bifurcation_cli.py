@@ -23,7 +23,7 @@ from .bifurcation_locate import locate_bifurcation, locate_jumps
 from .bifurcation_options import SearchOptions
 from .bifurcation_result import fmt_located
 from .bifurcation_trace import trace_boundary
-from .cli_common import claim_out_dir, prepare_out_dir, rerun_scan
+from .cli_common import add_allow_implausible, claim_out_dir, prepare_out_dir, rerun_scan
 from .scan import scan
 
 
@@ -78,6 +78,7 @@ def configure_parser(subparsers) -> None:
     p.add_argument("--atol", type=number_arg, default=None)
     p.add_argument("--max-steps", type=count_arg, default=200_000)
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
+    add_allow_implausible(p)
     p.add_argument(
         "--out",
         default=None,
@@ -143,7 +144,9 @@ def run_cli(args) -> int:
     jax.config.update("jax_enable_x64", True)
     from .._io.scenario import apply_overrides, load_scenario
 
-    scenario, overrides = apply_overrides(load_scenario(args.scenario), args.set)
+    scenario, overrides = apply_overrides(
+        load_scenario(args.scenario, allow_implausible=args.allow_implausible), args.set
+    )
     along_values = _check_cli_args(args, scenario)
     observable = _cli_observable(args.observable)
     # the settings of the --scan and --classify solves (scan's default solver at --rtol/--atol/--max-steps)

@@ -60,6 +60,9 @@ _CLI_WORDS = {
     "use another out_dir, or resume=False to overwrite it": "use another --out, or --no-resume to "
     "recompute and overwrite it",
     "resume=False": "--no-resume",
+    # `jaxhoist._physics.checks.OPT_IN`, the opt-in named by a plausible range's message
+    "pass allow_implausible=True (load_scenario, scenario_from_dict, Scenario, Scenario.replace) or "
+    "--allow-implausible on the command line": "pass --allow-implausible",
 }
 
 

@@ -121,3 +121,13 @@ def rerun_scan(call, out: Path | None, resume: bool, note):
             raise
         note(f"{out} holds another scan's chunks: recomputing there")
         return call(False)
+
+
+def add_allow_implausible(parser) -> None:
+    """The `--allow-implausible` flag of the commands that read a scenario."""
+    parser.add_argument(
+        "--allow-implausible",
+        action="store_true",
+        help="accept scenario values outside their plausible ranges (a typo like rope.stiffness=1e16 is "
+        "refused without it); the solve's own checks, e.g. the energy balance, still apply",
+    )

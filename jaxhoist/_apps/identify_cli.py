@@ -17,7 +17,15 @@ from .._io.measurement import (
 )
 from .._io.scenario import apply_overrides, load_scenario
 from .._numerics.options import SolverOptions
-from .cli_common import _ATOL_HELP, _RTOL_HELP, CLI_SOLVERS, claim_out_dir, default_out, prepare_out_dir
+from .cli_common import (
+    _ATOL_HELP,
+    _RTOL_HELP,
+    CLI_SOLVERS,
+    add_allow_implausible,
+    claim_out_dir,
+    default_out,
+    prepare_out_dir,
+)
 from .identify import identify
 from .identify_options import FitOptions
 from .identify_params import ALIASES
@@ -117,6 +125,7 @@ def configure_parser(subparsers) -> None:
         help="replace a scenario value by dotted path before fitting, e.g. hoist.speed=0.25 (repeatable; "
         "as in `jaxhoist simulate --set`); checked before compiling",
     )
+    add_allow_implausible(p)
     p.add_argument(
         "--out",
         default=None,
@@ -144,7 +153,10 @@ def run(args: argparse.Namespace) -> int:
         if not quiet:
             print(msg, file=sys.stderr, flush=True)
 
-    scenario, overrides = apply_overrides(load_scenario(args.scenario), getattr(args, "set", None) or [])
+    scenario, overrides = apply_overrides(
+        load_scenario(args.scenario, allow_implausible=args.allow_implausible),
+        getattr(args, "set", None) or [],
+    )
     measurement = read_measurement(args.measurement)
     params = [s.strip() for s in args.fit.split(",") if s.strip()]
     noise = _parse_kv(args.noise, "--noise")

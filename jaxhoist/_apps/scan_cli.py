@@ -13,7 +13,14 @@ from .._errors import ScenarioError
 from .._io.validate import parse_values
 from .._numerics.options import SolverOptions
 from .._numerics.times import Times
-from .cli_common import CLI_SOLVERS, claim_out_dir, default_out, prepare_out_dir, rerun_scan
+from .cli_common import (
+    CLI_SOLVERS,
+    add_allow_implausible,
+    claim_out_dir,
+    default_out,
+    prepare_out_dir,
+    rerun_scan,
+)
 from .scan import scan
 from .scan_layout import BatchOptions
 from .sweep import as_sweep
@@ -96,6 +103,7 @@ def configure_parser(subparsers) -> None:
         "--chunk-size", type=int, default=None, help="members per compiled call (default: automatic)"
     )
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
+    add_allow_implausible(p)
     p.add_argument(
         "--out", default=None, help="output folder (chunk files, manifest, scan.npz/json/nc); resumable"
     )
@@ -123,7 +131,9 @@ def run_cli(args) -> int:
         raise ScenarioError(
             f"give one --values per --param (got {len(args.param)} --param and {len(args.values)} --values)"
         )
-    scenario, _ = apply_overrides(load_scenario(args.scenario), args.set)
+    scenario, _ = apply_overrides(
+        load_scenario(args.scenario, allow_implausible=args.allow_implausible), args.set
+    )
     params = {p: parse_values(v, "--values") for p, v in zip(args.param, args.values, strict=True)}
     out = Path(args.out) if args.out else default_out(args.scenario, "scan-")
     prepare_out_dir(out, "scan", overwrite=args.overwrite)
@@ -158,7 +168,8 @@ def run_cli(args) -> int:
     n_fail = int(np.sum(~res.ok))
     t = res.attrs["timings_s"]
     print(f"scan          {scenario.name}: {res.size} members over {', '.join(res.params)} ({res.mode})")
-    print(f"failed        {n_fail}" + (f" (first: {res.failures()[0]})" if n_fail else ""))
+    counts = ", ".join(f"{k}: {v}" for k, v in res.status_counts().items() if k != "ok")
+    print(f"failed        {n_fail}" + (f" ({counts}; first: {res.failures()[0]})" if n_fail else ""))
     print(
         f"steps         median {int(np.median(res.num_accepted_steps))}, "
         f"max {int(res.num_accepted_steps.max())}"

@@ -100,6 +100,12 @@ class ScanResult:
         code = ScanStatus(int(self.status.ravel()[flat]))
         return self.reasons.get(flat, code.message)
 
+    def status_counts(self) -> dict[str, int]:
+        """How many members ended with each `ScanStatus` that occurs, by name (`{"ok": 97,
+        "energy_balance": 2, "max_steps": 1}`): failures of each kind counted apart."""
+        codes, counts = np.unique(self.status.ravel(), return_counts=True)
+        return {ScanStatus(int(c)).name.lower(): int(n) for c, n in zip(codes, counts, strict=True)}
+
     def failures(self) -> list[dict[str, Any]]:
         """One dict per failed member: flat index, parameter values, status name and reason."""
         out = []
@@ -158,6 +164,7 @@ class ScanResult:
                 "shape": list(self.shape),
                 "components": {k: (list(v) if v else None) for k, v in self.components.items()},
                 "reasons": {str(k): v for k, v in self.reasons.items()},
+                "status_counts": self.status_counts(),
                 "units": self.units,
                 "descriptions": self.descriptions,
             },

@@ -11,7 +11,16 @@ from pathlib import Path
 
 from .._io.scenario import preset_names
 from .animate_cli import _animate
-from .cli_common import _ATOL_HELP, _RTOL_HELP, PROG, _enable_x64, claim_out_dir, default_out, prepare_out_dir
+from .cli_common import (
+    _ATOL_HELP,
+    _RTOL_HELP,
+    PROG,
+    _enable_x64,
+    add_allow_implausible,
+    claim_out_dir,
+    default_out,
+    prepare_out_dir,
+)
 from .progress_bars import StepTimer, _bar, _LineSink, _percent_to_bar, _phase_to_bar
 
 # ---------------------------------------------------------------------------------------- simulate
@@ -188,7 +197,7 @@ def _load_checked(args: argparse.Namespace):
     from .._numerics.options import SolverOptions
     from .._numerics.times import Times
 
-    scenario = load_scenario(args.scenario)
+    scenario = load_scenario(args.scenario, allow_implausible=args.allow_implausible)
     scenario, overrides = apply_overrides(scenario, args.set)
     if args.n_save < 2:
         raise ScenarioError(f"--n-save must be >= 2, got {args.n_save}")
@@ -361,6 +370,7 @@ def configure_simulate(subparsers) -> None:
         help="output folder (default out/<preset name or scenario file name>); a folder an earlier "
         "`jaxhoist simulate` wrote is reused, its results replaced",
     )
+    add_allow_implausible(p)
     p.add_argument(
         "--overwrite",
         action="store_true",

@@ -60,7 +60,7 @@ TRAJECTORY_ARRAYS: dict[str, tuple[str, str]] = {
     "damping_loss": ("J", "energy lost in the ground, rope and boom dampers, accumulated"),
     "friction_work": ("J", "work taken out by friction (incl. bristle energy), accumulated"),
     "energy_residual": ("J", "E(t) - E(0) - [W_hoist - D_damping - W_friction](t); zero up to solver error"),
-    "status": ("-", "SolveStatus code: 0 ok, 1 max_steps, 2 nonfinite, 3 solver failed"),
+    "status": ("-", "SolveStatus code: 0 ok, 1 max_steps, 2 nonfinite, 3 solver failed, 4 energy_balance"),
     "num_accepted_steps": ("-", "accepted solver steps"),
     "num_rejected_steps": ("-", "rejected solver steps"),
 }

@@ -27,6 +27,7 @@ from typing import Any
 
 from .._errors import ScenarioError, require_x64
 from .._physics import params as P
+from .._physics.checks import OPT_IN
 from .._physics.paths import get_leaf
 from .validate import brief, parse_list, parse_number, read_text
 
@@ -192,8 +193,23 @@ def _law(reader: _Reader, data: dict, table: str, laws, default: str | None) -> 
     return law
 
 
-def scenario_from_dict(data: dict, source: str = "<dict>") -> P.Scenario:
-    """Build a checked `Scenario` from the plain dict of a scenario file."""
+#: The plausible range of `load.density` [kg/m^3] (not a leaf: the mass ρabc is, with a range of its own).
+DENSITY_RANGE = (1e-1, 1e5)
+
+
+def scenario_from_dict(data: dict, source: str = "<dict>", *, allow_implausible: bool = False) -> P.Scenario:
+    """Build a checked `Scenario` from the plain dict of a scenario file.
+
+    **Arguments**
+    - `data`: the dict (tables `load`, `foundation`, `rope`, `hoist`, `boom`; see `SCHEMA`).
+    - `source`: where it came from, for the messages.
+    - `allow_implausible`: accept values outside the parameters' plausible ranges (see
+      `Scenario.allow_implausible`); the solve's own checks still apply.
+
+    **Returns** the `Scenario`.
+
+    **Raises** `ScenarioError` naming the source, table and field.
+    """
     require_x64()
     r = _Reader(source)
     tables = ("load", "foundation", "rope", "hoist", "boom")
@@ -209,6 +225,15 @@ def scenario_from_dict(data: dict, source: str = "<dict>") -> P.Scenario:
 
     try:
         ld = r.table(data["load"], "load")
+        rho = ld.get("density")
+        lo, hi = DENSITY_RANGE
+        implausible = rho is not None and math.isfinite(rho) and rho > 0 and not lo <= rho <= hi
+        if implausible and not allow_implausible:
+            raise r.error(
+                "load",
+                f"load.density = {rho:g} kg/m^3 is outside its plausible range {lo:g} to {hi:g} kg/m^3 "
+                f"(a hollow container ~100, steel 7850, osmium 22600); {OPT_IN}",
+            )
         load = P.Load(
             ld["size"],
             ld.get("mass"),
@@ -261,6 +286,7 @@ def scenario_from_dict(data: dict, source: str = "<dict>") -> P.Scenario:
             name=top.get("name", Path(source).stem),
             t1=t1,
             description=top.get("description", ""),
+            allow_implausible=allow_implausible,
         )
     except ScenarioError as e:
         msg = str(e)
@@ -315,9 +341,12 @@ def apply_overrides(scenario: P.Scenario, items) -> tuple[P.Scenario, dict]:
     return scenario, overrides
 
 
-def load_scenario(name_or_path: str | Path) -> P.Scenario:
+def load_scenario(name_or_path: str | Path, *, allow_implausible: bool = False) -> P.Scenario:
     """A `Scenario` from a bundled preset name (`paper-2.3`, `paper-4.1`, `paper-4.2`, `paper-4.3`) or a
     TOML path.
+
+    With `allow_implausible`, values outside the parameters' plausible ranges are accepted (see
+    `Scenario.allow_implausible`; the solve's own checks still apply); without it they are refused.
 
     **Raises** `ScenarioError` naming the file and field for any invalid content (a folder, non-UTF-8
     bytes, invalid TOML, nesting too deep, integers too large for a float, unknown or missing fields, bad
@@ -332,7 +361,7 @@ def load_scenario(name_or_path: str | Path) -> P.Scenario:
         raise ScenarioError(f"{source}: not valid TOML: {e}") from None
     except ValueError as e:  # an integer of more than 4300 digits (Python's int-from-text limit)
         raise ScenarioError(f"{source}: {_huge_integer(text) or e}") from None
-    return scenario_from_dict(data, source)
+    return scenario_from_dict(data, source, allow_implausible=allow_implausible)
 
 
 def _huge_integer(text: str) -> str | None:

@@ -12,8 +12,9 @@ or the file, before anything is compiled or solved; none imports JAX transformat
   an existing result folder without `--overwrite`), and `clean_outputs` removes a previous run's files.
 - Parameter paths (`check_param_path`), counts (`check_count`), observables (`check_scalar_observable`) and
   (the agreement of `t1` with `ts` is checked with the time grid, `numerics.solve.check_times`).
-- A scenario's own values, including the plausibility check of physically absurd but finite values, are
-  checked by `Scenario.check()` (`jaxhoist._physics.params`); `check_scenario` is the same call.
+- A scenario's own values, including each parameter's plausible range (refused outside unless the scenario
+  opts in with `allow_implausible`), are checked by `Scenario.check()` (`jaxhoist._physics.params`);
+  `check_scenario` is the same call.
 """
 
 from __future__ import annotations
@@ -411,7 +412,7 @@ def check_scalar_observable(observable, flag: str = "--observable") -> None:
 
 def check_scenario(scenario: P.Scenario) -> P.Scenario:
     """The one validation of a scenario's values, shared by the CLI and the Python API: `scenario.check()`
-    (ranges, shapes, dtypes, the box geometry and the plausibility check of absurd but finite values).
+    (hard limits, shapes, dtypes, the box geometry and the plausible ranges, unless `allow_implausible`).
 
     **Returns** `scenario`. **Raises** `ScenarioError` naming the first invalid field.
     """

@@ -26,23 +26,25 @@ from .solve import solve
 
 
 class ScanStatus(enum.IntEnum):
-    """Outcome of one member of a scan (0-3 are the `SolveStatus` codes)."""
+    """Outcome of one member of a scan (0-4 are the `SolveStatus` codes, `ENERGY_BALANCE` included: a
+    member whose energy balance does not close is a failed member, its values NaN like any other's)."""
 
     OK = 0
     MAX_STEPS = 1
     NONFINITE = 2
     SOLVER_FAILED = 3
-    INVALID_PARAMETER = 4
-    NAN_OBSERVABLE = 5
+    ENERGY_BALANCE = 4
+    INVALID_PARAMETER = 5
+    NAN_OBSERVABLE = 6
 
     @property
     def message(self) -> str:
-        if self.value < 4:
+        if self.value in SolveStatus._value2member_map_:
             return SolveStatus(self.value).message
         return {
-            4: "invalid parameter values (not solved)",
-            5: "the solve succeeded but an observable is NaN",
-        }[self.value]
+            ScanStatus.INVALID_PARAMETER: "invalid parameter values (not solved)",
+            ScanStatus.NAN_OBSERVABLE: "the solve succeeded but an observable is NaN",
+        }[self]
 
 
 HISTORY_UNITS = {

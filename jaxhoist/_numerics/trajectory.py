@@ -4,11 +4,12 @@ rigid-ground model's `RigidTrajectory` is a subclass with its impact losses and 
 from __future__ import annotations
 
 import equinox as eqx
+import jax.numpy as jnp
 from jaxtyping import Array, Float, Int
 
 from .._errors import SolveStatus
 from .._physics.elastic import State
-from .._physics.energy import Energy
+from .._physics.energy import Energy, relative_balance_residual
 
 
 class Trajectory(eqx.Module):
@@ -24,7 +25,8 @@ class Trajectory(eqx.Module):
     - `tip_position`: boom tip A [m].
     - `energy`: `Energy` terms [J]; `hoist_work`, `damping_loss`, `friction_work`: accumulated [J].
     - `states`: the raw `State` at each saved time.
-    - `status`: a `SolveStatus` code (0 = ok); `num_accepted_steps`, `num_rejected_steps`.
+    - `status`: a `SolveStatus` code (0 = ok; `ENERGY_BALANCE` where the solver succeeded but the energy
+      balance does not close, see `energy_check`); `num_accepted_steps`, `num_rejected_steps`.
 
     The rigid-ground model's `RigidTrajectory` is a `Trajectory` with the same fields and three more
     (`impact_loss`, `phase_index` and the phase log `phases`), so code written for a `Trajectory` (plots,
@@ -53,7 +55,7 @@ class Trajectory(eqx.Module):
 
     @property
     def ok(self):
-        """True where the solve reached t1 with a finite state."""
+        """True where the solve reached t1 with a finite state and a closed energy balance."""
         return self.status == SolveStatus.OK
 
     def energy_residual(self) -> Float[Array, "*batch n_t"]:
@@ -61,3 +63,10 @@ class Trajectory(eqx.Module):
         mech = self.energy.mechanical
         supplied = self.hoist_work - self.damping_loss - self.friction_work
         return (mech - mech[..., :1]) - (supplied - supplied[..., :1])
+
+    def energy_check(self) -> Float[Array, "*batch"]:
+        """The energy balance's largest residual relative to the energy that flowed [-]
+        (`jaxhoist._physics.energy.relative_balance_residual`): what the solve compares with
+        `BALANCE_BOUND` to set `SolveStatus.ENERGY_BALANCE`."""
+        terms = (self.energy.mechanical, self.hoist_work, self.damping_loss, self.friction_work)
+        return jnp.asarray(relative_balance_residual(*terms))

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._typing import Scalar
-from .checks import _check, _f64
+from .checks import _check, _f64, plausible
 from .paths import unit
 
 # ----------------------------------------------------------------------------------------- friction
@@ -50,7 +50,10 @@ class RegularisedCoulomb(AbstractFrictionLaw):
       force and its gradient finite at v = 0.
     """
 
-    regularisation_velocity: Scalar = eqx.field(metadata=unit("m/s"))
+    regularisation_velocity: Scalar = eqx.field(
+        metadata=unit("m/s")
+        | plausible(1e-7, 0.1, "beyond 0.1 m/s friction is viscous at working speeds; below 1e-7 too stiff")
+    )
     state_size: ClassVar[int] = 0
 
     def __init__(self, regularisation_velocity=1e-3):
@@ -93,9 +96,13 @@ class BristleFriction(AbstractFrictionLaw):
       relaxes to zero [s].
     """
 
-    deflection: Scalar = eqx.field(metadata=unit("m"))
+    deflection: Scalar = eqx.field(
+        metadata=unit("m") | plausible(1e-7, 0.1, "a contact's elastic pre-sliding: micrometres to mm")
+    )
     breakaway_ratio: Scalar = eqx.field(metadata=unit("-"))
-    relaxation_time: Scalar = eqx.field(metadata=unit("s"))
+    relaxation_time: Scalar = eqx.field(
+        metadata=unit("s") | plausible(1e-5, 100.0, "a lifted corner's bristle relaxes within the lift")
+    )
     state_size: ClassVar[int] = 2
 
     def __init__(self, deflection=1e-3, breakaway_ratio=0.5, relaxation_time=0.01):

@@ -12,7 +12,7 @@ import numpy as np
 
 from .._errors import ScenarioError
 from .._typing import Scalar
-from .checks import _check, _concrete, _f64, _show
+from .checks import _check, _concrete, _f64, _show, plausible
 from .paths import unit
 
 
@@ -37,7 +37,7 @@ class ConstantSpeedHoist(AbstractHoistLaw):
     - `speed`: v_l [m/s].
     """
 
-    speed: Scalar = eqx.field(metadata=unit("m/s"))
+    speed: Scalar = eqx.field(metadata=unit("m/s") | plausible(0.0, 20.0, "crane hoists run at up to ~3 m/s"))
 
     def __init__(self, speed):
         self.speed = _f64(speed)
@@ -61,9 +61,13 @@ class RampedHoist(AbstractHoistLaw):
     - `travel`: total rope taken in [m] (`inf`: never stops); needs travel >= v_l ramp_time.
     """
 
-    speed: Scalar = eqx.field(metadata=unit("m/s"))
-    ramp_time: Scalar = eqx.field(metadata=unit("s"))
-    travel: Scalar = eqx.field(metadata=unit("m"))
+    speed: Scalar = eqx.field(metadata=unit("m/s") | plausible(0.0, 20.0, "crane hoists run at up to ~3 m/s"))
+    ramp_time: Scalar = eqx.field(
+        metadata=unit("s") | plausible(0.0, 1e3, "hoists reach their speed in seconds")
+    )
+    travel: Scalar = eqx.field(
+        metadata=unit("m") | plausible(0.0, 1e4, "no hoist holds 10 km of rope", infinite=True)
+    )
 
     def __init__(self, speed, ramp_time=0.0, travel=float("inf")):
         self.speed = _f64(speed)

@@ -11,6 +11,7 @@ Host-side checks (`check()`) run on concrete values only, so the modules stay tr
 
 from __future__ import annotations
 
+import copy
 import dataclasses
 
 import equinox as eqx
@@ -19,8 +20,7 @@ import numpy as np
 
 from .._errors import ScenarioError, require_x64
 from .._typing import Rot33, Scalar, Vec3
-from .checks import PLAUSIBLE_MAGNITUDE as PLAUSIBLE_MAGNITUDE
-from .checks import _check, _concrete, _f64, _show
+from .checks import _check, _concrete, _f64, _show, check_plausible, plausible
 from .friction import AbstractFrictionLaw as AbstractFrictionLaw
 from .friction import BristleFriction as BristleFriction
 from .friction import RegularisedCoulomb as RegularisedCoulomb
@@ -52,8 +52,14 @@ class Load(eqx.Module):
       carried to C by the parallel-axis theorem (our choice; give J explicitly for a measured load).
     """
 
-    size: Vec3 = eqx.field(metadata=unit("m"))
-    mass: Scalar = eqx.field(metadata=unit("kg"))
+    size: Vec3 = eqx.field(
+        metadata=unit("m")
+        | plausible(1e-2, 1e3, "a box from 1 cm to 1 km: the largest loads lifted measure ~200 m")
+    )
+    mass: Scalar = eqx.field(
+        metadata=unit("kg")
+        | plausible(1e-2, 1e8, "the heaviest crane lifts are ~2e7 kg; a load under 10 g is no crane's")
+    )
     mass_centre: Vec3 = eqx.field(metadata=unit("m"))
     inertia: Rot33 | None = eqx.field(metadata=unit("kg m²"))
 
@@ -67,10 +73,10 @@ class Load(eqx.Module):
             _check("load.density", _f64(density), unit="kg/m^3", low=0.0, low_open=True, symbol="ρ")
             mass = _f64(density) * size[0] * size[1] * size[2]
             m = _concrete(mass)
-            if m is not None and (not np.all(np.isfinite(m)) or np.any(m > PLAUSIBLE_MAGNITUDE[1])):
+            if m is not None and not np.all(np.isfinite(m)):
                 raise ScenarioError(
                     f"load.density (ρ) = {_show(np.asarray(density))} kg/m^3 is not plausible: the mass "
-                    f"ρabc = {_show(m)} kg is beyond {PLAUSIBLE_MAGNITUDE[1]:g} kg"
+                    f"ρabc = {_show(m)} kg overflows"
                 )
         self.size = size
         self.mass = _f64(mass)
@@ -128,11 +134,21 @@ class Foundation(eqx.Module):
     ground pushes, never pulls, and the force is continuous at touch-down.
     """
 
-    stiffness: Scalar = eqx.field(metadata=unit("N/m"))
-    damping: Scalar = eqx.field(metadata=unit("N s/m"))
-    friction_coefficient: Scalar = eqx.field(metadata=unit("-"))
+    stiffness: Scalar = eqx.field(
+        metadata=unit("N/m")
+        | plausible(1e2, 1e13, "per corner: soft soil ~1e6, concrete ~1e10; beyond 1e13 the ground is rigid")
+    )
+    damping: Scalar = eqx.field(
+        metadata=unit("N s/m")
+        | plausible(0.0, 1e11, "beyond 1e11 the ground is overdamped for any load up to 1e8 kg")
+    )
+    friction_coefficient: Scalar = eqx.field(
+        metadata=unit("-") | plausible(0.0, 3.0, "dry friction of real surfaces is below ~1.5")
+    )
     friction: AbstractFrictionLaw
-    damping_onset: Scalar = eqx.field(metadata=unit("m"))
+    damping_onset: Scalar = eqx.field(
+        metadata=unit("m") | plausible(0.0, 0.1, "a penetration of millimetres; 0 gives the paper's (3.1)")
+    )
 
     def __init__(self, stiffness, damping, friction_coefficient, friction=None, damping_onset=1e-4):
         self.stiffness = _f64(stiffness)
@@ -162,11 +178,19 @@ class Rope(eqx.Module):
     S = max(0, c_l δ + b_l min(δ/δ_0, 1) dδ/dt) for stretch δ = |AB| - l(t) > 0, else 0.
     """
 
-    stiffness: Scalar = eqx.field(metadata=unit("N/m"))
-    damping: Scalar = eqx.field(metadata=unit("N s/m"))
+    stiffness: Scalar = eqx.field(
+        metadata=unit("N/m")
+        | plausible(1e3, 1e12, "EA/l of steel or fibre hoist ropes and their falls: ~1e5 to 1e9")
+    )
+    damping: Scalar = eqx.field(
+        metadata=unit("N s/m")
+        | plausible(0.0, 1e10, "beyond 1e10 the rope is overdamped for any load up to 1e8 kg")
+    )
     attachment: Vec3 = eqx.field(metadata=unit("m"))
-    slack: Scalar = eqx.field(metadata=unit("m"))
-    damping_onset: Scalar = eqx.field(metadata=unit("m"))
+    slack: Scalar = eqx.field(metadata=unit("m") | plausible(0.0, 100.0, "more than the rope's length"))
+    damping_onset: Scalar = eqx.field(
+        metadata=unit("m") | plausible(0.0, 0.1, "a stretch of millimetres; 0 gives (2.14) as is")
+    )
 
     def __init__(self, stiffness, damping, attachment, slack=0.0, damping_onset=1e-4):
         self.stiffness = _f64(stiffness)
@@ -192,10 +216,20 @@ class Boom(eqx.Module):
     - `damping`: (c_X, c_Y, c_Z), equivalent boom damping [N s/m] (our addition; 0 is the paper's model).
     """
 
-    tip_position: Vec3 = eqx.field(metadata=unit("m"))
-    tip_mass: Scalar = eqx.field(metadata=unit("kg"))
-    stiffness: Vec3 = eqx.field(metadata=unit("N/m"))
-    damping: Vec3 = eqx.field(metadata=unit("N s/m"))
+    tip_position: Vec3 = eqx.field(
+        metadata=unit("m") | plausible(-1e4, 1e4, "the tallest cranes reach ~250 m")
+    )
+    tip_mass: Scalar = eqx.field(
+        metadata=unit("kg")
+        | plausible(1e-3, 1e7, "hook block and boom share: kg to t; under 1 g the tip's sqrt(k/m_0) explodes")
+    )
+    stiffness: Vec3 = eqx.field(
+        metadata=unit("N/m") | plausible(1e3, 1e12, "crane booms: ~1e5 to 1e9; beyond 1e12 the boom is rigid")
+    )
+    damping: Vec3 = eqx.field(
+        metadata=unit("N s/m")
+        | plausible(0.0, 1e10, "beyond 1e10 the boom is overdamped for any tip mass up to 1e7 kg")
+    )
 
     def __init__(self, tip_position, tip_mass, stiffness, damping=(0.0, 0.0, 0.0)):
         self.tip_position = _f64(tip_position)
@@ -229,6 +263,10 @@ class Scenario(eqx.Module):
     - `name`: a label (static).
     - `t1`: default end time of a simulation [s] (static).
     - `description`: free text (static).
+    - `allow_implausible`: accept values outside the parameters' plausible ranges (static, default False;
+      each field's range and its reason are in its metadata, `jaxhoist._physics.checks.plausible`). Without
+      it, `check()` refuses such a value (a typo like 1e16 for 1e6) before compiling; with it, the value
+      is solved, and the solve's own checks (`SolveStatus`) still mark a result that is wrong.
     """
 
     load: Load
@@ -236,13 +274,26 @@ class Scenario(eqx.Module):
     rope: Rope
     hoist: AbstractHoistLaw
     boom: Boom
-    gravity: Scalar = eqx.field(metadata=unit("m/s²"))
+    gravity: Scalar = eqx.field(
+        metadata=unit("m/s²") | plausible(0.1, 100.0, "the Moon 1.6, the Earth 9.81, Jupiter 24.8")
+    )
     name: str = eqx.field(static=True)
     t1: float = eqx.field(static=True)
     description: str = eqx.field(static=True)
+    allow_implausible: bool = eqx.field(static=True)
 
     def __init__(
-        self, load, foundation, rope, hoist, boom, gravity=9.81, name="custom", t1=10.0, description=""
+        self,
+        load,
+        foundation,
+        rope,
+        hoist,
+        boom,
+        gravity=9.81,
+        name="custom",
+        t1=10.0,
+        description="",
+        allow_implausible=False,
     ):
         require_x64()
         self.load = load
@@ -254,6 +305,7 @@ class Scenario(eqx.Module):
         self.name = name
         self.t1 = float(t1)
         self.description = str(description)
+        self.allow_implausible = bool(allow_implausible)
 
     def __check_init__(self):
         self.check()
@@ -261,11 +313,11 @@ class Scenario(eqx.Module):
     def check(self) -> None:
         """Raise `ScenarioError` naming the first invalid field (concrete leaves only).
 
-        Besides each field's range, shape and dtype, the box geometry (C inside the box, B on or in it) and a
-        plausibility check of physically absurd but finite values: every nonzero parameter within
-        `PLAUSIBLE_MAGNITUDE` (1e-100 to 1e100 in SI units), and the static sinking of the ground under the
-        load's weight, m g / (4 k), less than the box height c (else the initial static state is absurd:
-        the box would rest below the ground).
+        Besides each field's hard limits, shape and dtype, the box geometry (C inside the box, B on or in
+        it), the plausible range of every parameter (its field's `plausible` metadata: a value outside is
+        refused unless `allow_implausible`), and the static sinking of the ground under the load's weight,
+        m g / (4 k), less than the box height c (always: else the initial static state is absurd, the box
+        would rest below the ground).
         """
         self.load.check()
         self.foundation.check()
@@ -281,6 +333,8 @@ class Scenario(eqx.Module):
                 f"rope.attachment (B) must lie on or inside the box 0 <= B <= size = {_show(s)} m, "
                 f"got {_show(b)} m"
             )
+        if not self.allow_implausible:
+            check_plausible(self)
         m, g, k = (_concrete(x) for x in (self.load.mass, self.gravity, self.foundation.stiffness))
         if s is not None and m is not None and g is not None and k is not None:
             with np.errstate(all="ignore"):
@@ -298,13 +352,17 @@ class Scenario(eqx.Module):
         """This scenario with its static labels (`name`, `t1`, `description`) set to fixed values: what a
         compiled solve is given, so that scenarios that differ only in their labels (the presets, a copy
         renamed in a notebook) share one compiled program instead of compiling again. No solve reads the
-        labels (the saved times are resolved from `t1` before compiling)."""
-        return dataclasses.replace(self, name="scenario", t1=1.0, description="")
+        labels (the saved times are resolved from `t1` before compiling). `allow_implausible` is set too:
+        it is a setting of the host-side check, which the caller has run on the scenario already, so an
+        opted-in scenario shares the compiled program of the others."""
+        return dataclasses.replace(self, name="scenario", t1=1.0, description="", allow_implausible=True)
 
     def replace(self, **leaves) -> Scenario:
         """A copy with leaves replaced by dotted path.
 
         **Arguments**
+        - `allow_implausible` (keyword, not a leaf): set the copy's `allow_implausible` (default: keep
+          this scenario's).
         - `leaves`: `{dotted path: value}`, e.g. `replace(**{"foundation.friction_coefficient": 0.3})`;
           a value has the leaf's shape or broadcasts to it (a number for a 3-vector), in the leaf's unit.
 
@@ -314,4 +372,9 @@ class Scenario(eqx.Module):
         field's name), a static setting (`t1`, `name`), a value that is not numeric or whose shape does
         not fit the leaf.
         """
-        return replace_leaves(self, leaves)
+        allow_implausible = leaves.pop("allow_implausible", None)
+        new = replace_leaves(self, leaves)
+        if allow_implausible is not None and bool(allow_implausible) != new.allow_implausible:
+            new = copy.copy(new)  # a static field, set without running the checks (like the leaves)
+            object.__setattr__(new, "allow_implausible", bool(allow_implausible))
+        return new
