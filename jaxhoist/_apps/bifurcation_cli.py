@@ -20,7 +20,7 @@ from .._physics.paths import set_param
 from .bifurcation_eval import resolve_one
 from .bifurcation_jumps import find_crossings, find_jumps
 from .bifurcation_locate import locate_bifurcation, locate_jumps
-from .bifurcation_options import SearchOptions
+from .bifurcation_options import SearchOptions, as_method
 from .bifurcation_trace import trace_boundary
 from .scan import scan
 
@@ -181,7 +181,7 @@ def _locator_settings(args) -> dict:
     """The keywords of `locate_bifurcation` from the flags: `SearchOptions(--method, --tol)`, Tsit5 with
     --rtol/--atol/--max-steps, --t1 and --n-save."""
     return dict(
-        search=SearchOptions(args.method, args.tol),
+        search=SearchOptions(as_method(args.method), args.tol),
         options=SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps),
         times=Times(args.t1, n=args.n_save),
     )

@@ -32,8 +32,7 @@ import numpy as np
 
 from .._errors import ScenarioError, require_x64
 from .._numerics.options import SolverOptions
-from .._numerics.times import TimesLike
-from .._numerics.times import convert_legacy as convert_legacy_times
+from .._numerics.times import TimesLike, as_times
 from .._physics.params import Scenario
 from .._physics.paths import check_path, param_unit, set_param
 from .bifurcation_eval import Evaluator, Problem, indicator, level_from_ends, resolve_one
@@ -58,7 +57,6 @@ def locate_bifurcation(
     options: SolverOptions | None = None,
     times: TimesLike = None,
     progress: Callable[[dict], None] | None = None,
-    **deprecated,
 ) -> Bifurcation:
     """Refine a change of character of `observable` in `param` to a bracket no wider than `search.tol`.
 
@@ -86,18 +84,14 @@ def locate_bifurcation(
       for multisection), `value` (the observable there), `indicator` (g), `kind` ("end", "newton",
       "bisect", "multisection"), `bracket` (lo, hi) after the update, `width`, `tol`, `n_solves`,
       `elapsed` [s]. Default None: silent.
-    - `**deprecated`: the keywords of earlier versions, `t1`, `ts`, `n_save` (into `times`), `tol`,
-      `method` (a name), `max_solves`, `points_per_round`, `lanes` (into `search`) and `solver`, `rtol`,
-      `atol`, `dt0`, `max_steps` (into `options`, with Tsit5 when no solver is given): the same result,
-      with a `DeprecationWarning`.
 
     **Returns** a `Bifurcation`.
 
     **Raises** `ScenarioError` on invalid input (before compiling); `BifurcationError` if g has the same
     sign at both ends, or a solve fails.
     """
-    times, moved_times = convert_legacy_times("locate_bifurcation", times, deprecated)
-    search, options = settings("locate_bifurcation", search, options, deprecated, moved=moved_times)
+    times = as_times(times)
+    search, options = settings(search, options)
     require_x64()
     wall0 = time.perf_counter()
     if not isinstance(scenario, Scenario):

@@ -1,21 +1,17 @@
 """How `locate_bifurcation` and `trace_boundary` search, as objects: the refinement method (`Newton`,
 `Bisection`, `Multisection`), the tolerance and solve budget, and the bracketing of the continuation
-corrector (`SearchOptions`); and the conversion of the keywords of earlier versions (`tol=`, `method=`,
-`rtol=`, ...), which still work with a `DeprecationWarning`."""
+corrector (`SearchOptions`), and the locator's default solver settings."""
 
 from __future__ import annotations
 
-import sys
-import warnings
 from typing import ClassVar
 
 import diffrax
 import equinox as eqx
 import numpy as np
 
-from .._deprecated import _caller
 from .._errors import ScenarioError
-from .._numerics.options import DEFAULT_MAX_STEPS, SolverOptions
+from .._numerics.options import SolverOptions
 
 
 class AbstractSearchMethod(eqx.Module):
@@ -59,8 +55,8 @@ _METHODS = {"newton": Newton, "bisection": Bisection, "multisection": Multisecti
 
 
 def as_method(method) -> AbstractSearchMethod:
-    """The method object for `method` (an `AbstractSearchMethod`, or its name "newton", "bisection",
-    "multisection")."""
+    """The method object for the command line's `--method` name ("newton", "bisection", "multisection"),
+    or an `AbstractSearchMethod` as it is."""
     if isinstance(method, AbstractSearchMethod):
         return method
     if isinstance(method, str) and method in _METHODS:
@@ -71,8 +67,7 @@ def as_method(method) -> AbstractSearchMethod:
 class SearchOptions(eqx.Module):
     """Settings of the bifurcation search (host-side numbers; nothing here is traced).
 
-    - `method`: `Newton()` (default), `Bisection()` or `Multisection(points_per_round, lanes)`; the names
-      "newton", "bisection", "multisection" are accepted too.
+    - `method`: `Newton()` (default), `Bisection()` or `Multisection(points_per_round, lanes)`.
     - `tol`: the final bracket width [unit of the located parameter], > 0.
     - `max_solves`: give up (converged=False) after this many solves.
     - `initial_half_width`: `trace_boundary` only: the corrector's half-width at the second point [unit of
@@ -94,7 +89,7 @@ class SearchOptions(eqx.Module):
 
     def __init__(
         self,
-        method: AbstractSearchMethod | str = "newton",
+        method: AbstractSearchMethod = Newton(),
         tol: float = 1e-6,
         max_solves: int = 200,
         *,
@@ -102,7 +97,9 @@ class SearchOptions(eqx.Module):
         max_expansions: int = 8,
         min_jump_fraction: float = 0.1,
     ):
-        self.method = as_method(method)
+        if not isinstance(method, AbstractSearchMethod):
+            raise ScenarioError(f"method must be Newton(), Bisection() or Multisection(...), got {method!r}")
+        self.method = method
         if not (np.isfinite(tol) and tol > 0):
             raise ScenarioError(f"tol must be > 0, got {tol}")
         self.tol = tol
@@ -124,71 +121,18 @@ def default_solver_options() -> SolverOptions:
     return SolverOptions(solver=diffrax.Tsit5())
 
 
-_SEARCH_KW = ("tol", "method", "max_solves", "points_per_round", "lanes")
-_TRACE_KW = ("initial_half_width", "max_expansions", "min_jump_fraction")
-_SOLVER_KW = ("solver", "rtol", "atol", "dt0", "max_steps")
-
-
-def _search_from_keywords(kw: dict, trace: bool) -> SearchOptions:
-    method = kw.get("method", "newton")
-    if method == "multisection":
-        method = Multisection(kw.get("points_per_round", 16), kw.get("lanes", 16))
-    extra = {k: kw[k] for k in _TRACE_KW if k in kw} if trace else {}
-    return SearchOptions(method, kw.get("tol", 1e-6), kw.get("max_solves", 200), **extra)
-
-
-def _options_from_keywords(kw: dict) -> SolverOptions:
-    solver = kw.get("solver")
-    return SolverOptions(
-        solver=diffrax.Tsit5() if solver is None else solver,
-        rtol=kw.get("rtol"),
-        atol=kw.get("atol"),
-        dt0=kw.get("dt0"),
-        max_steps=kw.get("max_steps", DEFAULT_MAX_STEPS),
-    )
-
-
 def settings(
-    who: str,
-    search: SearchOptions | None,
-    options: SolverOptions | None,
-    legacy: dict,
-    trace: bool = False,
-    moved: dict[str, str] | None = None,
+    search: SearchOptions | None, options: SolverOptions | None
 ) -> tuple[SearchOptions, SolverOptions]:
-    """(search, options) for `who`, from the objects or, with one `DeprecationWarning`, from the keywords of
-    earlier versions in `legacy` (mapped exactly: the same `SolverOptions`, Tsit5 when no solver is given);
-    the warning also names `moved` (the saved times' earlier keywords, converted by the caller).
+    """(search, options) with the defaults `SearchOptions()` and `default_solver_options()` filled in.
 
-    **Raises** `TypeError` for an unknown keyword; `ScenarioError` when a keyword comes with the object it
-    moved into."""
-    search_kw = _SEARCH_KW + (_TRACE_KW if trace else ())
-    unknown = sorted(set(legacy) - set(search_kw) - set(_SOLVER_KW))
-    if unknown:
-        raise TypeError(f"{who}() got unexpected keyword argument(s): {', '.join(unknown)}")
-    moved_search = [k for k in search_kw if k in legacy]
-    moved_solver = [k for k in _SOLVER_KW if k in legacy]
-    moved_times = list(moved or {})
-    if moved_search and search is not None:
-        raise ScenarioError(f"{who}: give either search= or {', '.join(moved_search)}, not both")
-    if moved_solver and options is not None:
-        raise ScenarioError(f"{who}: give either options= or {', '.join(moved_solver)}, not both")
-    if legacy or moved_times:
-        new = []
-        if moved_times:
-            new.append(f"times=Times(t1, n=..., ts=...) for {', '.join(moved_times)}")
-        if moved_search:
-            new.append(f"search=SearchOptions(...) for {', '.join(moved_search)}")
-        if moved_solver:
-            new.append(f"options=SolverOptions(diffrax.Tsit5(), ...) for {', '.join(moved_solver)}")
-        warnings.warn(
-            f"{who}: the keywords {', '.join(moved_times + moved_search + moved_solver)} are deprecated; "
-            "pass " + " and ".join(new) + " (jaxhoist.Times, jaxhoist.SearchOptions, jaxhoist.SolverOptions)",
-            DeprecationWarning,
-            stacklevel=_caller(sys._getframe(0), 3)[1],  # who called `who`, past run-time type checkers
-        )
+    **Raises** `ScenarioError` for a `search` or `options` of the wrong type."""
     if search is None:
-        search = _search_from_keywords(legacy, trace)
+        search = SearchOptions()
+    elif not isinstance(search, SearchOptions):
+        raise ScenarioError(f"search must be a jaxhoist.SearchOptions, got {type(search).__name__}")
     if options is None:
-        options = _options_from_keywords(legacy) if moved_solver else default_solver_options()
+        options = default_solver_options()
+    elif not isinstance(options, SolverOptions):
+        raise ScenarioError(f"options must be a jaxhoist.SolverOptions, got {type(options).__name__}")
     return search, options

@@ -10,8 +10,7 @@ import numpy as np
 
 from .._errors import ScenarioError
 from .._numerics.options import SolverOptions
-from .._numerics.times import TimesLike
-from .._numerics.times import convert_legacy as convert_legacy_times
+from .._numerics.times import TimesLike, as_times
 from .._physics.params import Scenario
 from .._physics.paths import check_path, set_param
 from .bifurcation_eval import resolve_one
@@ -33,7 +32,6 @@ def trace_boundary(
     options: SolverOptions | None = None,
     times: TimesLike = None,
     progress: Callable[[dict], None] | None = None,
-    **deprecated,
 ) -> Boundary:
     """Follow the boundary p*(q) in the (p, q) plane by continuation, not a dense grid.
 
@@ -57,14 +55,11 @@ def trace_boundary(
       `locate_bifurcation` (default 201 equally spaced times from 0 to the scenario's t1).
     - `progress` (default None: silent) receives every report of the inner `locate_bifurcation` calls, with
       `point` (index k of q), `n_points` and `along_value` (q) added.
-    - The keywords of earlier versions (`t1`, `ts`, `n_save`; `tol`, `method`, `initial_half_width`,
-      `max_expansions`, `min_jump_fraction`, `max_solves`, `points_per_round`, `lanes`; `solver`, `rtol`,
-      `atol`, `dt0`, `max_steps`) still work, with a `DeprecationWarning`.
 
     **Returns** a `Boundary`.
     """
-    times, moved_times = convert_legacy_times("trace_boundary", times, deprecated)
-    search, options = settings("trace_boundary", search, options, deprecated, trace=True, moved=moved_times)
+    times = as_times(times)
+    search, options = settings(search, options)
     qs = np.asarray(along_values, dtype=np.float64)
     if qs.ndim != 1 or qs.size < 1:
         raise ScenarioError("along_values must be a non-empty 1-D sequence")

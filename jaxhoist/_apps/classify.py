@@ -38,8 +38,7 @@ import numpy as np
 
 from .._errors import ScenarioError
 from .._numerics.options import SolverOptions
-from .._numerics.times import Times, TimesLike
-from .._numerics.times import convert_legacy as convert_legacy_times
+from .._numerics.times import Times, TimesLike, as_times
 from .scan_layout import BatchOptions
 
 FINAL_STATE = ("final_x", "final_y", "final_phi", "final_theta", "final_psi")
@@ -350,7 +349,6 @@ def classify_change(
     times: TimesLike = None,
     options: SolverOptions | None = None,
     batch: BatchOptions | None = None,
-    **scan_kw,
 ) -> ChangeClass:
     """Classify a located change by solving around it.
 
@@ -362,16 +360,13 @@ def classify_change(
       bracket ends (points inside the bracket are dropped; default: 100 bracket widths, at least 1 % of
       |p*|).
     - `times` (`Times(t1, n, ts)`, a number t1 [s] or an array ts [s]; default 2501 equally spaced times
-      from 0 to the scenario's t1), `options` (`SolverOptions`), `batch` (`BatchOptions`; the members are
-      always solved in the order given) and further keyword arguments go to `scan`; save every ~10 ms (the
-      default 2501 over 25 s) so event times and counts are read reliably. The earlier keywords `t1`, `ts`,
-      `n_save` (now `times`) and the solver and layout keywords (`solver`, `rtol`, `atol`, `dt0`,
-      `max_steps`, `fixed_step`, `lanes`, ...) still work, with a `DeprecationWarning`.
+      from 0 to the scenario's t1), `options` (`SolverOptions`) and `batch` (`BatchOptions`; the members are
+      always solved in the order given) go to `scan`; save every ~10 ms (the default 2501 over 25 s) so
+      event times and counts are read reliably.
 
     **Returns** a `ChangeClass` (`classify_samples` on the solves).
     """
     from .scan import Sweep, scan
-    from .scan_layout import LEGACY_KW, convert_legacy
 
     if change is not None:
         param = change.param if param is None else param
@@ -387,12 +382,9 @@ def classify_change(
         half_window = max(100 * (hi - lo), 0.01 * abs(mid), 1e-6)
     xs = np.linspace(mid - half_window, mid + half_window, n_window)
     xs = np.unique(np.concatenate([xs[(xs < lo) | (xs > hi)], [lo, hi]]))  # the bracket's ends are neighbours
-    times, moved = convert_legacy_times("classify_change", times, scan_kw)
+    times = as_times(times)
     if times.n is None and times.ts is None:
         times = Times(times.t1, n=DEFAULT_N)
-    legacy = {k: scan_kw.pop(k) for k in list(scan_kw) if k in LEGACY_KW}
-    derivatives = bool(scan_kw.get("derivatives", False))
-    _, options, batch = convert_legacy("classify_change", legacy, options, batch, derivatives, moved)
     batch = dataclasses.replace(BatchOptions() if batch is None else batch, sort=False)
     res = scan(
         scenario,
@@ -401,7 +393,6 @@ def classify_change(
         observables=list(OBSERVABLES),
         options=options,
         batch=batch,
-        **scan_kw,
     )
     if not np.all(res.ok):
         raise ScenarioError(f"classify_change: solves failed: {res.failures()[:2]}")

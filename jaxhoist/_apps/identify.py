@@ -55,7 +55,7 @@ from .._numerics.times import Times
 from .._physics.params import Scenario
 from .._physics.paths import param_unit
 from .identify_core import _REPORTER, _compiled_core, _Config, _FitReporter, _model
-from .identify_options import FitOptions, convert_legacy, fit_solver_options
+from .identify_options import FitOptions, fit_solver_options
 from .identify_params import ALIASES as ALIASES
 from .identify_params import SYMBOLS as SYMBOLS
 from .identify_params import _build_params as _build_params
@@ -150,35 +150,44 @@ def _model_jit(cfg: _Config, z, args):
     return _model(cfg, z, args)
 
 
-_DATA_KW = ("signals", "noise", "start", "bounds", "t1")
-
-
 def residual_function(
     scenario,
     measurement,
     params,
     *,
+    signals: Sequence[str] | None = None,
+    noise: Mapping[str, float | str] | None = None,
+    start: Mapping[str, Any] | None = None,
+    bounds: Mapping[str, tuple[float, float]] | None = None,
+    t1: float | None = None,
     options: SolverOptions | None = None,
     fit: FitOptions | None = None,
-    **kwargs,
 ):
     """The whitened residual vector of `identify`'s problem as a plain numpy function of θ (flat, in the
     order of `IdentificationResult.names`), for comparisons with other optimisers (e.g. scipy with finite
     differences). Takes `identify`'s `signals`, `noise`, `start`, `bounds`, `t1`, `options` and `fit` (only
-    its `weights` are read); the earlier `weights`, `rtol`, `atol`, `max_steps` still work, with a
-    `DeprecationWarning`. A failed solve gives non-finite residuals. `options` defaults to `identify`'s (the
-    Rosenbrock-W solver at rtol 5e-4): its residuals carry that tolerance, too noisy for finite differences
-    with small steps; for those pass a tight solve, e.g. `SolverOptions(diffrax.Tsit5(), rtol=1e-8,
-    atol=1e-10)` (`experiments/identify_paper42.py` does).
+    its `weights` are read). A failed solve gives non-finite residuals. `options` defaults to `identify`'s
+    (the Rosenbrock-W solver at rtol 5e-4): its residuals carry that tolerance, too noisy for finite
+    differences with small steps; for those pass a tight solve, e.g. `SolverOptions(diffrax.Tsit5(),
+    rtol=1e-8, atol=1e-10)` (`experiments/identify_paper42.py` does).
 
     **Returns** `(fn, theta0)`: `fn(theta) -> r` (n_residuals,) and the start θ0.
     """
     require_x64()
-    data_kw = {k: kwargs.pop(k) for k in _DATA_KW if k in kwargs}
-    options, fit = convert_legacy("residual_function", kwargs, options, fit, allow_fit=("weights",))
+    if fit is not None and not isinstance(fit, FitOptions):
+        raise ScenarioError(f"fit must be a jaxhoist.FitOptions, got {type(fit).__name__}")
     weights = None if fit is None else fit.weights
     prob = _setup(
-        scenario, measurement, params, weights=weights, options=fit_solver_options(options), **data_kw
+        scenario,
+        measurement,
+        params,
+        signals=signals,
+        noise=noise,
+        weights=weights,
+        start=start,
+        bounds=bounds,
+        t1=t1,
+        options=fit_solver_options(options),
     )
     reverse = prob.cfg.options.replace(adjoint=diffrax.RecursiveCheckpointAdjoint())
     cfg = dataclasses.replace(prob.cfg, options=reverse)
@@ -205,7 +214,6 @@ def identify(
     options: SolverOptions | None = None,
     fit: FitOptions | None = None,
     progress: Callable[[dict], None] | None = None,
-    **deprecated,
 ) -> IdentificationResult:
     """Fit scenario leaves to measured time series by weighted nonlinear least squares.
 
@@ -241,10 +249,6 @@ def identify(
       such steps), `step` (|Δz| from the best point so far, in the fit variables z: log θ for positive
       leaves), `solve_ok`, `solver_steps` (of that simulation) and `elapsed` [s] since the call. Default
       None: silent.
-    - `**deprecated`: the earlier keywords `rtol`, `atol`, `max_steps` (now `options`) and `weights`,
-      `n_starts`, `start_spread`, `seed`, `lm_rtol`, `lm_atol`, `max_iterations`, `max_relative_se`,
-      `condition_limit` (now `fit`) still work, converted to the same objects, with a
-      `DeprecationWarning`.
 
     **Returns** an `IdentificationResult` (`summary()` prints a table).
 
@@ -253,7 +257,6 @@ def identify(
     """
     require_x64()
     wall0 = time.perf_counter()
-    options, fit = convert_legacy("identify", deprecated, options, fit)
     fit = FitOptions() if fit is None else fit
     if not isinstance(fit, FitOptions):
         raise ScenarioError(f"fit must be a jaxhoist.FitOptions, got {type(fit).__name__}")
@@ -444,7 +447,6 @@ def synthetic_measurement(
     seed: int = 0,
     options: SolverOptions | None = None,
     source: str = "synthetic",
-    **deprecated,
 ) -> Measurement:
     """Simulate `scenario`, sample `signals` (names or groups) at times `t` [s] and add Gaussian noise.
 
@@ -455,12 +457,9 @@ def synthetic_measurement(
       rtol 5e-4), the default solver of `identify`'s model, so that a fit to noise-free data with the
       defaults recovers the parameters to the solver's accuracy. For data that stand in for a real lift,
       whose model error should be far below the fit's, pass tighter tolerances (`SolverOptions(rtol=1e-8,
-      atol=1e-10)`). The earlier `rtol`, `atol`, `max_steps` still work, with a `DeprecationWarning`.
+      atol=1e-10)`).
     """
     require_x64()
-    options, _ = convert_legacy(
-        "synthetic_measurement", deprecated, options, None, allow_fit=False, forward=False
-    )
     options = SolverOptions() if options is None else options
     t = np.asarray(t, dtype=np.float64)
     names: list[str] = []

@@ -1,20 +1,16 @@
 """The choices of `identify` as objects: `FitOptions` (starts, Levenberg-Marquardt termination,
-identifiability thresholds), the fit's `SolverOptions`, and the conversion of the earlier keyword arguments
-(`rtol=`, `n_starts=`, `lm_rtol=`, ...) to them."""
+identifiability thresholds) and the fit's `SolverOptions`."""
 
 from __future__ import annotations
 
-import dataclasses
 from collections.abc import Mapping
-from typing import Any
 
 import diffrax
 import equinox as eqx
 import numpy as np
 
-from .._deprecated import warn_moved
 from .._errors import ScenarioError
-from .._numerics.options import DEFAULT_MAX_STEPS, SolverOptions
+from .._numerics.options import SolverOptions
 
 
 def _as_weights(weights):
@@ -75,8 +71,8 @@ class FitOptions(eqx.Module):
 
 
 def fit_solver_options(options: SolverOptions | None) -> SolverOptions:
-    """The fit's `SolverOptions`: default `SolverOptions(adjoint="forward")`, the Rosenbrock-W solver at its
-    defaults (rtol 5e-4, atol 1e-5, PI controller, the ∂f/∂t term), always with forward mode
+    """The fit's `SolverOptions`: default `SolverOptions(adjoint=diffrax.ForwardMode())`, the Rosenbrock-W
+    solver at its defaults (rtol 5e-4, atol 1e-5, PI controller, the ∂f/∂t term), always with forward mode
     (`diffrax.ForwardMode`).
 
     The state and its parameter sensitivities are integrated as one system under one step-size control
@@ -91,59 +87,7 @@ def fit_solver_options(options: SolverOptions | None) -> SolverOptions:
     **Raises** `ScenarioError` for options that are not a `SolverOptions`.
     """
     if options is None:
-        return SolverOptions(adjoint="forward")
+        return SolverOptions(adjoint=diffrax.ForwardMode())
     if not isinstance(options, SolverOptions):
         raise ScenarioError(f"options must be a jaxhoist.SolverOptions, got {type(options).__name__}")
     return options if options.forward_mode else options.replace(adjoint=diffrax.ForwardMode())
-
-
-_SOLVER_KW = ("rtol", "atol", "max_steps")
-_FIT_KW = tuple(FitOptions.__dataclass_fields__)
-
-
-def convert_legacy(
-    function: str,
-    old: dict[str, Any],
-    options: SolverOptions | None,
-    fit: FitOptions | None,
-    allow_fit: bool | tuple[str, ...] = True,
-    forward: bool = True,
-    stacklevel: int = 4,
-) -> tuple[SolverOptions | None, FitOptions | None]:
-    """`(options, fit)` from the earlier keywords of `identify` in `old` (`rtol, atol, max_steps` and,
-    with `allow_fit` True, the `FitOptions` fields, `weights` included; a tuple of field names allows
-    those), built exactly as the earlier `identify` built them (forward
-    mode if `forward`, else the default reverse adjoint, as `synthetic_measurement` had it); one
-    `DeprecationWarning` naming the new spelling (`stacklevel` as in `warn_moved`, from the caller of this
-    function).
-
-    **Raises** `TypeError` for an unknown keyword, `ScenarioError` for an old keyword given with the object
-    that replaces it.
-    """
-    fit_fields = _FIT_KW if allow_fit is True else tuple(allow_fit or ())
-    unknown = sorted(set(old) - set(_SOLVER_KW + fit_fields))
-    if unknown:
-        raise TypeError(f"{function}() got unexpected keyword argument(s): {', '.join(unknown)}")
-    solver_kw = {k: old[k] for k in _SOLVER_KW if k in old}
-    fit_kw = {k: old[k] for k in fit_fields if k in old}
-    moved = {k: f"options=SolverOptions(diffrax.Tsit5(), {k}=...)" for k in solver_kw}
-    moved.update({k: f"fit=FitOptions({k}=...)" for k in fit_kw})
-    if solver_kw:
-        if options is not None:
-            raise ScenarioError(f"give either options or {', '.join(solver_kw)}, not both")
-        options = SolverOptions(
-            diffrax.Tsit5(),
-            rtol=solver_kw.get("rtol"),
-            atol=solver_kw.get("atol"),
-            max_steps=solver_kw.get("max_steps", DEFAULT_MAX_STEPS),
-            adjoint="forward" if forward else "reverse",
-        )
-    if fit_kw:
-        if fit is None:
-            fit = FitOptions(**fit_kw)
-        elif set(fit_kw) == {"weights"} and fit.weights is None:  # weights was an argument beside fit
-            fit = dataclasses.replace(fit, weights=fit_kw["weights"])
-        else:
-            raise ScenarioError(f"give either fit or {', '.join(fit_kw)}, not both")
-    warn_moved(function, moved, stacklevel=stacklevel)
-    return options, fit

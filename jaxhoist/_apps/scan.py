@@ -70,14 +70,13 @@ from .._numerics.batch import (
     flatten_out,
 )
 from .._numerics.options import SolverOptions
-from .._numerics.times import Times, TimesLike
-from .._numerics.times import convert_legacy as convert_legacy_times
+from .._numerics.times import Times, TimesLike, as_times
 from .._physics.params import Scenario
 from .._physics.paths import check_path, param_unit
 from . import progress as progress_mod
 from . import scan_layout as layout
 from .progress import Progress
-from .scan_layout import BatchOptions, convert_legacy, scan_solver_options
+from .scan_layout import BatchOptions, scan_solver_options
 from .scan_result import ScanResult
 from .sweep import AbstractSweep, Grid, Points, Sweep, as_sweep
 
@@ -100,7 +99,6 @@ def scan(
     out_dir: str | Path | None = None,
     resume: bool = True,
     progress: bool | Callable[[Progress], None] | None = None,
-    **deprecated,
 ) -> ScanResult:
     """Solve `scenario` for many values of some of its float leaves and evaluate observables of each solve.
 
@@ -140,11 +138,6 @@ def scan(
       arguments in each process and an `out_dir` on a shared file system; the chunks are shared out
       between the processes, and every process returns the whole result.
     - `progress`: True to print a line per chunk on stderr, or a callable receiving a `Progress`.
-    - `**deprecated`: the earlier keywords `t1`, `ts`, `n_save` (now `times`), `params` (now `sweep`),
-      `mode` (now the sweep's type), `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `fixed_step` (now
-      `options`) and `lanes`, `chunk_size`, `max_memory`, `devices`, `sort`, `wait_timeout` (now `batch`)
-      still work, converted to the same
-      objects (the same results bit for bit), with a `DeprecationWarning`.
 
     **Returns** a `ScanResult`.
 
@@ -152,20 +145,12 @@ def scan(
     invalid value is marked `INVALID_PARAMETER` instead, unless every member is invalid.
     """
     require_x64()
-    renamed = {}
-    if "params" in deprecated:
-        if sweep is not None:
-            raise TypeError("scan() got both sweep and params (its earlier name)")
-        sweep, renamed = deprecated.pop("params"), {"params": "sweep"}
     if sweep is None:
         raise TypeError("scan() missing the sweep: Sweep(path, values), Grid({...}) or Points({...})")
-    times, moved_times = convert_legacy_times("scan", times, deprecated)
-    renamed = moved_times | renamed
-    mode, options, batch = convert_legacy("scan", deprecated, options, batch, derivatives, renamed)
     return _scan(
         scenario,
-        as_sweep(sweep, mode),
-        times,
+        as_sweep(sweep),
+        as_times(times),
         observables=observables,
         options=scan_solver_options(options, derivatives),
         histories=histories,

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import diffrax
 import jax
 import numpy as np
 
@@ -119,14 +120,17 @@ def run_cli(args) -> int:
     scenario, _ = apply_overrides(load_scenario(args.scenario), args.set)
     params = {p: parse_values(v, "--values") for p, v in zip(args.param, args.values, strict=True)}
     out = check_out_dir(Path(args.out) if args.out else Path("out") / f"scan-{scenario.name}", "--out")
-    options = SolverOptions(
-        CLI_SOLVERS[args.solver](),
-        rtol=args.rtol,
-        atol=args.atol,
-        dt0=args.fixed_step,
-        max_steps=args.max_steps,
-        fixed_step=args.fixed_step is not None,
-    )
+    if args.fixed_step is None:
+        options = SolverOptions(
+            CLI_SOLVERS[args.solver](), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps
+        )
+    else:  # constant steps of --fixed-step [s]: --rtol/--atol are not read
+        options = SolverOptions(
+            CLI_SOLVERS[args.solver](),
+            diffrax.ConstantStepSize(),
+            dt0=args.fixed_step,
+            max_steps=args.max_steps,
+        )
     res = scan(
         scenario,
         as_sweep(params, args.mode),

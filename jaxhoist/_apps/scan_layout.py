@@ -1,22 +1,19 @@
 """How a scan is laid out and run: `BatchOptions` (lanes, chunk size, memory cap, devices, sort order, the
 wait for other processes), the solve order and the chunk size that follow from them, the scan's
-`SolverOptions`, and the conversion of the earlier keyword arguments (`mode=`, `rtol=`, `lanes=`, ...)
-to these objects."""
+`SolverOptions`."""
 
 from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import Any
 
 import diffrax
 import equinox as eqx
 import numpy as np
 
-from .._deprecated import warn_moved
 from .._errors import ScenarioError
 from .._numerics.batch import hist_shape
-from .._numerics.options import DEFAULT_MAX_STEPS, SolverOptions
+from .._numerics.options import SolverOptions
 from . import sweep as sweep_mod
 
 
@@ -126,75 +123,6 @@ def scan_solver_options(options: SolverOptions | None, derivatives: bool) -> Sol
     if derivatives and not options.forward_mode:
         options = options.replace(adjoint=diffrax.ForwardMode())
     return options
-
-
-_SOLVER_KW = ("solver", "rtol", "atol", "dt0", "max_steps", "fixed_step")
-_BATCH_KW = ("lanes", "chunk_size", "max_memory", "devices", "sort", "wait_timeout")
-#: The earlier keywords of `scan` that moved into `SolverOptions` and `BatchOptions`.
-LEGACY_KW = _SOLVER_KW + _BATCH_KW
-
-
-def convert_legacy(
-    function: str,
-    old: dict[str, Any],
-    options: SolverOptions | None,
-    batch: BatchOptions | None,
-    derivatives: bool,
-    renamed: dict[str, str] | None = None,
-    stacklevel: int = 4,
-) -> tuple[str | None, SolverOptions | None, BatchOptions | None]:
-    """`(mode, options, batch)` from the earlier keywords of `scan` in `old` (`mode`, the solver block
-    `solver, rtol, atol, dt0, max_steps, fixed_step` and the layout block `lanes, chunk_size, max_memory,
-    devices, sort, wait_timeout`), built exactly as the earlier `scan` built them; one `DeprecationWarning`
-    naming the new spelling of these and of `renamed` (old name -> new name; `stacklevel` as in
-    `warn_moved`, from the caller of this function).
-
-    **Raises** `TypeError` for an unknown keyword, `ScenarioError` for an old keyword given with the object
-    that replaces it.
-    """
-    unknown = sorted(set(old) - {"mode", *_SOLVER_KW, *_BATCH_KW})
-    if unknown:
-        raise TypeError(f"{function}() got unexpected keyword argument(s): {', '.join(unknown)}")
-    moved = dict(renamed or {})
-    if "mode" in old:
-        moved["mode"] = "sweep=Sweep(path, values) | Grid({...}) | Points({...})"
-    mode = old.pop("mode", None)
-    solver_kw = {k: old[k] for k in _SOLVER_KW if k in old}
-    batch_kw = {k: old[k] for k in _BATCH_KW if k in old}
-    if solver_kw:
-        if options is not None:
-            raise ScenarioError(f"give either options or {', '.join(solver_kw)}, not both")
-        moved.update({k: "options=" + _solver_hint(k) for k in solver_kw})
-        solver = solver_kw.get("solver")
-        if derivatives and solver is None:
-            solver = diffrax.Tsit5()
-        options = SolverOptions(
-            solver=solver,
-            rtol=solver_kw.get("rtol"),
-            atol=solver_kw.get("atol"),
-            dt0=solver_kw.get("dt0"),
-            max_steps=solver_kw.get("max_steps", DEFAULT_MAX_STEPS),
-            adjoint="forward" if derivatives else "reverse",
-            fixed_step=bool(solver_kw.get("fixed_step", False)),
-        )
-    if batch_kw:
-        if batch is not None:
-            raise ScenarioError(f"give either batch or {', '.join(batch_kw)}, not both")
-        moved.update({k: f"batch=BatchOptions({k}=...)" for k in batch_kw})
-        batch = BatchOptions(**batch_kw)
-    warn_moved(function, moved, stacklevel=stacklevel)
-    return mode, options, batch
-
-
-def _solver_hint(name: str) -> str:
-    return {
-        "solver": "SolverOptions(solver)",
-        "rtol": "SolverOptions(rtol=...)",
-        "atol": "SolverOptions(atol=...)",
-        "dt0": "SolverOptions(dt0=...)",
-        "max_steps": "SolverOptions(max_steps=...)",
-        "fixed_step": "SolverOptions(stepsize_controller=diffrax.ConstantStepSize(), dt0=...)",
-    }[name]
 
 
 def order(scenario, paths: Sequence[str], members: np.ndarray, sort: bool):

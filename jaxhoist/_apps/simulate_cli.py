@@ -146,14 +146,15 @@ def _load_checked(args: argparse.Namespace):
         raise ScenarioError(
             f"--rope {args.rope} needs --model rigid (the elastic-foundation model has the elastic rope)"
         )
-    if args.model == "rigid":
-        import diffrax
+    import diffrax
 
+    if args.model == "rigid":
         options = SolverOptions(diffrax.Tsit5(), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps)
     else:
         # diffrax's progress meter (TextProgressMeter) unless --quiet; its lines become a bar on stderr
+        meter = diffrax.NoProgressMeter() if args.quiet else diffrax.TextProgressMeter()
         options = SolverOptions(
-            rtol=args.rtol, atol=args.atol, max_steps=args.max_steps, progress=not args.quiet
+            rtol=args.rtol, atol=args.atol, max_steps=args.max_steps, progress_meter=meter
         )
     return scenario, overrides, t1, options, ts
 
@@ -162,7 +163,7 @@ def _solve_rigid(args, scenario, t1, ts, options, progress):
     """The rigid-ground model's phase loop, its phase log drawn as a bar; (trajectory, solve time [s])."""
     import numpy as np
 
-    from .._numerics.options import as_model
+    from .._numerics.options import ElasticRope, InextensibleRope, RigidGround
     from .._numerics.rigid_options import RigidOptions
     from .._numerics.rigid_solve import simulate_rigid
     from .._numerics.times import Times
@@ -184,7 +185,7 @@ def _solve_rigid(args, scenario, t1, ts, options, progress):
             traj = simulate_rigid(
                 scenario,
                 Times(t1, ts=np.asarray(ts)),
-                model=as_model("rigid", args.rope),  # pyright: ignore[reportArgumentType]  # "rigid": a RigidGround
+                model=RigidGround(rope=InextensibleRope() if args.rope == "inextensible" else ElasticRope()),
                 options=RigidOptions(
                     rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
                     atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in

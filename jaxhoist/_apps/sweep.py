@@ -1,7 +1,7 @@
 """The members of a scan as objects: `Sweep` (one parameter), `Grid` (every combination) and `Points`
 (equally long lists zipped together), each a mapping of parameter path -> values checked on construction;
-`parse_values` reads values from arrays or strings, `as_sweep` turns a plain mapping (and the earlier
-`mode=` string) into one of them, and `validate_members` checks every member on the host before anything
+`parse_values` reads values from arrays or strings, `as_sweep` turns a plain mapping (and the command
+line's `--mode`) into one of them, and `validate_members` checks every member on the host before anything
 is compiled."""
 
 from __future__ import annotations

@@ -19,9 +19,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import SolveStatus
+from .._physics.paths import set_param
 from . import fixed_step as fixed_mod
 from .options import SolverOptions
-from .paths import set_param
 from .solve import solve
 
 

@@ -2,9 +2,7 @@
 how many steps) and the models `ElasticFoundation` / `RigidGround` that `simulate` dispatches on.
 
 Every choice is a real object (a diffrax solver, a diffrax step-size controller, a diffrax adjoint), the way
-`diffrax.diffeqsolve` takes them; the strings and flags of earlier versions (`rtol=`, `fixed_step=True`,
-`adjoint="forward"`, `model="rigid"`, `rope="inextensible"`) are still accepted and converted here, in one
-place.
+`diffrax.diffeqsolve` takes them.
 """
 
 from __future__ import annotations
@@ -72,12 +70,11 @@ class SolverOptions(eqx.Module):
     - `max_steps`: the step budget; reaching it is reported as `SolveStatus.MAX_STEPS`.
     - `progress_meter`: a diffrax progress meter (default `diffrax.NoProgressMeter()`).
 
-    Earlier keyword arguments still work and are converted: `rtol`, `atol` (a `PIDController`),
-    `fixed_step=True` (a `ConstantStepSize`), `adjoint="reverse" | "forward"`, `progress=True` (a
-    `TextProgressMeter`).
+    - `rtol`, `atol`: the tolerances of the default `PIDController` (relative; absolute in SI units of each
+      state); None: the solver's defaults above. Not together with `stepsize_controller`.
 
     **Raises** `ScenarioError` for a non-positive tolerance or step, a constant step without `dt0`, a step
-    budget below 1 or an unknown adjoint name.
+    budget below 1 or an adjoint that is not a diffrax adjoint.
     """
 
     solver: diffrax.AbstractSolver
@@ -91,15 +88,13 @@ class SolverOptions(eqx.Module):
         self,
         solver: diffrax.AbstractSolver | None = None,
         stepsize_controller: diffrax.AbstractStepSizeController | None = None,
-        adjoint: diffrax.AbstractAdjoint | str | None = None,
+        adjoint: diffrax.AbstractAdjoint | None = None,
         *,
         dt0: float | None = None,
         max_steps: int = DEFAULT_MAX_STEPS,
         progress_meter: diffrax.AbstractProgressMeter | None = None,
         rtol: float | None = None,
         atol: float | None = None,
-        fixed_step: bool = False,
-        progress: bool = False,
     ):
         if solver is None:
             from .rosenbrock import RosenbrockW
@@ -108,41 +103,35 @@ class SolverOptions(eqx.Module):
         self.solver = solver
         if not isinstance(self.solver, diffrax.AbstractSolver):
             raise ScenarioError(f"solver must be a diffrax solver, got {solver!r}")
-        if stepsize_controller is not None and (rtol is not None or atol is not None or fixed_step):
-            raise ScenarioError("give either stepsize_controller or rtol/atol/fixed_step, not both")
+        if stepsize_controller is not None and (rtol is not None or atol is not None):
+            raise ScenarioError("give either stepsize_controller or rtol/atol, not both")
         if stepsize_controller is None:
-            if fixed_step:
-                stepsize_controller = diffrax.ConstantStepSize()
-            else:
-                d_rtol, d_atol = default_tolerances(self.solver)
-                pcoeff, icoeff = default_controller_coefficients(self.solver)
-                stepsize_controller = diffrax.PIDController(
-                    rtol=_positive("rtol", d_rtol if rtol is None else rtol),
-                    atol=_positive("atol", d_atol if atol is None else atol),
-                    pcoeff=pcoeff,
-                    icoeff=icoeff,
-                )
+            d_rtol, d_atol = default_tolerances(self.solver)
+            pcoeff, icoeff = default_controller_coefficients(self.solver)
+            stepsize_controller = diffrax.PIDController(
+                rtol=_positive("rtol", d_rtol if rtol is None else rtol),
+                atol=_positive("atol", d_atol if atol is None else atol),
+                pcoeff=pcoeff,
+                icoeff=icoeff,
+            )
         elif isinstance(stepsize_controller, diffrax.PIDController):
             _positive("rtol", stepsize_controller.rtol)
             _positive("atol", stepsize_controller.atol)
         self.stepsize_controller = stepsize_controller
-        if adjoint is None or adjoint == "reverse":
+        if adjoint is None:
             adjoint = diffrax.RecursiveCheckpointAdjoint()
-        elif adjoint == "forward":
-            adjoint = diffrax.ForwardMode()
         elif not isinstance(adjoint, diffrax.AbstractAdjoint):
-            raise ScenarioError(f"solver option adjoint must be 'reverse' or 'forward', got {adjoint!r}")
+            raise ScenarioError(
+                "solver option adjoint must be a diffrax adjoint (diffrax.RecursiveCheckpointAdjoint() or "
+                f"diffrax.ForwardMode()), got {adjoint!r}"
+            )
         self.adjoint = adjoint
-        if progress_meter is None:
-            progress_meter = diffrax.TextProgressMeter() if progress else diffrax.NoProgressMeter()
-        self.progress_meter = progress_meter
+        self.progress_meter = diffrax.NoProgressMeter() if progress_meter is None else progress_meter
         if dt0 is not None:
             dt0 = _positive("dt0", dt0)
         self.dt0 = dt0
         if self.fixed_step and dt0 is None:
-            raise ScenarioError(
-                "a constant step (fixed_step=True, ConstantStepSize) needs the step size dt0 [s]"
-            )
+            raise ScenarioError("a constant step (diffrax.ConstantStepSize()) needs the step size dt0 [s]")
         if int(max_steps) < 1:
             raise ScenarioError(f"solver option max_steps must be >= 1, got {max_steps}")
         self.max_steps = int(max_steps)
@@ -241,35 +230,3 @@ class RigidGround(AbstractModel):
         e = float(self.restitution)
         if not (0.0 <= e <= 1.0):
             raise ScenarioError(f"restitution (e) must be in [0, 1], got {self.restitution}")
-
-
-def as_model(model, rope=None) -> AbstractModel:
-    """The model object for `model` (an `AbstractModel`, or the earlier strings "elastic"/"rigid") and the
-    earlier `rope` string ("elastic"/"inextensible").
-
-    **Raises** `ScenarioError` for an unknown name or an inextensible rope with the elastic model.
-    """
-    ropes = {"elastic": ElasticRope(), "inextensible": InextensibleRope()}
-    if rope is not None and not isinstance(rope, AbstractRope):
-        if rope not in ropes:
-            raise ScenarioError(f"rope must be one of {', '.join(map(repr, ropes))}, got {rope!r}")
-        rope = ropes[rope]
-    if isinstance(model, str):
-        if model == "elastic":
-            model = ElasticFoundation()
-        elif model == "rigid":
-            model = RigidGround(rope=rope or ElasticRope())
-            rope = None
-        else:
-            raise ScenarioError(f"model must be 'elastic' or 'rigid' (or a model object), got {model!r}")
-    if not isinstance(model, AbstractModel):
-        raise ScenarioError(f"model must be ElasticFoundation() or RigidGround(...), got {model!r}")
-    if rope is not None:
-        if isinstance(model, RigidGround):
-            model = RigidGround(rope=rope, restitution=model.restitution)
-        elif not isinstance(rope, ElasticRope):
-            raise ScenarioError(
-                f"rope={rope.name!r} is available with model='rigid' only (the elastic-foundation model of "
-                "§3 has the elastic rope (2.14)); use model=RigidGround(rope=InextensibleRope())"
-            )
-    return model

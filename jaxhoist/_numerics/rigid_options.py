@@ -1,18 +1,12 @@
-"""The numerical settings of the rigid model's phase driver as one object, `RigidOptions`, and the
-conversion of `simulate_rigid`'s earlier keyword arguments (`restitution=`, `rope=`, `rtol=`, ...) to it
-and to the model object `RigidGround`."""
+"""The numerical settings of the rigid model's phase driver as one object, `RigidOptions`."""
 
 from __future__ import annotations
-
-from typing import Any
 
 import equinox as eqx
 import numpy as np
 
-from .._deprecated import warn_moved
 from .._errors import ScenarioError
 from .._physics.rigid_contact import Settings
-from .options import ElasticRope, InextensibleRope, RigidGround
 from .rigid_compiled import StallRule
 from .rigid_compliant import ChatterRule
 
@@ -85,47 +79,3 @@ class RigidOptions(eqx.Module):
             if not isinstance(self.stall, StallRule):
                 raise ScenarioError(f"stall must be a StallRule or None, got {type(self.stall).__name__}")
             self.stall.check()
-
-
-_MODEL_KW = ("restitution", "rope")
-_OPTIONS_KW = ("rtol", "atol", "max_steps", "max_phases", "settings", "chatter")
-
-
-def convert_legacy(
-    old: dict[str, Any],
-    model: RigidGround | None,
-    options: RigidOptions | None,
-    stacklevel: int = 4,
-    moved: dict[str, str] | None = None,
-) -> tuple[RigidGround, RigidOptions]:
-    """`(model, options)` from `simulate_rigid`'s earlier keywords in `old` (`restitution`, `rope` ->
-    `RigidGround`; `rtol`, `atol`, `max_steps`, `max_phases`, `settings`, `chatter` -> `RigidOptions`),
-    with one `DeprecationWarning` naming the new spelling of these and of `moved` (old name -> new
-    spelling: the saved times' keywords, converted by the caller; `stacklevel` as in `warn_moved`, from the
-    caller of this function); the defaults where neither is given.
-
-    **Raises** `TypeError` for an unknown keyword, `ScenarioError` for an old keyword given with the object
-    that replaces it, an unknown rope name or a restitution outside [0, 1].
-    """
-    unknown = sorted(set(old) - {*_MODEL_KW, *_OPTIONS_KW})
-    if unknown:
-        raise TypeError(f"simulate_rigid() got unexpected keyword argument(s): {', '.join(unknown)}")
-    model_kw = {k: old[k] for k in _MODEL_KW if k in old}
-    options_kw = {k: old[k] for k in _OPTIONS_KW if k in old}
-    moved = dict(moved or {})
-    moved.update({k: f"model=RigidGround({k}=...)" for k in model_kw})
-    moved.update({k: f"options=RigidOptions({k}=...)" for k in options_kw})
-    if model_kw:
-        if model is not None:
-            raise ScenarioError(f"give either model or {', '.join(model_kw)}, not both")
-        ropes = {"elastic": ElasticRope(), "inextensible": InextensibleRope()}
-        rope = model_kw.get("rope", "elastic")
-        if rope not in ropes:
-            raise ScenarioError(f"rope must be one of {', '.join(map(repr, ropes))}, got {rope!r}")
-        model = RigidGround(rope=ropes[rope], restitution=model_kw.get("restitution", 0.0))
-    if options_kw:
-        if options is not None:
-            raise ScenarioError(f"give either options or {', '.join(options_kw)}, not both")
-        options = RigidOptions(**options_kw)
-    warn_moved("simulate_rigid", moved, stacklevel=stacklevel)
-    return RigidGround() if model is None else model, RigidOptions() if options is None else options

@@ -55,14 +55,12 @@ from .rigid_compiled import (
 from .rigid_compliant import ChatterRule
 from .rigid_coulomb import coulomb_pattern
 from .rigid_driver import _Driver
-from .rigid_options import DRIVER_TOLERANCES, RigidOptions, convert_legacy
+from .rigid_options import DRIVER_TOLERANCES, RigidOptions
 from .rigid_records import PhaseRecord, RigidContactError, RigidTrajectory
 from .rigid_run import _Run
-from .times import TimesLike
-from .times import convert_legacy as convert_legacy_times
+from .times import TimesLike, as_times
 
 __all__ = [
-    "ROPE_MODELS",
     "ChatterRule",
     "PhaseRecord",
     "RigidContactError",
@@ -75,9 +73,6 @@ __all__ = [
 ]
 
 
-#: The rope models of `simulate_rigid(..., rope=...)`.
-ROPE_MODELS = ("elastic", "inextensible")
-
 #: The number of saved times when `Times.n` is None.
 DEFAULT_N = 501
 
@@ -89,7 +84,6 @@ def simulate_rigid(
     options: RigidOptions | None = None,
     *,
     verbose: bool | str = False,
-    **deprecated,
 ) -> RigidTrajectory:
     """Simulate a lift with the rigid-body-on-rigid-ground model (paper §2) from rest at t = 0 to t1.
 
@@ -113,9 +107,6 @@ def simulate_rigid(
     - `options`: `RigidOptions` (phase tolerances and step budget, `max_phases`, contact `settings`, the
       `chatter` rule, the `stall` rule); default `RigidOptions()`.
     - `verbose`: print each phase as it ends.
-    - `**deprecated`: the earlier keywords `t1`, `ts`, `n_save` (now `times`), `restitution`, `rope` (now
-      `model`) and `rtol`, `atol`, `max_steps`, `max_phases`, `settings`, `chatter` (now `options`) still
-      work, with a `DeprecationWarning`.
 
     **Returns** a `RigidTrajectory` (with the phase log in `.phases`).
 
@@ -123,8 +114,9 @@ def simulate_rigid(
     contact situations and solver failures.
     """
     require_x64()
-    times, moved = convert_legacy_times("simulate_rigid", times, deprecated)
-    model, options = convert_legacy(deprecated, model, options, moved=moved)
+    times = as_times(times)
+    model = RigidGround() if model is None else model
+    options = RigidOptions() if options is None else options
     if not isinstance(model, RigidGround):
         raise ScenarioError(f"model must be RigidGround(...), got {type(model).__name__}")
     if not isinstance(options, RigidOptions):

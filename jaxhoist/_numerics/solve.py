@@ -10,19 +10,17 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from .._deprecated import warn_moved
 from .._errors import ScenarioError, SolveStatus, forward_mode_hint, require_x64
 from .._physics import energy as energy_mod
 from .._physics import kinematics
 from .._physics.elastic import Constants, State, snapshot, vector_field
 from .._physics.equilibrium import initial_state
 from .._physics.params import Scenario
-from .options import AbstractModel, ElasticFoundation, RigidGround, SolverOptions, as_model
+from .options import AbstractModel, ElasticFoundation, RigidGround, SolverOptions
 from .rigid_options import RigidOptions
 from .rigid_solve import simulate_rigid
 from .sensitivity import solve_forward, uses_tangent_solve
-from .times import TimesLike
-from .times import convert_legacy as convert_legacy_times
+from .times import TimesLike, as_times
 from .trajectory import Trajectory as Trajectory
 
 
@@ -136,67 +134,14 @@ def as_float64_leaves(scenario: Scenario) -> Scenario:
 #: The number of saved times of `simulate` and `simulate_rigid` when `Times.n` is None.
 DEFAULT_N = 501
 
-_LEGACY_SOLVER_KW = ("solver", "rtol", "atol", "dt0", "max_steps", "adjoint", "progress", "fixed_step")
-
-#: The new spelling of each earlier keyword of `simulate` (for the deprecation warning).
-_NEW_SPELLING = {
-    "solver": "options=SolverOptions(solver)",
-    "rtol": "options=SolverOptions(rtol=...)",
-    "atol": "options=SolverOptions(atol=...)",
-    "dt0": "options=SolverOptions(dt0=...)",
-    "max_steps": "options=SolverOptions(max_steps=...)",
-    "adjoint": "options=SolverOptions(adjoint=diffrax.ForwardMode() | diffrax.RecursiveCheckpointAdjoint())",
-    "progress": "options=SolverOptions(progress_meter=diffrax.TextProgressMeter())",
-    "fixed_step": "options=SolverOptions(stepsize_controller=diffrax.ConstantStepSize(), dt0=...)",
-    "rope": "model=RigidGround(rope=ElasticRope() | InextensibleRope())",
-}
-
-
-def convert_legacy(
-    model: AbstractModel | str, options: SolverOptions | None, old: dict
-) -> tuple[AbstractModel, SolverOptions | None, dict[str, str]]:
-    """`(model, options, moved)` from `simulate`'s earlier keywords in `old` (the solver block `solver, rtol,
-    atol, dt0, max_steps, adjoint, progress, fixed_step` and `rope`) and the earlier model strings
-    "elastic"/"rigid", built exactly as the earlier `simulate` built them; `moved` (old name -> new
-    spelling) is for the one `DeprecationWarning`, which the caller gives once nothing can fail any more.
-    `options` stays None where neither it nor a solver keyword is given.
-
-    **Raises** `TypeError` for an unknown keyword, `ScenarioError` for an old keyword given with the object
-    that replaces it, an unknown model or rope name, or a solver keyword the rigid model does not read.
-    """
-    old = dict(old)
-    rope = old.pop("rope", None)
-    unknown = sorted(set(old) - set(_LEGACY_SOLVER_KW))
-    if unknown:
-        raise TypeError(f"simulate() got unexpected keyword argument(s): {', '.join(unknown)}")
-    moved = {k: _NEW_SPELLING[k] for k in old}
-    if rope is not None:
-        moved["rope"] = _NEW_SPELLING["rope"]
-    if isinstance(model, str):
-        moved["model"] = f"model={'RigidGround()' if model == 'rigid' else 'ElasticFoundation()'}"
-    model = as_model(model, rope)
-    if options is not None and old:
-        raise ScenarioError(f"give either options or the keywords {', '.join(sorted(old))}, not both")
-    if options is None and old:
-        if isinstance(model, RigidGround):
-            extra = set(old) - {"rtol", "atol", "max_steps"}
-            if extra and any(old[k] not in (None, False, "reverse") for k in extra):
-                raise ScenarioError("model='rigid' takes only t1, ts, n_save, rtol, atol, max_steps and rope")
-            kw = {k: v for k, v in old.items() if k in ("rtol", "atol", "max_steps")}
-            options = SolverOptions(diffrax.Tsit5(), **kw)  # for its default tolerances 1e-6, 1e-8
-        else:
-            options = SolverOptions(**old)
-    return model, options, moved
-
 
 def simulate(
     scenario: Scenario,
     times: TimesLike = None,
-    model: AbstractModel | str = ElasticFoundation(),
+    model: AbstractModel = ElasticFoundation(),
     options: SolverOptions | None = None,
     *,
     throw: bool = True,
-    **deprecated,
 ) -> Trajectory:
     """Simulate a lift from rest at t = 0 to the end time t1 [s] of `times`.
 
@@ -213,16 +158,10 @@ def simulate(
     - `model`: `ElasticFoundation()` (paper §3, the default: one compiled, differentiable solve) or
       `RigidGround(rope=ElasticRope() | InextensibleRope())` (paper §2, the event-driven reference
       `simulate_rigid`: host-side phase loop, not differentiable or vmappable; it returns a
-      `RigidTrajectory` with the same output names plus `impact_loss` and the phase log). The earlier
-      strings "elastic" and "rigid" still work, with a `DeprecationWarning`.
+      `RigidTrajectory` with the same output names plus `impact_loss` and the phase log).
     - `options`: `SolverOptions` (solver, step-size controller, adjoint, dt0, max_steps, progress meter).
       The rigid model reads only its tolerances and step budget.
     - `throw`: raise if the solve fails (max steps, non-finite state); with False, read `Trajectory.status`.
-    - `**deprecated`: the earlier keywords `t1`, `ts`, `n_save` (converted to `Times`: the same saved
-      times), `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`, `progress`, `fixed_step` (converted
-      to `SolverOptions` exactly as before; not together with `options`) and `rope` ("elastic" or
-      "inextensible", rigid model only; converted to `RigidGround`) still work, with one
-      `DeprecationWarning` naming the new spelling.
 
     **Returns** a `Trajectory`: for the rigid model its subclass `RigidTrajectory`, which adds `impact_loss`
     and the phase log.
@@ -231,13 +170,19 @@ def simulate(
     and (with `throw=True`) an `EquinoxRuntimeError` naming the failure.
     """
     require_x64()
-    times, moved_times = convert_legacy_times("simulate", times, deprecated)
-    model, options, moved = convert_legacy(model, options, deprecated)
-    moved = moved_times | moved
+    times = as_times(times)
+    if not isinstance(model, AbstractModel):
+        raise ScenarioError(f"model must be ElasticFoundation() or RigidGround(...), got {model!r}")
+    if options is not None and not isinstance(options, SolverOptions):
+        raise ScenarioError(f"options must be a jaxhoist.SolverOptions, got {type(options).__name__}")
     if isinstance(model, RigidGround):
         if options is None:
             options = SolverOptions(diffrax.Tsit5())  # for its default tolerances 1e-6, 1e-8
-        warn_moved("simulate", moved)
+        if options.rtol is None or options.atol is None:
+            raise ScenarioError(
+                "model=RigidGround() reads only the tolerances (rtol, atol of a PIDController) and max_steps "
+                f"of options; got the step-size controller {type(options.stepsize_controller).__name__}"
+            )
         rigid_options = RigidOptions(
             rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
             atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
@@ -251,8 +196,7 @@ def simulate(
     if options is None:
         options = SolverOptions()
     _, ts = times.resolve(scenario, DEFAULT_N, jnp)
-    warn_moved("simulate", moved)
     ts = jnp.asarray(ts, dtype=jnp.float64)
-    with forward_mode_hint():  # jacfwd through the reverse adjoint: say to pass adjoint="forward"
+    with forward_mode_hint():  # jacfwd through the reverse adjoint: say to pass adjoint=diffrax.ForwardMode()
         traj = _solve_jit(scenario.unlabelled(), ts, options)  # one program for any labels
     return _raise_on_failure(traj) if throw else traj

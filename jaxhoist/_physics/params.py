@@ -28,8 +28,6 @@ from .hoist import AbstractHoistLaw as AbstractHoistLaw
 from .hoist import ConstantSpeedHoist as ConstantSpeedHoist
 from .hoist import ProfileHoist as ProfileHoist
 from .hoist import RampedHoist as RampedHoist
-from .paths import get_leaf as get_leaf  # the dotted paths live in physics.paths (issue 11)
-from .paths import leaf_getter as leaf_getter
 from .paths import replace_leaves, unit
 
 # --------------------------------------------------------------------------------------------- load
