@@ -27,6 +27,7 @@ from ._apps.scan import ScanResult as ScanResult
 from ._apps.scan import ScanStatus as ScanStatus
 from ._apps.scan import Sweep as Sweep
 from ._apps.scan import scan as scan
+from ._apps.simulate import simulate as simulate
 from ._errors import Float64Error as Float64Error
 from ._errors import ScenarioError as ScenarioError
 from ._errors import SolveStatus as SolveStatus
@@ -41,10 +42,6 @@ from ._io.scenario import scenario_from_dict as scenario_from_dict
 from ._numerics.observables import Observable as Observable
 from ._numerics.observables import contact_function as contact_function
 from ._numerics.observables import get as get_observable  # noqa: F401  (re-export under a clearer name)
-from ._numerics.options import ElasticFoundation as ElasticFoundation
-from ._numerics.options import ElasticRope as ElasticRope
-from ._numerics.options import InextensibleRope as InextensibleRope
-from ._numerics.options import RigidGround as RigidGround
 from ._numerics.options import SolverOptions as SolverOptions
 from ._numerics.rigid_compiled import StallRule as StallRule
 from ._numerics.rigid_compliant import ChatterRule as ChatterRule
@@ -54,8 +51,8 @@ from ._numerics.rigid_solve import RigidTrajectory as RigidTrajectory
 from ._numerics.rigid_solve import simulate_rigid as simulate_rigid
 from ._numerics.rosenbrock import RosenbrockW as RosenbrockW
 from ._numerics.solve import Trajectory as Trajectory
-from ._numerics.solve import simulate as simulate
 from ._numerics.times import Times as Times
+from ._physics.elastic import ElasticFoundation as ElasticFoundation
 from ._physics.elastic import State as State
 from ._physics.elastic import vector_field as vector_field
 from ._physics.energy import Energy as Energy
@@ -76,6 +73,9 @@ from ._physics.params import Scenario as Scenario
 from ._physics.paths import get_param as get_param
 from ._physics.paths import param_unit as param_unit
 from ._physics.paths import set_param as set_param
+from ._physics.rigid_model import ElasticRope as ElasticRope
+from ._physics.rigid_model import InextensibleRope as InextensibleRope
+from ._physics.rigid_model import RigidGround as RigidGround
 from ._physics.statics import first_failure as first_failure
 from ._physics.statics import lift_threshold as lift_threshold
 from ._physics.statics import rest_statics as rest_statics

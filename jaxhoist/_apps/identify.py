@@ -50,7 +50,6 @@ from .._io.measurement import (
 )
 from .._io.scenario import load_scenario
 from .._numerics.options import SolverOptions
-from .._numerics.solve import simulate
 from .._numerics.times import Times
 from .._physics.params import Scenario
 from .._physics.paths import param_unit
@@ -69,6 +68,7 @@ from .identify_result import IdentificationResult as IdentificationResult
 from .identify_result import StartResult as StartResult
 from .identify_result import covariance_report as covariance_report
 from .identify_result import plot_fit as plot_fit
+from .simulate import simulate
 
 # ------------------------------------------------------------------------------------- identify
 

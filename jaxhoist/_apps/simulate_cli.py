@@ -163,10 +163,10 @@ def _solve_rigid(args, scenario, t1, ts, options, progress):
     """The rigid-ground model's phase loop, its phase log drawn as a bar; (trajectory, solve time [s])."""
     import numpy as np
 
-    from .._numerics.options import ElasticRope, InextensibleRope, RigidGround
     from .._numerics.rigid_options import RigidOptions
     from .._numerics.rigid_solve import simulate_rigid
     from .._numerics.times import Times
+    from .._physics.rigid_model import ElasticRope, InextensibleRope, RigidGround
 
     label = "solving with the rigid-ground model (each phase compiles on first use)"
     with (

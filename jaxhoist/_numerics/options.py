@@ -1,13 +1,11 @@
 """Choices of numerics as objects: `SolverOptions` (which integrator, which step-size control, which adjoint,
-how many steps) and the models `ElasticFoundation` / `RigidGround` that `simulate` dispatches on.
+how many steps).
 
 Every choice is a real object (a diffrax solver, a diffrax step-size controller, a diffrax adjoint), the way
 `diffrax.diffeqsolve` takes them.
 """
 
 from __future__ import annotations
-
-from typing import ClassVar
 
 import diffrax
 import equinox as eqx
@@ -179,54 +177,3 @@ class SolverOptions(eqx.Module):
             "fixed_step": self.fixed_step,
             "adjoint": type(self.adjoint).__name__,
         }
-
-
-# ------------------------------------------------------------------------------------------------ models
-
-
-class AbstractRope(eqx.Module):
-    """How the rigid-ground model treats the rope (the elastic model always has the elastic rope (2.14))."""
-
-    name: ClassVar[str]
-
-
-class ElasticRope(AbstractRope):
-    """The elastic, damped rope of eq. (2.14)."""
-
-    name: ClassVar[str] = "elastic"
-
-
-class InextensibleRope(AbstractRope):
-    """The inextensible rope of eq. (2.15): a constraint with the boom tip's motion (rigid model only)."""
-
-    name: ClassVar[str] = "inextensible"
-
-
-class AbstractModel(eqx.Module):
-    """A model of the ground contact that `simulate` can solve."""
-
-
-class ElasticFoundation(AbstractModel):
-    """The paper's §3 model: the box on four one-sided corner spring-dampers with friction; solved by
-    `diffrax.diffeqsolve` (differentiable, vmappable)."""
-
-
-class RigidGround(AbstractModel):
-    """The paper's §2 model: the box on a rigid ground, phases chosen by events (rest, sliding, tipping,
-    flight, impacts); solved by the host-side phase driver `simulate_rigid` (not differentiable).
-
-    - `rope`: `ElasticRope()` (2.14, default) or `InextensibleRope()` (2.15).
-    - `restitution`: Newton's coefficient e [-] of corner impacts, in [0, 1] (0, the default: plastic).
-
-    **Raises** `ScenarioError` for a restitution outside [0, 1].
-    """
-
-    rope: AbstractRope = ElasticRope()
-    restitution: float = 0.0
-
-    def __check_init__(self):
-        if not isinstance(self.rope, AbstractRope):
-            raise ScenarioError(f"rope must be ElasticRope() or InextensibleRope(), got {self.rope!r}")
-        e = float(self.restitution)
-        if not (0.0 <= e <= 1.0):
-            raise ScenarioError(f"restitution (e) must be in [0, 1], got {self.restitution}")

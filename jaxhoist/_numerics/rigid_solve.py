@@ -46,7 +46,7 @@ import numpy as np
 from .._errors import ScenarioError, require_x64
 from .._physics import rigid
 from .._physics.params import Scenario
-from .options import InextensibleRope, RigidGround
+from .._physics.rigid_model import InextensibleRope, RigidGround
 from .rigid_compiled import (
     OUTPUT_CHUNK,
     StallRule,

@@ -1,5 +1,6 @@
-"""`simulate`: validate on the host, then one `eqx.filter_jit` core that solves the elastic model with
-diffrax and evaluates every output at the saved times."""
+"""`simulate_elastic`, the elastic-foundation model of `simulate`: validate on the host, then one
+`eqx.filter_jit` core that solves the elastic model with diffrax and evaluates every output at the saved
+times. It knows nothing of the rigid model (`_apps/simulate.py` dispatches on the model type)."""
 
 from __future__ import annotations
 
@@ -10,17 +11,15 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from .._errors import ScenarioError, SolveStatus, forward_mode_hint, require_x64
+from .._errors import SolveStatus, forward_mode_hint
 from .._physics import energy as energy_mod
 from .._physics import kinematics
 from .._physics.elastic import Constants, State, snapshot, vector_field
 from .._physics.equilibrium import initial_state
 from .._physics.params import Scenario
-from .options import AbstractModel, ElasticFoundation, RigidGround, SolverOptions
-from .rigid_options import RigidOptions
-from .rigid_solve import simulate_rigid
+from .options import SolverOptions
 from .sensitivity import solve_forward, uses_tangent_solve
-from .times import TimesLike, as_times
+from .times import Times
 from .trajectory import Trajectory as Trajectory
 
 
@@ -135,60 +134,23 @@ def as_float64_leaves(scenario: Scenario) -> Scenario:
 DEFAULT_N = 501
 
 
-def simulate(
-    scenario: Scenario,
-    times: TimesLike = None,
-    model: AbstractModel = ElasticFoundation(),
-    options: SolverOptions | None = None,
-    *,
-    throw: bool = True,
+def simulate_elastic(
+    scenario: Scenario, times: Times, options: SolverOptions | None = None, *, throw: bool = True
 ) -> Trajectory:
-    """Simulate a lift from rest at t = 0 to the end time t1 [s] of `times`.
-
-    Works under `jax.jit`, `jax.vmap` over any scenario leaf, `jax.grad` (the default adjoint) and
-    `jax.jacfwd` (`SolverOptions(adjoint=diffrax.ForwardMode())`), for the elastic model. For derivatives
-    over long spans pass `options=SolverOptions(diffrax.Tsit5())`: through the default Rosenbrock-W solver
-    they are not reliable yet at high friction (see `RosenbrockW`).
+    """The elastic-foundation model (paper §3) of `jaxhoist.simulate`: check `scenario` on the host, then
+    one `eqx.filter_jit` core that solves with diffrax and evaluates every output at the saved `times`.
 
     **Arguments**
-    - `scenario`: a `Scenario` (see `load_scenario`).
-    - `times`: the saved times, a `Times(t1, n, ts)`: end time t1 [s] (default `ts[-1]` if `ts` is given,
-      else `scenario.t1`), `n` equally spaced times from 0 to t1 (default 501) or the saved times `ts` [s]
-      (starting at 0, ending at t1). A number is t1 [s], a 1-D array is ts [s]. Default `Times()`.
-    - `model`: `ElasticFoundation()` (paper §3, the default: one compiled, differentiable solve) or
-      `RigidGround(rope=ElasticRope() | InextensibleRope())` (paper §2, the event-driven reference
-      `simulate_rigid`: host-side phase loop, not differentiable or vmappable; it returns a
-      `RigidTrajectory` with the same output names plus `impact_loss` and the phase log).
-    - `options`: `SolverOptions` (solver, step-size controller, adjoint, dt0, max_steps, progress meter).
-      The rigid model reads only its tolerances and step budget.
-    - `throw`: raise if the solve fails (max steps, non-finite state); with False, read `Trajectory.status`.
+    - `scenario`: a `Scenario`.
+    - `times`: the saved times, a `Times` (its defaults resolved here: t1 the scenario's, 501 times).
+    - `options`: `SolverOptions` (default `SolverOptions()`, the Rosenbrock-W solver).
+    - `throw`: raise if the solve fails; with False, read `Trajectory.status`.
 
-    **Returns** a `Trajectory`: for the rigid model its subclass `RigidTrajectory`, which adds `impact_loss`
-    and the phase log.
+    **Returns** a `Trajectory`.
 
-    **Raises** `ScenarioError` for invalid input (before compiling), `Float64Error` without x64,
-    and (with `throw=True`) an `EquinoxRuntimeError` naming the failure.
+    **Raises** `ScenarioError` for invalid input (before compiling), and (with `throw=True`) an
+    `EquinoxRuntimeError` naming the failure.
     """
-    require_x64()
-    times = as_times(times)
-    if not isinstance(model, AbstractModel):
-        raise ScenarioError(f"model must be ElasticFoundation() or RigidGround(...), got {model!r}")
-    if options is not None and not isinstance(options, SolverOptions):
-        raise ScenarioError(f"options must be a jaxhoist.SolverOptions, got {type(options).__name__}")
-    if isinstance(model, RigidGround):
-        if options is None:
-            options = SolverOptions(diffrax.Tsit5())  # for its default tolerances 1e-6, 1e-8
-        if options.rtol is None or options.atol is None:
-            raise ScenarioError(
-                "model=RigidGround() reads only the tolerances (rtol, atol of a PIDController) and max_steps "
-                f"of options; got the step-size controller {type(options.stepsize_controller).__name__}"
-            )
-        rigid_options = RigidOptions(
-            rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
-            atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
-            max_steps=options.max_steps,
-        )
-        return simulate_rigid(scenario, times, model, rigid_options)
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()
