@@ -22,7 +22,7 @@ from jaxhoist._apps.bifurcation import (  # noqa: E402
     locate_bifurcation,
     trace_boundary,
 )
-from jaxhoist._apps.scan_result import ScanResult  # noqa: E402
+from jaxhoist._apps.scan.result import ScanResult  # noqa: E402
 from jaxhoist._numerics import observables as O  # noqa: E402
 from jaxhoist._physics import kinematics  # noqa: E402
 
@@ -333,7 +333,7 @@ def test_find_crossings_brackets_every_zero_of_a_continuous_indicator():
 def test_scan_plots_show_the_data_failures_and_located_values(newton_result, tmp_path):
     """The plots of a sweep (one panel per component, failed members ticked, located values as lines), of a
     2-D grid (a colour map per component) and of the locator's convergence, built without solving."""
-    from jaxhoist._apps import scan_plots
+    from jaxhoist._apps.plots import scan as scan_plots
 
     x = np.linspace(0.0, 1.0, 21)
     y = np.stack([x, x**2], axis=-1)
@@ -421,7 +421,7 @@ def test_scan_and_bifurcation_commands(tmp_path, capfd):
     the default level is the midpoint of the values at the bracket ends), lands on a/2."""
     import json
 
-    from jaxhoist._apps.cli import main
+    from jaxhoist._apps.cli.app import main
 
     path = tmp_path / "sym.toml"
     path.write_text(SYMMETRIC_TOML)
@@ -472,7 +472,7 @@ def test_trace_reports_a_vanished_jump_as_lost(monkeypatch):
     a stand-in (no solves): a jump of size 1 at q = 0 and 0.9, of size 1e-4 at q = 0.5."""
     import types
 
-    from jaxhoist._apps import bifurcation_trace
+    from jaxhoist._apps.bifurcation import trace as bifurcation_trace
 
     def fake_locate(sc, param, obs, br, level=None, search=SearchOptions(), **kw):
         q = float(sc.hoist.speed)
@@ -496,7 +496,7 @@ def test_trace_boundary_passes_its_settings_to_every_point(monkeypatch):
 
     import diffrax
 
-    from jaxhoist._apps import bifurcation_trace
+    from jaxhoist._apps.bifurcation import trace as bifurcation_trace
 
     seen = []
 

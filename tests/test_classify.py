@@ -1,6 +1,6 @@
-"""`jaxhoist._apps.classify`: each kind of located change recognised on synthetic samples, the 10-90 % ramp
-width against its closed form, the `last_contact_time` observable against `liftoff_time`, and one cheap
-real case."""
+"""`jaxhoist._apps.bifurcation.classify`: each kind of located change recognised on synthetic samples, the
+10-90 % ramp width against its closed form, the `last_contact_time` observable against `liftoff_time`,
+and one cheap real case."""
 
 import math
 
@@ -13,7 +13,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist._apps.classify import classify_change, classify_samples, ramp_width  # noqa: E402
+from jaxhoist._apps.bifurcation.classify import classify_change, classify_samples, ramp_width  # noqa: E402
 from jaxhoist._numerics import observables as O  # noqa: E402
 
 BR = (0.4999995, 0.5000005)  # a located bracket of width 1e-6 around p* = 0.5
@@ -167,7 +167,7 @@ def test_classify_change_passes_its_times_to_scan(monkeypatch):
     default is 2501 saved times (the scan replaced by a recorder: no solves)."""
     import diffrax
 
-    from jaxhoist._apps import scan as scan_mod
+    from jaxhoist._apps.scan import run as scan_mod
 
     seen = []
 
@@ -222,7 +222,7 @@ def test_cli_bifurcation_classify(tmp_path, capsys):
     the level crossing of the mass centre's x after 0.3 s of paper-4.2 is a continuous crossing."""
     import json
 
-    from jaxhoist._apps import cli
+    from jaxhoist._apps.cli import app as cli
 
     out = tmp_path / "bif"
     code = cli.main(

@@ -17,7 +17,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from jaxhoist._apps import cli, simulate_cli  # noqa: E402
+from jaxhoist._apps.cli import app as cli  # noqa: E402
+from jaxhoist._apps.cli import simulate as simulate_cli  # noqa: E402
 from jaxhoist._io import results  # noqa: E402
 from jaxhoist._io.scenario import SCHEMA  # noqa: E402
 
@@ -156,7 +157,7 @@ def test_simulate_csv_goes_into_identify_unchanged(tmp_path):
 
 
 def cli_plots():
-    from jaxhoist._apps import plots
+    from jaxhoist._apps.plots import trajectory as plots
 
     return plots.PLOTS
 
@@ -345,7 +346,7 @@ def test_library_hints_use_the_flag_names(monkeypatch, capsys):
 def test_scan_progress_bar_shows_members_rate_eta_failures(monkeypatch):
     import io
 
-    from jaxhoist._apps import progress as scan_mod
+    from jaxhoist._apps.scan import progress as scan_mod
 
     stream = io.StringIO()
     bar = cli.ScanProgressBar(stream=stream)

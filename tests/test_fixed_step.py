@@ -18,7 +18,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist._apps.scan import scan  # noqa: E402
+from jaxhoist._apps.scan.run import scan  # noqa: E402
 from jaxhoist._numerics import fixed_step  # noqa: E402
 from jaxhoist._numerics.options import SolverOptions  # noqa: E402
 from jaxhoist._numerics.solve import solve  # noqa: E402

@@ -1,4 +1,5 @@
-"""Parameter identification (`jaxhoist._apps.identify`) and measurement files (`jaxhoist._io.measurement`).
+"""Parameter identification (`jaxhoist._apps.identify.fit`) and measurement files
+(`jaxhoist._io.measurement`).
 
 One compiled problem serves every fit here: μ of paper-4.2 from the mass-centre path on 21 samples over
 0.4 s (before the first corner touches down again: there the ground damper force jumps and the flow is not
@@ -18,10 +19,10 @@ import pytest  # noqa: E402
 import scipy.stats  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist._apps import identify as ident  # noqa: E402
-from jaxhoist._apps import identify_core  # noqa: E402
-from jaxhoist._apps.identify import identify, synthetic_measurement  # noqa: E402
-from jaxhoist._apps.identify_options import fit_solver_options  # noqa: E402
+from jaxhoist._apps.identify import core as identify_core  # noqa: E402
+from jaxhoist._apps.identify import fit as ident  # noqa: E402
+from jaxhoist._apps.identify.fit import identify, synthetic_measurement  # noqa: E402
+from jaxhoist._apps.identify.options import fit_solver_options  # noqa: E402
 from jaxhoist._io.measurement import Measurement, MeasurementError, read_measurement, write_measurement  # noqa: E402
 from jaxhoist._numerics import compile_cache  # noqa: E402
 
@@ -217,7 +218,7 @@ def test_collinear_parameters_give_condition_number_and_direction():
 
 
 def test_cli_identify_writes_estimates(scenario, clean, tmp_path, capfd):
-    from jaxhoist._apps.cli import main
+    from jaxhoist._apps.cli.app import main
 
     csv = write_measurement(tmp_path / "lift.csv", _noisy(clean, 100), units={"position_z": "mm"})
     out = tmp_path / "fit"

@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import jaxhoist as jh
-from jaxhoist._numerics.rigid_solve import RigidContactError, simulate_rigid
+from jaxhoist._numerics.rigid.solve import RigidContactError, simulate_rigid
 from jaxhoist._physics import rigid, statics
 
 N_SAVE = 61
@@ -275,7 +275,7 @@ def test_model_switch_and_cli_reach_the_rigid_driver(slide_run, tmp_path):
     """`simulate(..., model=RigidGround())` and `jaxhoist simulate --model rigid` run the same phase driver:
     the same sliding motion (bit for bit: same solver, same settings), and the CLI's energy residual includes
     the impact losses."""
-    from jaxhoist._apps.cli import main
+    from jaxhoist._apps.cli.app import main
     from jaxhoist._io.results import load_trajectory
 
     sc, ref = slide_run

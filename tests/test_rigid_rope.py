@@ -15,7 +15,7 @@ import pytest
 from scipy.optimize import brentq
 
 import jaxhoist as jh
-from jaxhoist._numerics.rigid_solve import simulate_rigid
+from jaxhoist._numerics.rigid.solve import simulate_rigid
 
 N_SAVE = 61
 T1 = 1.5
@@ -174,7 +174,7 @@ def test_energy_balance_closes_with_the_rope_jerk_losses(jerk_runs):
 
 
 def test_rope_switch_errors():
-    from jaxhoist._apps.cli import main
+    from jaxhoist._apps.cli.app import main
 
     assert main(["simulate", "paper-4.1", "--rope", "inextensible", "--quiet", "--no-plots"]) == 2
     with pytest.raises(SystemExit):
@@ -196,7 +196,7 @@ def test_model_switch_reaches_the_inextensible_rope(ramped_lift):
 
 def test_cli_runs_the_inextensible_rope(ramped_lift, tmp_path):
     """`jaxhoist simulate FILE --model rigid --rope inextensible` gives the same lift."""
-    from jaxhoist._apps.cli import main
+    from jaxhoist._apps.cli.app import main
     from jaxhoist._io.results import load_trajectory
 
     _, ref = ramped_lift

@@ -1,4 +1,4 @@
-"""`jaxhoist.scan` (with `_io/scan_store.py`, `_apps/scan_result.py`): chunked, vmapped, sharded scans.
+"""`jaxhoist.scan` (with `_io/scan_store.py`, `_apps/scan/result.py`): chunked, vmapped, sharded scans.
 
 The scans here share one compiled core (same scenario structure, observables, options, saved times and
 chunk shape) wherever a test does not need another shape. The box is a 1 m cube of 1000 kg pulled
@@ -18,9 +18,9 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist._apps.scan import ScanResult, ScanStatus, scan  # noqa: E402
-from jaxhoist._apps.sweep import members as _members  # noqa: E402
-from jaxhoist._apps.sweep import parse_values  # noqa: E402
+from jaxhoist._apps.scan.run import ScanResult, ScanStatus, scan  # noqa: E402
+from jaxhoist._apps.scan.sweep import members as _members  # noqa: E402
+from jaxhoist._apps.scan.sweep import parse_values  # noqa: E402
 from jaxhoist._numerics import observables as O  # noqa: E402
 from jaxhoist._physics.paths import get_param, parse_path, set_param  # noqa: E402
 
@@ -330,7 +330,7 @@ def test_forward_sensitivities_match_differences(box, tmp_path):
     # The sensitivities of a vector observable keep both axes, labelled, in the netCDF file and the plots.
     import scipy.io
 
-    from jaxhoist._apps.scan_plots import _components
+    from jaxhoist._apps.plots.scan import _components
 
     assert res.axes("d_final_position") == [
         ("final_position_component", 3, ("x", "y", "z")),
@@ -539,7 +539,7 @@ def test_four_devices_and_resumes_across_device_counts(clean, tmp_path):
 def test_fingerprint_sees_constants_and_closures_of_custom_observables():
     """Issue 14: a custom observable whose constant or closed-over value changed must not reuse the chunks
     of the old one (the fingerprint hashed only the bytecode)."""
-    from jaxhoist._apps.scan import _fingerprint
+    from jaxhoist._apps.scan.run import _fingerprint
     from jaxhoist._numerics.batch import BatchSpec as _Spec
     from jaxhoist._numerics.observables import resolve
 
@@ -573,7 +573,7 @@ def test_fingerprint_sees_solver_settings_beyond_the_tolerances():
     PI coefficients) are not reused: the fingerprint has the solver's and the controller's fields."""
     import diffrax
 
-    from jaxhoist._apps.scan import _fingerprint
+    from jaxhoist._apps.scan.run import _fingerprint
     from jaxhoist._numerics.batch import BatchSpec as _Spec
     from jaxhoist._numerics.observables import resolve
 
@@ -663,7 +663,7 @@ def test_fingerprint_is_the_same_in_every_process():
     import sys
     from pathlib import Path
 
-    from jaxhoist._apps.scan import _fingerprint
+    from jaxhoist._apps.scan.run import _fingerprint
     from jaxhoist._numerics.batch import BatchSpec as _Spec
     from jaxhoist._numerics.observables import resolve
 
@@ -709,7 +709,7 @@ def test_sweep_objects_count_members_and_refuse_bad_input(box):
     """`Sweep`, `Grid` (outer product) and `Points` (zipped): member counts and layout; a plain mapping is a
     `Sweep` for one parameter and a `Grid` for several; bad input gives a one-line `ScenarioError` naming
     the path, before anything is compiled."""
-    from jaxhoist._apps.sweep import as_sweep
+    from jaxhoist._apps.scan.sweep import as_sweep
 
     g = jh.Grid({MU: "0.1:0.6:6", "hoist.speed": [0.2, 0.3]})
     assert g.size == len(g) == 12 and g.shape == (6, 2) and g.params == (MU, "hoist.speed")
@@ -745,7 +745,7 @@ def test_default_lanes_widen_with_the_member_count_only():
     next power of two."""
     from types import SimpleNamespace
 
-    from jaxhoist._apps.scan_layout import adaptive_lanes
+    from jaxhoist._apps.scan.layout import adaptive_lanes
 
     widths = {n: adaptive_lanes(n) for n in (1, 64, 511, 512, 1024, 4096, 65536)}
     assert widths == {1: 16, 64: 16, 511: 16, 512: 32, 1024: 64, 4096: 256, 65536: 256}

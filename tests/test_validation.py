@@ -625,7 +625,9 @@ def test_strict_numbers():
 
 
 def _cli(monkeypatch, capsys, argv) -> tuple[int, str]:
-    from jaxhoist._apps import bifurcation_cli, cli, simulate_cli
+    from jaxhoist._apps.cli import app as cli
+    from jaxhoist._apps.cli import bifurcation as bifurcation_cli
+    from jaxhoist._apps.cli import simulate as simulate_cli
 
     monkeypatch.setattr(simulate_cli, "_compiled_solve", _core_must_not_run)
     for name in ("scan", "locate_bifurcation", "trace_boundary"):
@@ -717,7 +719,7 @@ def test_overwrite_cleans_only_the_files_simulate_writes(tmp_path):
 
 
 def test_failed_run_summary_prints_no_event_times():
-    from jaxhoist._apps.cli import event_lines, summary_status
+    from jaxhoist._apps.cli.app import event_lines, summary_status
     from jaxhoist._errors import SolveStatus
 
     ts = np.linspace(0.0, 1.0, 11)
@@ -817,7 +819,7 @@ def test_measurement_path_that_is_a_folder(tmp_path):
 def test_cli_overwrite_replaces_a_previous_run(tmp_path, capsys):
     """End to end (the short solve of tests/test_cli.py, compiled once per process): a second run into the
     same folder is refused; with --overwrite and --no-plots the old PNGs are gone and the data is new."""
-    from jaxhoist._apps import cli
+    from jaxhoist._apps.cli import app as cli
     from jaxhoist._io import results
 
     out = tmp_path / "o"

@@ -7,14 +7,14 @@ import diffrax
 
 from .._errors import ScenarioError, require_x64
 from .._numerics.options import SolverOptions
-from .._numerics.rigid_options import RigidOptions
-from .._numerics.rigid_solve import simulate_rigid
+from .._numerics.rigid.options import RigidOptions
+from .._numerics.rigid.solve import simulate_rigid
 from .._numerics.solve import simulate_elastic
 from .._numerics.times import TimesLike, as_times
 from .._numerics.trajectory import Trajectory
 from .._physics.elastic import AbstractModel, ElasticFoundation
 from .._physics.params import Scenario
-from .._physics.rigid_model import RigidGround
+from .._physics.rigid.model import RigidGround
 
 
 def simulate(

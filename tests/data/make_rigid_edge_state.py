@@ -22,7 +22,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist._numerics.rigid_solve import simulate_rigid  # noqa: E402
+from jaxhoist._numerics.rigid.solve import simulate_rigid  # noqa: E402
 
 OUT = Path(__file__).parent / "rigid_edge_state.npz"
 T_FROM = 46.0  # [s]
@@ -35,7 +35,7 @@ def scenario() -> jh.Scenario:
 
 
 def main() -> None:
-    from jaxhoist._numerics import rigid_run
+    from jaxhoist._numerics.rigid import run as rigid_run
 
     found: dict = {}
     step = rigid_run._Run.step
