@@ -1,15 +1,16 @@
 """Where does the motion change character? The public names of the bifurcation tools, from the modules that
 hold them:
 
-- `bifurcation_jumps`: `find_jumps`, `find_crossings` and their `Jump` brackets on a 1-D scan;
-- `bifurcation_locate`: `locate_bifurcation` (refinement of one bracket to a tolerance, with
-  derivative-accelerated root finding) and `locate_jumps` (every candidate of a scan);
-  `bifurcation_multisection` its vmapped multisection rounds; `bifurcation_eval` the indicator and the
-  compiled solves;
-- `bifurcation_trace`: `trace_boundary` (continuation of a two-parameter boundary);
-- `bifurcation_options`: `SearchOptions` and the methods `Newton`, `Bisection`, `Multisection`;
-- `bifurcation_result`: `Bifurcation`, `Boundary`, `BifurcationError`;
-- `bifurcation_cli`: the `jaxhoist bifurcation` command.
+- `jumps`: `find_jumps`, `find_crossings` and their `Jump` brackets on a 1-D scan;
+- `locate`: `locate_bifurcation` (refinement of one bracket to a tolerance, with derivative-accelerated
+  root finding) and `locate_jumps` (every candidate of a scan); `multisection` its vmapped multisection
+  rounds; `eval` the indicator and the compiled solves;
+- `trace`: `trace_boundary` (continuation of a two-parameter boundary);
+- `options`: `SearchOptions` and the methods `Newton`, `Bisection`, `Multisection`;
+- `result`: `Bifurcation`, `Boundary`, `BifurcationError`;
+- `classify`: `classify_change`, `classify_samples`, `ChangeClass` (what a located change is).
+
+The `jaxhoist bifurcation` command lives in `_apps/cli/bifurcation.py`.
 
     import jaxhoist as jh
     from jaxhoist import observables as obs

@@ -76,7 +76,7 @@ def locate_bifurcation(
       parameter] (default 1e-6); give up (converged=False) after `max_solves` solves (default 200).
     - `options`: `SolverOptions`; default `SolverOptions(diffrax.Tsit5())` (rtol 1e-6, atol 1e-8), not the
       Rosenbrock-W default of `simulate`: on the paper's §4.3 change it located μ* 40x closer to the
-      reference in half the time (`bifurcation_options.default_solver_options`, docs/bifurcation.md).
+      reference in half the time (`options.default_solver_options`, docs/bifurcation.md).
     - `times`: the saved times, a `Times(t1, n, ts)` as in `simulate` (a number is t1 [s], a 1-D array ts
       [s]); default `Times()`: 201 equally spaced times from 0 to the scenario's t1.
     - `progress`: called on the host after every evaluation (every round for multisection) with a dict:

@@ -27,7 +27,7 @@ class FitOptions(eqx.Module):
       cost wins, all are reported in `IdentificationResult.starts`.
     - `lm_rtol`, `lm_atol`: Levenberg-Marquardt termination, the Cauchy test on the fit variables z and on
       the whitened residuals [-] (optimistix `rtol`, `atol`); the fit also stops when, after a rejected
-      step, the next trial step in z is below that test's resolution (`identify_core._LevenbergMarquardt`).
+      step, the next trial step in z is below that test's resolution (`core._LevenbergMarquardt`).
     - `max_iterations`: the step budget of each Levenberg-Marquardt run.
     - `max_relative_se`: a parameter whose standard error exceeds this fraction of its value [-] is not
       identifiable; `condition_limit`: nor are the parameters when the condition number of JᵀJ (in relative
@@ -76,7 +76,7 @@ def fit_solver_options(options: SolverOptions | None) -> SolverOptions:
     (`diffrax.ForwardMode`).
 
     The state and its parameter sensitivities are integrated as one system under one step-size control
-    (`identify_core._sensitivity_solve`); with `jaxhoist.RosenbrockW` its W serves every block, factorised
+    (`core._sensitivity_solve`); with `jaxhoist.RosenbrockW` its W serves every block, factorised
     once per step. It became the default on 2026-11-27: on paper-4.2 (`python experiments/identify_paper42.py
     --no-scipy --solver tsit5 --solver rosenbrock-w`, μ, k, h, c_l, b_l from 5 mm / 1 % noise) the 25 s fit
     took 20.0 s + 24.3 s compile against Tsit5's (rtol 1e-6, the default until then) 74.9 s + 15.8 s, the

@@ -9,7 +9,7 @@ sharded computation per chunk, with per-member status, resumable chunk files and
 
 Where the parts live: the members (`apps.sweep`), the pure batch core (`numerics.batch`: a vmapped group of
 `lanes` members, the groups of a chunk on each device, the devices in parallel), the chunk loop and the
-assembly of the `ScanResult` (this module, `apps.scan_result`), the files in `out_dir` (`io.scan_store`),
+assembly of the `ScanResult` (this module, `scan.result`), the files in `out_dir` (`io.scan_store`),
 progress reports (`apps.progress`).
 
 How the work is laid out (and why results do not depend on the chunk size or the device count):

@@ -1,5 +1,5 @@
 """The compiled (jitted) pieces of the rigid model's phase driver: the phase solve, guards, candidate
-configurations, impulses, rope state and outputs (`numerics.rigid_solve`), and small host helpers."""
+configurations, impulses, rope state and outputs (`numerics.rigid.solve`), and small host helpers."""
 
 from __future__ import annotations
 

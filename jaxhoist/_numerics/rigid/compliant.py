@@ -23,7 +23,7 @@ configuration is consistent `ChatterRule.max_regularised` times in a row (the le
 a regularised phase again and again: two sticking corners on an edge whose minimum-norm friction split
 breaks one cone, a Painlevé-type situation with no rigid phase to continue with). The compliant phase is
 not left while the rigid model would have no consistent configuration at its end: it goes on from its own
-state, episode after episode (`rigid_run._Run.compliant`); the stiff foundation it integrates is the limit
+state, episode after episode (`run._Run.compliant`); the stiff foundation it integrates is the limit
 the rigid model stands for, and it has a motion where the rigid contact problem has none.
 """
 

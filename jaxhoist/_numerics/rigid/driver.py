@@ -498,5 +498,5 @@ class _Driver:
 
     # ---------------------------------------------------------------------------- impacts
     def impact(self, t, y, striking: list[int], taut: bool = False, normal_only: bool = False):
-        """Velocity jump at an impact of the `striking` corners: `numerics.rigid_impacts.impact`."""
+        """Velocity jump at an impact of the `striking` corners: `numerics.rigid.impacts.impact`."""
         return rigid_impacts.impact(self, t, y, striking, taut=taut, normal_only=normal_only)

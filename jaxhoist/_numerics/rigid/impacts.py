@@ -1,7 +1,7 @@
 """Impacts of the rigid model (paper §2): corner impacts with Newton's restitution law and Coulomb friction
 impulses, and the plastic jerk of the inextensible rope (2.15), with their resolution rules
 (docs/rigid-model.md, "Resolution of contact choices and impacts"). Host side; `drv` is the phase
-driver (`numerics.rigid_driver._Driver`)."""
+driver (`numerics.rigid.driver._Driver`)."""
 
 from __future__ import annotations
 

@@ -39,7 +39,7 @@ class RigidOptions(eqx.Module):
     - `settings`: `physics.rigid.Settings` (Baumgarte β [1/s], slip blend velocity [m/s], pseudo-inverse
       cut-off, stop and rest velocities [m/s]); default (None): `Settings()`.
     - `chatter`: a `ChatterRule`: when a sustained cycle of impacts (or a phase that stalls twice) is passed
-      by a compliant phase (`numerics.rigid_compliant`; recorded in the phase log); None: never (such a run
+      by a compliant phase (`numerics.rigid.compliant`; recorded in the phase log); None: never (such a run
       ends at `max_phases`, or raises at the second stall).
     - `stall`: a `StallRule`: a phase solve whose mean step over `stall.window` step attempts falls below
       `stall.min_step` [s] has stalled (as one that reaches `max_steps`, found after thousands of steps

@@ -1,5 +1,5 @@
 """What the rigid model's phase driver returns (paper §2): the phase log (`PhaseRecord`), the trajectory
-(`RigidTrajectory`) and `RigidContactError`. All are importable from `numerics.rigid_solve` as well."""
+(`RigidTrajectory`) and `RigidContactError`. All are importable from `numerics.rigid.solve` as well."""
 
 from __future__ import annotations
 
@@ -32,7 +32,7 @@ class PhaseRecord:
       taut, or "t1".
     - `state_end`: the state at `t_end` (before any impact).
     - `rope`: "elastic" (2.14), or the inextensible rope (2.15) "taut" or "slack" ("compliant" in a
-      compliant phase, where a stiff elastic rope stands in for it; `numerics.rigid_compliant`).
+      compliant phase, where a stiff elastic rope stands in for it; `numerics.rigid.compliant`).
     - `choice`: how the configuration was chosen where that needed more than consistency (several
       consistent configurations: the rule that picked it; none: the regularised fallback; a compliant
       phase: what triggered it and its parameters), else "".

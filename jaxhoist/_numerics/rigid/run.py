@@ -1,4 +1,4 @@
-"""The phase loop of the rigid model (paper §2) behind `simulate_rigid` (`rigid_solve`): `_Run` solves
+"""The phase loop of the rigid model (paper §2) behind `simulate_rigid` (`solve`): `_Run` solves
 phase after phase, resolves impacts and contact changes, passes sustained cycles by compliant phases and
 assembles the `RigidTrajectory`; `_transition` is its helper."""
 
@@ -315,7 +315,7 @@ class _Run:
         return y_end, end
 
     def compliant(self, t0: float, y0: State, phase0: Phase, why: str) -> bool:
-        """A compliant phase from (t0, y0) (`numerics.rigid_compliant`): fill its saved samples, log it,
+        """A compliant phase from (t0, y0) (`numerics.rigid.compliant`): fill its saved samples, log it,
         book its hand-back loss, and choose the next phase. Returns False when t1 is reached.
 
         The phase is not left while no contact configuration is consistent at its end (the choice would

@@ -33,10 +33,10 @@ for inputs that cannot be continued: too many phases, a failed phase solve, an i
 energy with the given restitution, an inextensible rope that cannot start.
 
 A sustained cycle of impacts or contact changes, or a phase that stalls twice, is passed by a compliant
-phase (`rigid_compliant`), recorded in the phase log. Modules: this one (`simulate_rigid`); `rigid_run`
-(the phase loop `_Run`); `rigid_records` (`PhaseRecord`, `RigidTrajectory`, `RigidContactError`,
-importable from here), `rigid_driver` (`_Driver`: solves, projections, configuration choice),
-`rigid_impacts`, `rigid_coulomb`, `rigid_compiled`.
+phase (`compliant`), recorded in the phase log. Modules: this one (`simulate_rigid`); `run`
+(the phase loop `_Run`); `records` (`PhaseRecord`, `RigidTrajectory`, `RigidContactError`,
+importable from here), `driver` (`_Driver`: solves, projections, configuration choice),
+`impacts`, `coulomb`, `compiled`.
 """
 
 from __future__ import annotations

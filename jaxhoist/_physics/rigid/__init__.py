@@ -23,7 +23,7 @@ a contact's normal force reaching 0 (lift-off of that corner), a free corner rea
 (touch-down or impact), a sticking corner's friction reaching μN_i (slip), a sliding corner's velocity
 along its sliding direction reaching 0 (stop or turn), and for rest: R leaving the rectangle (tip) or
 ρ* reaching 1 (slip). The choice of the next phase, impacts and the phase loop live in
-`numerics.rigid_solve`.
+`numerics.rigid.solve`.
 
 The state is `elastic.State` (with an empty friction state, shape (4, 0)); the rope (2.14) and the boom
 (2.13) are the force laws of `forces`. With `inextensible=True` the rope is instead the constraint (2.15)
@@ -31,9 +31,9 @@ The state is `elastic.State` (with an empty friction state, shape (4, 0)); the r
 and the boom tip's acceleration joins the constrained accelerations. All functions are pure JAX.
 """
 
-# The definitions live in `rigid_contact` (contact modes, phases, settings, loads, contact matrices) and
-# `rigid_dynamics` (the dynamics of a phase, its guards, impulses, energies and outputs; it imports
-# `rigid_contact`); this module re-exports both so that `physics.rigid` stays the one name to use.
+# The definitions live in `contact` (contact modes, phases, settings, loads, contact matrices) and
+# `dynamics` (the dynamics of a phase, its guards, impulses, energies and outputs; it imports
+# `contact`); this module re-exports both so that `physics.rigid` stays the one name to use.
 from .contact import (  # noqa: I001
     FREE as FREE,
     SLIDE as SLIDE,

@@ -1,6 +1,6 @@
 """The §2 rigid model's contact modes, phases, settings, corner loads and contact matrices (the definitions
-that `rigid_dynamics` builds on). Use them through `physics.rigid`, which re-exports this module and
-`rigid_dynamics` (see its docstring for the model)."""
+that `dynamics` builds on). Use them through `physics.rigid`, which re-exports this module and
+`dynamics` (see its docstring for the model)."""
 
 from __future__ import annotations
 
@@ -429,7 +429,7 @@ def solve_rope_contact_system(jacobians, Minv, P, s_rows, target, g_rope, m0, rh
 
 
 class ContactMatrices(eqx.Module):
-    """The data of the contact problem at one instant, for host-side analysis (`numerics.rigid_solve`).
+    """The data of the contact problem at one instant, for host-side analysis (`numerics.rigid.solve`).
 
     - `mass`: M = diag(m I, J) (6, 6); `force`: generalised applied force (6) (see `Loads`);
     - `jacobians` B_i (4, 3, 6), `bias` (4, 3), `corner_velocity` (4, 3), `corners` (4, 3);

@@ -425,7 +425,7 @@ def energy(y: State, ld: Loads, scenario: Scenario, c: Constants) -> Energy:
 
 
 class Output(eqx.Module):
-    """What the trajectory reports at one saved instant (see `numerics.rigid_solve.RigidTrajectory`)."""
+    """What the trajectory reports at one saved instant (see `numerics.rigid.solve.RigidTrajectory`)."""
 
     corners: CornerVecs
     normal: PerCorner
