@@ -78,13 +78,13 @@ def test_gif_and_keyframes_are_valid_images_with_the_expected_frames(result_dir,
 
 
 def test_drawn_geometry_is_the_saved_geometry(result_dir, scene):
-    from jaxhoist._apps.plots.animation import _figure
+    from jaxhoist._apps.plots.animation import new_figure
 
     arrays = results.load_trajectory(result_dir / "trajectory.npz")
     size = np.array([2.5, 6.0, 2.5])  # a, b, c of paper-4.2 [m]
     weight = 850.0 * 2.5 * 6.0 * 2.5 * 9.81  # m g [N]
     assert scene.weight == pytest.approx(weight, rel=1e-12)
-    fig, (ax,) = _figure(1)
+    fig, (ax,) = new_figure(1)
     limits = scene.limits()
     for k in (0, N_SAVE // 4, N_SAVE - 1):
         art = an.draw_frame(ax, scene, k, limits)

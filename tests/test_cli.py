@@ -362,7 +362,7 @@ def test_scan_progress_bar_shows_members_rate_eta_failures(monkeypatch):
 
     # while a subcommand runs, the scan's default per-chunk line is this bar; afterwards it is restored
     saved = scan_mod.default_reporter()
-    with cli._scan_bars():
+    with cli.scan_bars():
         assert isinstance(scan_mod.default_reporter(), cli.ScanProgressBar)
     assert scan_mod.default_reporter() is saved
 
@@ -374,13 +374,13 @@ def test_printed_progress_lines_drive_the_bars():
 
     stream = io.StringIO()
     bar = tqdm(total=100.0, file=stream)
-    sink = cli._LineSink(cli._percent_to_bar(bar))
+    sink = cli.LineSink(cli.percent_to_bar(bar))
     sink.write("0.00%\n12.")  # diffrax's TextProgressMeter lines, possibly split
     sink.write("50%\n")
     assert bar.n == 12.5
     sink.write("100.00%\n")
     assert bar.n == 100.0
     bar = tqdm(total=4.0, file=stream)
-    sink = cli._LineSink(cli._phase_to_bar(bar))
+    sink = cli.LineSink(cli.phase_to_bar(bar))
     sink.write("  0.000000 -   0.300000 s  rest                     -> rest:slip [12 steps so far]\n")
     assert bar.n == pytest.approx(0.3)

@@ -254,23 +254,23 @@ def test_cli_identify_writes_estimates(scenario, clean, tmp_path, capfd):
 
 def test_reparameterisations_round_trip(scenario):
     """log for positive leaves, scaled logit inside bounds (the box for the mass centre), affine otherwise."""
-    params, theta0 = ident._build_params(
+    params, theta0 = ident.build_params(
         scenario, ["k", "load.mass_centre", "rope.attachment[2]", "b_l"], {"b_l": 5e5}, {"k": (1e6, 1e8)}
     )
     assert [p.kind for p in params] == ["logit", "logit", "affine", "log"]
     np.testing.assert_array_equal(params[1].hi, np.asarray(scenario.load.size))  # default bounds: the box
     assert theta0[-1] == 5e5  # the start value
-    z = ident._flat_z(params, theta0)
-    np.testing.assert_allclose(ident._theta_of(params, z), theta0, rtol=1e-13)
+    z = ident.flat_z(params, theta0)
+    np.testing.assert_allclose(ident.theta_of(params, z), theta0, rtol=1e-13)
     # dθ/dz against a central difference of the transform.
     h = 1e-6
     num = [
-        (ident._theta_of(params, z + h * e) - ident._theta_of(params, z - h * e))[i] / (2 * h)
+        (ident.theta_of(params, z + h * e) - ident.theta_of(params, z - h * e))[i] / (2 * h)
         for i, e in enumerate(np.eye(z.size))
     ]
-    np.testing.assert_allclose(ident._flat_dtheta_dz(params, z), num, rtol=1e-6)
+    np.testing.assert_allclose(ident.flat_dtheta_dz(params, z), num, rtol=1e-6)
     # Any z maps inside the bounds.
-    th = ident._theta_of(params, np.full(z.size, 50.0))
+    th = ident.theta_of(params, np.full(z.size, 50.0))
     assert 1e6 < th[0] <= 1e8 and np.all(th[1:4] <= np.asarray(scenario.load.size))
 
 

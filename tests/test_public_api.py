@@ -116,3 +116,21 @@ def test_every_family_has_a_face_of_imports_only():
         assert not names & modules, f"{family}/__init__.py hides its modules {names & modules}"
     apps = {p.name for p in (PACKAGE / "_apps").iterdir() if p.suffix == ".py"}
     assert apps <= {"__init__.py", "simulate.py"}, f"_apps/ top level holds modules: {sorted(apps)}"
+
+
+def test_underscore_names_stay_in_their_module():
+    """A name another module imports is plain (privacy is the package's underscore); a leading underscore
+    means private to its module. At most 10 exceptions, each with its reason in a comment on the line."""
+    crossing = []
+    for path in MODULES:
+        lines = path.read_text().split("\n")
+        for node in ast.walk(ast.parse(path.read_text())):
+            if not isinstance(node, ast.ImportFrom):
+                continue
+            if node.level or (node.module or "").startswith("jaxhoist"):
+                for a in node.names:
+                    if a.name.startswith("_") and not a.name.startswith("__"):
+                        crossing.append((path.relative_to(PACKAGE), a.name, lines[node.end_lineno - 1]))
+    assert len(crossing) <= 10, f"{len(crossing)} imports of _-names across modules: {crossing[:5]} ..."
+    for where, name, line in crossing:
+        assert "#" in line, f"{where} imports {name} without a reason comment"

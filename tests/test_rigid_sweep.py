@@ -208,10 +208,10 @@ def _edge_run(chatter, max_phases: int, span: float):
     make_rigid_edge_state.py`), for `span` seconds, with the `ChatterRule` `chatter` and `max_phases`."""
     import jax.numpy as jnp
 
-    from jaxhoist._numerics.rigid.compiled import _Options
-    from jaxhoist._numerics.rigid.driver import _Driver
+    from jaxhoist._numerics.rigid.compiled import Options
+    from jaxhoist._numerics.rigid.driver import Driver
     from jaxhoist._numerics.rigid.options import DRIVER_TOLERANCES
-    from jaxhoist._numerics.rigid.run import _Run
+    from jaxhoist._numerics.rigid.run import Run
     from jaxhoist._physics import rigid
     from jaxhoist._physics.elastic import State
 
@@ -222,9 +222,9 @@ def _edge_run(chatter, max_phases: int, span: float):
     _, c = rigid.initial_state(sc)
     o, settings = jh.RigidOptions(), rigid.Settings()
     assert o.stall is not None
-    opt = _Options(o.rtol, o.atol, o.max_steps, 1e-10, o.stall.window, o.stall.min_step)  # as simulate_rigid
-    drv = _Driver(sc, c, settings, opt, 0.0, dict(DRIVER_TOLERANCES))
-    run = _Run(drv, np.linspace(t0, t0 + span, 21), t0 + span, max_phases, o.max_steps, chatter, False)
+    opt = Options(o.rtol, o.atol, o.max_steps, 1e-10, o.stall.window, o.stall.min_step)  # as simulate_rigid
+    drv = Driver(sc, c, settings, opt, 0.0, dict(DRIVER_TOLERANCES))
+    run = Run(drv, np.linspace(t0, t0 + span, 21), t0 + span, max_phases, o.max_steps, chatter, False)
     run.resume(t0, y0)
     while run.step():
         pass

@@ -11,11 +11,11 @@ from jaxtyping import Array
 from .._errors import ScenarioError
 
 
-def _f64(x) -> Array:
+def f64(x) -> Array:
     return jnp.asarray(x, dtype=jnp.float64)
 
 
-def _concrete(x) -> np.ndarray | None:
+def concrete(x) -> np.ndarray | None:
     """The value of a leaf as numpy, or None if it is a tracer (inside jit/vmap/grad)."""
     if isinstance(x, jax.core.Tracer):  # pyright: ignore[reportAttributeAccessIssue]  # jax.core is a lazily loaded submodule
         return None
@@ -28,7 +28,7 @@ range, in SI units. Outside it, float64 products in the forces and energies (m g
 lose the value entirely, and a solve "succeeds" with absurd states (C_z ≈ -1e295 m)."""
 
 
-def _show(v):
+def show(v):
     """A value for an error message: the list itself if short, else a summary (messages stay short)."""
     v = np.asarray(v)
     if v.size <= 6:
@@ -43,12 +43,12 @@ def _check_plausible(label: str, v: np.ndarray, unit_s: str) -> None:
     bad = (a > hi) | ((a > 0) & (a < lo))
     if np.any(bad):
         raise ScenarioError(
-            f"{label} = {_show(v)}{unit_s} is not plausible: nonzero values must have a magnitude between "
+            f"{label} = {show(v)}{unit_s} is not plausible: nonzero values must have a magnitude between "
             f"{lo:g} and {hi:g} in SI units (beyond that, forces and energies overflow float64)"
         )
 
 
-def _check(
+def check_value(
     name: str,
     value,
     *,
@@ -64,7 +64,7 @@ def _check(
 ) -> None:
     """Raise `ScenarioError` naming `name` unless every element of `value` is finite and in range (and,
     with `plausible`, of a magnitude within `PLAUSIBLE_MAGNITUDE` unless zero)."""
-    v = _concrete(value)
+    v = concrete(value)
     if v is None:
         return
     label = f"{name} ({symbol})" if symbol else name
@@ -79,17 +79,17 @@ def _check(
         raise ScenarioError(f"{label} must have shape {shape}, got {v.shape}")
     if not np.all(np.isfinite(v)):
         if not allow_posinf or np.any(np.isnan(v) | np.isneginf(v)):
-            raise ScenarioError(f"{label} must be finite, got {_show(v)}")
+            raise ScenarioError(f"{label} must be finite, got {show(v)}")
     unit_s = f" {unit}" if unit and unit != "-" else ""
     if low is not None:
         bad = v <= low if low_open else v < low
         if np.any(bad):
             rel = ">" if low_open else ">="
-            raise ScenarioError(f"{label} must be {rel} {low}{unit_s}, got {_show(v)}")
+            raise ScenarioError(f"{label} must be {rel} {low}{unit_s}, got {show(v)}")
     if high is not None:
         bad = v >= high if high_open else v > high
         if np.any(bad):
             rel = "<" if high_open else "<="
-            raise ScenarioError(f"{label} must be {rel} {high}{unit_s}, got {_show(v)}")
+            raise ScenarioError(f"{label} must be {rel} {high}{unit_s}, got {show(v)}")
     if plausible:
         _check_plausible(label, v, unit_s)

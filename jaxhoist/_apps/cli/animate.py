@@ -5,19 +5,19 @@ from __future__ import annotations
 import argparse
 from pathlib import Path
 
-from .progress import _bar
+from .progress import tqdm_bar
 
 # ---------------------------------------------------------------------------------------- animate
 
 
-def _animate(result_dir, *, quiet: bool = False, **kw) -> list[Path]:
+def animate_folder(result_dir, *, quiet: bool = False, **kw) -> list[Path]:
     from ..plots.animation import animate
 
     bars = []  # the bar opens with the first frame, after every check has passed
 
     def step(done, total):
         if not bars:
-            bars.append(_bar(total, "animating", "frame", quiet=quiet))
+            bars.append(tqdm_bar(total, "animating", "frame", quiet=quiet))
         bars[0].update(done - bars[0].n)
 
     try:
@@ -29,7 +29,7 @@ def _animate(result_dir, *, quiet: bool = False, **kw) -> list[Path]:
 
 def run_animate(args: argparse.Namespace) -> int:
     """`jaxhoist animate RESULT_DIR`: the 3-D animation and the key-frame strip of a saved lift."""
-    paths = _animate(
+    paths = animate_folder(
         args.result_dir,
         quiet=args.quiet,
         fps=args.fps,

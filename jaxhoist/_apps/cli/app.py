@@ -19,14 +19,14 @@ import sys
 from collections.abc import Sequence
 
 from .animate import configure_animate
-from .common import _ATOL_HELP, _RTOL_HELP, PROG, _enable_x64
+from .common import ATOL_HELP, PROG, RTOL_HELP, enable_x64
 from .progress import FitProgressBar as FitProgressBar
+from .progress import LineSink as LineSink
 from .progress import LocatorProgressBar as LocatorProgressBar
 from .progress import ScanProgressBar as ScanProgressBar
-from .progress import _LineSink as _LineSink
-from .progress import _percent_to_bar as _percent_to_bar
-from .progress import _phase_to_bar as _phase_to_bar
-from .progress import _scan_bars as _scan_bars
+from .progress import percent_to_bar as percent_to_bar
+from .progress import phase_to_bar as phase_to_bar
+from .progress import scan_bars as scan_bars
 from .simulate import configure_simulate
 from .simulate import event_lines as event_lines
 from .simulate import summary_status as summary_status
@@ -44,8 +44,8 @@ EXTENSIONS = {
 # Help texts the CLI adds where a subcommand module gives none (key: (command, option dest)); each help
 # then gets its default appended by `_DefaultsFormatter`.
 _EXTRA_HELP = {
-    "rtol": _RTOL_HELP + " (default: the solver's, 5e-4 for the default rosenbrock-w, 1e-6 for the others)",
-    "atol": _ATOL_HELP + " (default: the solver's, 1e-5 for the default rosenbrock-w, 1e-8 for the others)",
+    "rtol": RTOL_HELP + " (default: the solver's, 5e-4 for the default rosenbrock-w, 1e-6 for the others)",
+    "atol": ATOL_HELP + " (default: the solver's, 1e-5 for the default rosenbrock-w, 1e-8 for the others)",
     "t1": "end time [s] (default: the scenario's t1)",
     "n_save": "number of equally spaced saved times from 0 to t1",
     "max_steps": "solver step budget per solve; reaching it is reported as status max_steps",
@@ -192,7 +192,7 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: Sequence[str] | None = None) -> int:
     """Entry point of `jaxhoist` and `python -m jaxhoist`. Returns the exit code: 0 ok, 1 the solve failed
     (status not ok), 2 invalid input (one-line message on stderr, no traceback)."""
-    _enable_x64()
+    enable_x64()
     from ..._errors import Float64Error, ScenarioError, one_line
 
     argv = list(sys.argv[1:] if argv is None else argv)
@@ -211,7 +211,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         if args.command in ("simulate", "animate"):
             code = args.func(args)
         else:
-            with _scan_bars():
+            with scan_bars():
                 code = args.func(args)
     except (ScenarioError, Float64Error) as e:
         print(f"{PROG}: error: {one_line(_cli_message(str(e)))}", file=sys.stderr)

@@ -21,7 +21,7 @@ from ..identify.fit import identify
 from ..identify.options import FitOptions
 from ..identify.parameters import ALIASES
 from ..identify.result import plot_fit
-from .common import _ATOL_HELP, _RTOL_HELP, CLI_SOLVERS
+from .common import ATOL_HELP, CLI_SOLVERS, RTOL_HELP
 
 # ------------------------------------------------------------------------------------- CLI
 
@@ -100,13 +100,13 @@ def configure_parser(subparsers) -> None:
         "--rtol",
         type=float,
         default=None,
-        help=_RTOL_HELP + " (default: the solver's, 5e-4 for rosenbrock-w, 1e-6 for the others)",
+        help=RTOL_HELP + " (default: the solver's, 5e-4 for rosenbrock-w, 1e-6 for the others)",
     )
     p.add_argument(
         "--atol",
         type=float,
         default=None,
-        help=_ATOL_HELP + " (default: the solver's, 1e-5 for rosenbrock-w, 1e-8 for the others)",
+        help=ATOL_HELP + " (default: the solver's, 1e-5 for rosenbrock-w, 1e-8 for the others)",
     )
     p.add_argument("--max-iterations", type=int, default=100, help="LM step budget (default 100)")
     p.add_argument(

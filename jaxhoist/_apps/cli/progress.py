@@ -53,7 +53,7 @@ class _Step:
 # ------------------------------------------------------------------------------------- progress bars
 
 
-def _bar(total: float | int, desc: str, unit: str, *, quiet: bool = False, bar_format: str | None = None):
+def tqdm_bar(total: float | int, desc: str, unit: str, *, quiet: bool = False, bar_format: str | None = None):
     """A tqdm progress bar on stderr (a disabled one with `quiet`)."""
     from tqdm import tqdm
 
@@ -69,7 +69,7 @@ def _bar(total: float | int, desc: str, unit: str, *, quiet: bool = False, bar_f
     )
 
 
-class _LineSink:
+class LineSink:
     """A text stream that hands every complete line to `on_line` (used to turn what the library prints on
     stdout while it works, diffrax's `TextProgressMeter` percentages or the rigid model's phase log, into a
     progress bar on stderr; stdout keeps only the summary)."""
@@ -89,7 +89,7 @@ class _LineSink:
         pass
 
 
-def _percent_to_bar(bar):
+def percent_to_bar(bar):
     """`on_line` for diffrax's TextProgressMeter: lines "12.34%" move `bar` (total 100) to 12.34."""
 
     def on_line(line: str) -> None:
@@ -104,7 +104,7 @@ def _percent_to_bar(bar):
     return on_line
 
 
-def _phase_to_bar(bar):
+def phase_to_bar(bar):
     """`on_line` for the rigid model's verbose phase log ("t0 - t1 s  modes -> end [n steps so far]"): moves
     `bar` (total t1 [s]) to the phase's end time and shows the phase in the postfix."""
 
@@ -256,7 +256,7 @@ def _fmt_seconds(s: float) -> str:
 
 
 @contextlib.contextmanager
-def _scan_bars():
+def scan_bars():
     """While a subcommand runs, scans that report with their default (`scan(progress=True)`, as the `scan`
     and `bifurcation --scan` commands call it) draw a `ScanProgressBar` instead of printing lines."""
     from ..scan.progress import reporting

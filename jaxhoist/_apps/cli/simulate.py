@@ -10,9 +10,9 @@ import time
 from pathlib import Path
 
 from ..._io.scenario import preset_names
-from .animate import _animate
-from .common import _ATOL_HELP, _RTOL_HELP, PROG, _enable_x64
-from .progress import StepTimer, _bar, _LineSink, _percent_to_bar, _phase_to_bar
+from .animate import animate_folder
+from .common import ATOL_HELP, PROG, RTOL_HELP, enable_x64
+from .progress import LineSink, StepTimer, percent_to_bar, phase_to_bar, tqdm_bar
 
 # ---------------------------------------------------------------------------------------- simulate
 
@@ -86,7 +86,7 @@ def event_lines(status, ts, normal_forces) -> list[str]:
 
 def run_simulate(args: argparse.Namespace) -> int:
     """`jaxhoist simulate`: load, validate, compile, solve, save npz+json (+ PNGs), print a summary."""
-    _enable_x64()
+    enable_x64()
     from ..._errors import SolveStatus, require_x64
     from ..._io.validate import check_out_dir
 
@@ -118,7 +118,7 @@ def run_simulate(args: argparse.Namespace) -> int:
             pngs = plots.save_all(arrays, out_dir, title_prefix=scenario.name)
     animation = []
     if args.animate:
-        animation = _animate(out_dir, quiet=args.quiet)
+        animation = animate_folder(out_dir, quiet=args.quiet)
 
     # ---- summary (stdout)
     status = summary_status(arrays)
@@ -171,7 +171,7 @@ def _solve_rigid(args, scenario, t1, ts, options, progress):
     label = "solving with the rigid-ground model (each phase compiles on first use)"
     with (
         progress(label, bar=True),
-        _bar(
+        tqdm_bar(
             float(t1),
             "rigid model",
             "s",
@@ -181,7 +181,7 @@ def _solve_rigid(args, scenario, t1, ts, options, progress):
             ),
         ) as bar,
     ):
-        with contextlib.redirect_stdout(_LineSink(_phase_to_bar(bar))):
+        with contextlib.redirect_stdout(LineSink(phase_to_bar(bar))):
             traj = simulate_rigid(
                 scenario,
                 Times(t1, ts=np.asarray(ts)),
@@ -211,7 +211,7 @@ def _solve_elastic(args, scenario, ts, options, progress):
         solve_fn = _compiled_solve(scenario, ts, options)
     with (
         progress("solving", bar=True),
-        _bar(
+        tqdm_bar(
             100.0,
             "solving",
             "%",
@@ -219,7 +219,7 @@ def _solve_elastic(args, scenario, ts, options, progress):
             bar_format=("{desc}: {percentage:3.0f}%|{bar}| t = {n:.0f}% of t1 [{elapsed}<{remaining}]"),
         ) as bar,
     ):
-        with contextlib.redirect_stdout(_LineSink(_percent_to_bar(bar))):
+        with contextlib.redirect_stdout(LineSink(percent_to_bar(bar))):
             traj = jax.block_until_ready(solve_fn(scenario, ts, options))
     return traj, progress.times["solving"]
 
@@ -280,14 +280,14 @@ def configure_simulate(subparsers) -> None:
         type=number_arg,
         default=None,
         metavar="R",
-        help=_RTOL_HELP + " (default 5e-4 with the default Rosenbrock-W solver; 1e-6 with --model rigid)",
+        help=RTOL_HELP + " (default 5e-4 with the default Rosenbrock-W solver; 1e-6 with --model rigid)",
     )
     p.add_argument(
         "--atol",
         type=number_arg,
         default=None,
         metavar="A",
-        help=_ATOL_HELP + " (default 1e-5 with the default solver; 1e-8 with --model rigid)",
+        help=ATOL_HELP + " (default 1e-5 with the default solver; 1e-8 with --model rigid)",
     )
     p.add_argument(
         "--max-steps",

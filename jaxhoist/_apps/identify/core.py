@@ -26,13 +26,13 @@ from ..._physics.elastic import vector_field
 from ..._physics.equilibrium import initial_state
 from ..._physics.params import Scenario
 from ..._physics.paths import set_leaf
-from .parameters import _to_theta
+from .parameters import to_theta
 
 _PENALTY = 1e6  # whitened residual entry used when a trial solve fails: LM rejects such a step
 _VERBOSE = False
 
 
-class _FitReporter:
+class FitReporter:
     """Host side of the fit's progress reports. The compiled core always calls `_report` (through
     `jax.debug.callback`, once or more per LM evaluation); `_report` forwards to the reporter installed by
     `identify` for the duration of one LM run, so the compiled program does not depend on the callback and
@@ -71,11 +71,11 @@ class _FitReporter:
         )
 
 
-_REPORTER: list = [None]  # the active `_FitReporter`, or None
+REPORTER: list = [None]  # the active `_FitReporter`, or None
 
 
 def _report(z, cost, info) -> None:
-    rep = _REPORTER[0]
+    rep = REPORTER[0]
     if rep is not None:
         rep(z, cost, info)
 
@@ -84,7 +84,7 @@ def _report(z, cost, info) -> None:
 
 
 @dataclasses.dataclass(frozen=True)
-class _Config:
+class Config:
     """The static structure of one identification problem (a change recompiles the core)."""
 
     params: tuple[tuple[str, int | None, tuple[int, ...], str], ...]  # (path, index, shape, kind)
@@ -95,29 +95,29 @@ class _Config:
     sensitivity: str = "equations"  # "equations" | "solver", see `_model_and_jacobian`
 
 
-def _scenario_at(cfg: _Config, scenario: Scenario, tr, z):
+def _scenario_at(cfg: Config, scenario: Scenario, tr, z):
     i = 0
     for (path, index, shape, kind), (ref, lo, hi, scale) in zip(cfg.params, tr, strict=True):
         n = int(np.prod(shape, dtype=int))
-        theta = _to_theta(kind, z[i : i + n].reshape(shape), ref, lo, hi, scale)
+        theta = to_theta(kind, z[i : i + n].reshape(shape), ref, lo, hi, scale)
         i += n
         scenario = set_leaf(scenario, path, index, theta)
     return scenario
 
 
-def _signals(cfg: _Config, traj):
+def _signals(cfg: Config, traj):
     m = jnp.stack([getattr(traj, f)[(slice(None), *idx)] for f, idx in cfg.signals])
     return m[:, 1:] if cfg.drop_first else m
 
 
-def _model(cfg: _Config, z, args):
+def model(cfg: Config, z, args):
     """Whitened residuals (model - data) / σ, flattened signal-major, and the solve's status and steps."""
     scenario, tr, data, sigma, ts = args
     traj = solve(_scenario_at(cfg, scenario, tr, z), ts, cfg.options)
     return ((_signals(cfg, traj) - data) / sigma).ravel(), traj.status, traj.num_accepted_steps
 
 
-def _sensitivity_solve(cfg: _Config, z, args):
+def _sensitivity_solve(cfg: Config, z, args):
     """Model signals and their derivatives d(signal)/dz from the forward sensitivity equations.
 
     The state y and its p sensitivities S_i = dy/dz_i are integrated together as one ODE,
@@ -199,7 +199,7 @@ def _sensitivity_solve(cfg: _Config, z, args):
     return m, dm, status, steps
 
 
-def _model_and_jacobian(cfg: _Config, z, args):
+def _model_and_jacobian(cfg: Config, z, args):
     """Whitened residuals r (n,), their Jacobian dr/dz (n, p), status and solver steps.
 
     `cfg.sensitivity = "equations"` (default, any solver): the forward sensitivity equations with error
@@ -213,7 +213,7 @@ def _model_and_jacobian(cfg: _Config, z, args):
     if cfg.sensitivity == "solver":
 
         def f(zz):
-            r, status, steps = _model(cfg, zz, args)
+            r, status, steps = model(cfg, zz, args)
             return r, (r, status, steps)
 
         J, (r, status, steps) = jax.jacfwd(f, has_aux=True)(z)
@@ -224,7 +224,7 @@ def _model_and_jacobian(cfg: _Config, z, args):
     return r, J, status, steps
 
 
-def _residual_fn(cfg: _Config):
+def _residual_fn(cfg: Config):
     """`fn(z, args) -> (r, info)` for optimistix, info = (status, solver steps). Its JVP computes the full
     forward-mode Jacobian once (p tangents carried by one solve) and applies it as a matrix."""
 
@@ -237,7 +237,7 @@ def _residual_fn(cfg: _Config):
 
     @jax.custom_jvp
     def res(z, args):
-        r, status, steps = _model(cfg, z, args)
+        r, status, steps = model(cfg, z, args)
         r, _ = guard(r, status)
         return r, jnp.stack([status, steps]).astype(jnp.float64)
 
@@ -287,7 +287,7 @@ class _LevenbergMarquardt(optx.LevenbergMarquardt):
 
 
 @eqx.filter_jit
-def _fit_core(cfg: _Config, z0, args, lm_tol, scale):
+def _fit_core(cfg: Config, z0, args, lm_tol, scale):
     """Levenberg-Marquardt on the residuals multiplied by `scale`. The LM tolerances and the scale are traced
     (not static), so changing them does not recompile; with infinite tolerances the run stops after the
     first evaluation, which `identify` uses to probe the Jacobian at the start (same compiled program).
@@ -324,7 +324,7 @@ def _fit_core(cfg: _Config, z0, args, lm_tol, scale):
     )
 
 
-def _compiled_core(cfg: _Config, z0, args, lm_tol, scale):
+def compiled_core(cfg: Config, z0, args, lm_tol, scale):
     """`_fit_core` compiled ahead of time (so compile and fit are timed apart), cached per structure."""
     key = (cfg, *structure_key(z0, args, lm_tol, scale))
     fn, _ = compiled("identify", key, lambda: _fit_core.lower(cfg, z0, args, lm_tol, scale))

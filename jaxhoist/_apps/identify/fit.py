@@ -54,17 +54,17 @@ from ..._numerics.times import Times
 from ..._physics.params import Scenario
 from ..._physics.paths import param_unit
 from ..simulate import simulate
-from .core import _REPORTER, _compiled_core, _Config, _FitReporter, _model
+from .core import REPORTER, Config, FitReporter, compiled_core, model
 from .options import FitOptions, fit_solver_options
 from .parameters import ALIASES as ALIASES
 from .parameters import SYMBOLS as SYMBOLS
-from .parameters import _build_params as _build_params
-from .parameters import _expand, _Param, _random_starts, _sigmas, _spec_value, _unflatten
-from .parameters import _flat_dtheta_dz as _flat_dtheta_dz
-from .parameters import _flat_z as _flat_z
-from .parameters import _theta_of as _theta_of
+from .parameters import Param, expand, random_starts, sigmas, spec_value, unflatten
 from .parameters import apply_params as apply_params
+from .parameters import build_params as build_params
+from .parameters import flat_dtheta_dz as flat_dtheta_dz
+from .parameters import flat_z as flat_z
 from .parameters import resolve_param as resolve_param
+from .parameters import theta_of as theta_of
 from .result import IdentificationResult as IdentificationResult
 from .result import StartResult as StartResult
 from .result import covariance_report as covariance_report
@@ -77,14 +77,14 @@ from .result import plot_fit as plot_fit
 class _Problem:
     scenario: Scenario
     measurement: Measurement
-    params: list[_Param]
+    params: list[Param]
     theta0: np.ndarray
     names: list[str]
     sigma: dict[str, float]
     noise_known: bool
     warnings: list[str]
     n_residuals: int
-    cfg: _Config
+    cfg: Config
     args: tuple
 
 
@@ -120,8 +120,8 @@ def _setup(
     if not (np.isfinite(t1) and t1 > 0):
         raise ScenarioError(f"t1 must be a positive finite time [s], got {t1}")
     measurement.check_span(t1)
-    plist, theta0 = _build_params(scenario, params, start or {}, bounds or {})
-    sig, noise_known, warnings = _sigmas(measurement, noise, weights)
+    plist, theta0 = build_params(scenario, params, start or {}, bounds or {})
+    sig, noise_known, warnings = sigmas(measurement, noise, weights)
     names = measurement.names
     n_res = len(names) * measurement.t.size
     if n_res <= theta0.size:
@@ -133,7 +133,7 @@ def _setup(
     ts = np.concatenate([[0.0], t]) if drop_first else t
     data = np.stack([measurement.signals[s] for s in names])
     sigma = np.stack([np.full(t.shape, sig[s]) for s in names])
-    cfg = _Config(
+    cfg = Config(
         params=tuple((p.path, p.index, p.shape, p.kind) for p in plist),
         signals=tuple((SIGNALS[s].field, SIGNALS[s].index) for s in names),
         drop_first=drop_first,
@@ -146,8 +146,8 @@ def _setup(
 
 
 @eqx.filter_jit
-def _model_jit(cfg: _Config, z, args):
-    return _model(cfg, z, args)
+def _model_jit(cfg: Config, z, args):
+    return model(cfg, z, args)
 
 
 def residual_function(
@@ -193,7 +193,7 @@ def residual_function(
     cfg = dataclasses.replace(prob.cfg, options=reverse)
 
     def fn(theta):
-        z = jnp.asarray(_flat_z(prob.params, np.asarray(theta, dtype=np.float64)))
+        z = jnp.asarray(flat_z(prob.params, np.asarray(theta, dtype=np.float64)))
         r, status, _ = _model_jit(cfg, z, prob.args)
         r = np.asarray(r)
         return r if int(status) == SolveStatus.OK else np.full_like(r, np.nan)
@@ -276,16 +276,16 @@ def identify(
     )
     scenario, plist, theta0, cfg, args = prob.scenario, prob.params, prob.theta0, prob.cfg, prob.args
     # Each start is checked as a scenario before compiling (e.g. a mass centre outside the box).
-    starts = [theta0] + _random_starts(
+    starts = [theta0] + random_starts(
         plist, theta0, int(fit.n_starts) - 1, float(fit.start_spread), int(fit.seed)
     )
     for th in starts:
-        apply_params(scenario, _unflatten(plist, th)).check()
+        apply_params(scenario, unflatten(plist, th)).check()
     lm_tol = jnp.asarray([fit.lm_rtol, fit.lm_atol], dtype=jnp.float64)
 
     # ---- the compiled core, once per start
     c0 = time.perf_counter()
-    core = _compiled_core(cfg, jnp.asarray(_flat_z(plist, starts[0])), args, lm_tol, jnp.asarray(1.0))
+    core = compiled_core(cfg, jnp.asarray(flat_z(plist, starts[0])), args, lm_tol, jnp.asarray(1.0))
     compile_time = time.perf_counter() - c0
     runs, outs = [], []
     for th in starts:
@@ -311,26 +311,26 @@ def _run_start(core, cfg, args, plist, th, lm_tol, which: tuple[int, int], progr
     w0 = time.perf_counter()
     one = jnp.asarray(1.0)
     probe_tol = jnp.asarray([1e300, 1e300])  # stops after the first evaluation (inf * 0 would give NaN)
-    z0 = jnp.asarray(_flat_z(plist, th))
+    z0 = jnp.asarray(flat_z(plist, th))
     # Probe J at the start (one evaluation), then set the damping scale (see `_fit_core`).
     J0 = np.asarray(core(cfg, z0, args, probe_tol, one)[2])
     d = float(np.max(np.sum(J0**2, axis=0))) if np.all(np.isfinite(J0)) else 0.0
     scale = jnp.asarray(1.0 / math.sqrt(d) if d > 0 else 1.0)
     if progress is not None:
-        _REPORTER[0] = _FitReporter(progress, which[0], which[1], wall0)
+        REPORTER[0] = FitReporter(progress, which[0], which[1], wall0)
     try:
         z, r, J, info, n_steps, n_acc, codes = jax.block_until_ready(core(cfg, z0, args, lm_tol, scale))
         jax.effects_barrier()  # every report delivered before the reporter goes
     finally:
-        _REPORTER[0] = None
+        REPORTER[0] = None
     z, r, J, info, codes = (np.asarray(x) for x in (z, r, J, info, codes))
-    theta = _theta_of(plist, z)
+    theta = theta_of(plist, z)
     converged = bool(codes[0])
     msg = "converged" if converged else ("reached max_iterations" if codes[1] else "LM failed")
     cost = 0.5 * float(np.sum(r**2))
     run = StartResult(
-        _unflatten(plist, th),
-        _unflatten(plist, theta),
+        unflatten(plist, th),
+        unflatten(plist, theta),
         cost,
         int(n_steps),
         int(n_acc),
@@ -349,7 +349,7 @@ def _result(prob, starts, runs, out, best: int, *, max_relative_se, condition_li
     z, r, J, info, theta = out
     run = runs[best]
     # ---- covariance and identifiability at the optimum
-    D = _flat_dtheta_dz(plist, z)
+    D = flat_dtheta_dz(plist, z)
     J_theta = J / D[None, :]
     flat_names = [n for p_ in plist for n in p_.element_names()]
     rep = covariance_report(
@@ -387,7 +387,7 @@ def _result(prob, starts, runs, out, best: int, *, max_relative_se, condition_li
 
     sig_rows = r.reshape(len(names), -1)
     fitted = {s: measurement.signals[s] + sig[s] * sig_rows[i] for i, s in enumerate(names)}
-    fitted_scenario = apply_params(scenario, _unflatten(plist, theta))
+    fitted_scenario = apply_params(scenario, unflatten(plist, theta))
     return IdentificationResult(
         names=flat_names,
         params=[p_.name for p_ in plist],
@@ -475,8 +475,8 @@ def synthetic_measurement(
         spec = SIGNALS[n]
         v = np.asarray(getattr(traj, spec.field))[(slice(None), *spec.index)]
         clean[n] = v[1:] if drop else v
-    noise_e = _expand(noise, names, "synthetic_measurement: noise")
+    noise_e = expand(noise, names, "synthetic_measurement: noise")
     rng = np.random.default_rng(seed)
-    sig = {n: _spec_value(raw, n, clean[n], "noise") for n, raw in noise_e.items()}
+    sig = {n: spec_value(raw, n, clean[n], "noise") for n, raw in noise_e.items()}
     noisy = {n: clean[n] + (rng.normal(0.0, sig[n], size=t.shape) if n in sig else 0.0) for n in names}
     return Measurement(t, noisy, sig, source)

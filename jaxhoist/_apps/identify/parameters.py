@@ -50,7 +50,7 @@ _POSITIVE = {
 
 
 @dataclasses.dataclass(frozen=True)
-class _Param:
+class Param:
     """One fitted leaf (or one element of a vector leaf, `path[i]`)."""
 
     name: str  # as reported: "foundation.stiffness", "load.mass_centre[1]"
@@ -82,7 +82,7 @@ class _Param:
         return np.asarray((theta - self.ref) / self.scale)
 
 
-def _to_theta(kind: str, z, ref, lo, hi, scale):
+def to_theta(kind: str, z, ref, lo, hi, scale):
     if kind == "log":
         return ref * jnp.exp(z)
     if kind == "logit":
@@ -133,12 +133,12 @@ def _default_bounds(scenario: Scenario, path: str) -> tuple[np.ndarray, np.ndarr
     return None
 
 
-def _build_params(
+def build_params(
     scenario: Scenario,
     params: Sequence[str],
     start: Mapping[str, Any],
     bounds: Mapping[str, tuple[float, float]],
-) -> tuple[list[_Param], np.ndarray]:
+) -> tuple[list[Param], np.ndarray]:
     """Check the parameter list on the host; return the parameter specs and the flat start θ0."""
     if isinstance(params, str):
         params = [p for p in params.split(",") if p.strip()]
@@ -219,12 +219,12 @@ def _build_params(
         else:
             scale = np.asarray(np.where(np.abs(value) > 0, np.abs(value), 1.0))
             kind, ref, lo, hi = "affine", value.copy(), np.zeros_like(value), np.zeros_like(value)
-        out.append(_Param(name, path, index, value.shape, kind, ref, lo, hi, scale))
+        out.append(Param(name, path, index, value.shape, kind, ref, lo, hi, scale))
         theta0.append(value.ravel())
     return out, np.concatenate(theta0)
 
 
-def _unflatten(params: list[_Param], flat: np.ndarray) -> dict[str, np.ndarray | float]:
+def unflatten(params: list[Param], flat: np.ndarray) -> dict[str, np.ndarray | float]:
     out, i = {}, 0
     for p in params:
         v = flat[i : i + p.size].reshape(p.shape)
@@ -233,7 +233,7 @@ def _unflatten(params: list[_Param], flat: np.ndarray) -> dict[str, np.ndarray |
     return out
 
 
-def _flat_z(params: list[_Param], theta: np.ndarray) -> np.ndarray:
+def flat_z(params: list[Param], theta: np.ndarray) -> np.ndarray:
     out, i = [], 0
     for p in params:
         out.append(p.to_z(theta[i : i + p.size].reshape(p.shape)).ravel())
@@ -241,7 +241,7 @@ def _flat_z(params: list[_Param], theta: np.ndarray) -> np.ndarray:
     return np.concatenate(out)
 
 
-def _flat_dtheta_dz(params: list[_Param], z: np.ndarray) -> np.ndarray:
+def flat_dtheta_dz(params: list[Param], z: np.ndarray) -> np.ndarray:
     out, i = [], 0
     for p in params:
         seg = z[i : i + p.size].reshape(p.shape)
@@ -264,17 +264,17 @@ def apply_params(scenario: Scenario, values: Mapping[str, Any]) -> Scenario:
     return out
 
 
-def _theta_of(plist: list[_Param], z: np.ndarray) -> np.ndarray:
+def theta_of(plist: list[Param], z: np.ndarray) -> np.ndarray:
     out, i = [], 0
     for p in plist:
         seg = z[i : i + p.size].reshape(p.shape)
-        out.append(np.asarray(_to_theta(p.kind, seg, p.ref, p.lo, p.hi, p.scale)).ravel())
+        out.append(np.asarray(to_theta(p.kind, seg, p.ref, p.lo, p.hi, p.scale)).ravel())
         i += p.size
     return np.concatenate(out).astype(np.float64)
 
 
-def _random_starts(
-    plist: list[_Param], theta0: np.ndarray, n: int, spread: float, seed: int
+def random_starts(
+    plist: list[Param], theta0: np.ndarray, n: int, spread: float, seed: int
 ) -> list[np.ndarray]:
     rng = np.random.default_rng(seed)
     out = []
@@ -299,7 +299,7 @@ def _random_starts(
 # ------------------------------------------------------------------------------------- noise/weights
 
 
-def _spec_value(raw, name: str, y: np.ndarray, what: str) -> float:
+def spec_value(raw, name: str, y: np.ndarray, what: str) -> float:
     if isinstance(raw, str) and raw.strip().endswith("%"):
         try:
             pct = float(raw.strip()[:-1])
@@ -319,7 +319,7 @@ def _spec_value(raw, name: str, y: np.ndarray, what: str) -> float:
     return value
 
 
-def _expand(spec: Mapping[str, Any] | None, names: list[str], what: str) -> dict[str, Any]:
+def expand(spec: Mapping[str, Any] | None, names: list[str], what: str) -> dict[str, Any]:
     out: dict[str, Any] = {}
     for key, raw in (spec or {}).items():
         check_signal_names([key], what, groups=True)
@@ -331,10 +331,10 @@ def _expand(spec: Mapping[str, Any] | None, names: list[str], what: str) -> dict
     return out
 
 
-def _sigmas(m: Measurement, noise, weights) -> tuple[dict[str, float], bool, list[str]]:
+def sigmas(m: Measurement, noise, weights) -> tuple[dict[str, float], bool, list[str]]:
     names = m.names
-    noise_e = _expand(noise, names, "noise")
-    weight_e = _expand(weights, names, "weights")
+    noise_e = expand(noise, names, "noise")
+    weight_e = expand(weights, names, "weights")
     both = sorted(set(noise_e) & set(weight_e))
     if both:
         raise ScenarioError(f"give a noise level or a weight for a signal, not both: {both}")
@@ -342,9 +342,9 @@ def _sigmas(m: Measurement, noise, weights) -> tuple[dict[str, float], bool, lis
     for s in names:
         y = m.signals[s]
         if s in noise_e:
-            sig[s] = _spec_value(noise_e[s], s, y, "noise")
+            sig[s] = spec_value(noise_e[s], s, y, "noise")
         elif s in weight_e:
-            sig[s] = 1.0 / _spec_value(weight_e[s], s, y, "weight")
+            sig[s] = 1.0 / spec_value(weight_e[s], s, y, "weight")
         elif s in m.noise:
             sig[s] = m.noise[s]
         else:

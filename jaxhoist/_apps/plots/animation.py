@@ -28,10 +28,10 @@ import numpy as np
 
 from ..._errors import ScenarioError
 from ..._io.results import corner_detach_times, liftoff_time
-from .scene import _FACES
 from .scene import ARROW_CAP as ARROW_CAP
 from .scene import CORNER_COLOURS as CORNER_COLOURS
 from .scene import CORNERS as CORNERS
+from .scene import FACES
 from .scene import Scene as Scene
 from .scene import contact_state as contact_state
 from .scene import load_scene as load_scene
@@ -108,7 +108,7 @@ def draw_frame(
     c, top = scene.corners[k], scene.top[k]
     verts = np.concatenate([c, top])
     box = Poly3DCollection(
-        [[tuple(verts[i]) for i in f] for f in _FACES],
+        [[tuple(verts[i]) for i in f] for f in FACES],
         facecolor="tan",
         edgecolor="0.2",
         linewidths=0.9,
@@ -173,7 +173,7 @@ def draw_frame(
     return out
 
 
-def _figure(n_cols: int = 1, size: tuple[float, float] = (6.0, 7.0)) -> tuple[Figure, list]:
+def new_figure(n_cols: int = 1, size: tuple[float, float] = (6.0, 7.0)) -> tuple[Figure, list]:
     from matplotlib.figure import Figure
 
     fig = Figure(figsize=(size[0] * n_cols, size[1]), layout="constrained")
@@ -218,7 +218,7 @@ def plot_keyframes(scene: Scene, n: int = 5, *, indices: Sequence[int] | None = 
 
     **Returns** the `Figure` (save with `jaxhoist._apps.plots.trajectory.save_figure`)."""
     idx = list(indices) if indices is not None else keyframe_indices(scene, n)
-    fig, axes = _figure(len(idx), size=(4.4, 6.0))
+    fig, axes = new_figure(len(idx), size=(4.4, 6.0))
     limits = scene.limits()
     for ax, k in zip(axes, idx, strict=True):
         draw_frame(ax, scene, k, limits)
@@ -298,7 +298,7 @@ def save_animation(
             extra_args=["-pix_fmt", "yuv420p"],
         )
     )
-    fig, (ax,) = _figure(1)
+    fig, (ax,) = new_figure(1)
     FigureCanvasAgg(fig)
     limits = scene.limits()
     fig.suptitle(f"{scene.name} ({scene.model} model)", fontsize=11)

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .trajectory import _figure, save_figure
+from .trajectory import new_figure, save_figure
 
 if TYPE_CHECKING:
     from matplotlib.figure import Figure
@@ -104,7 +104,7 @@ def plot_sweep(
     n_all = len(labels)
     labels, y = [labels[k] for k in keep], y[:, keep]
     n = min(len(labels), _MAX_PANELS)
-    fig, axes = _figure(n, 1, figsize=(7.0, 1.2 + 1.8 * n))
+    fig, axes = new_figure(n, 1, figsize=(7.0, 1.2 + 1.8 * n))
     for k in range(n):
         ax = axes[k, 0]
         yk = np.where(ok, y[:, k], np.nan)
@@ -153,7 +153,7 @@ def plot_grid(result: ScanResult, name: str, *, title: str | None = None) -> Fig
     n = min(len(labels), _MAX_PANELS)
     ncols = 1 if n == 1 else 2
     nrows = -(-n // ncols)
-    fig, axes = _figure(nrows, ncols, figsize=(6.0 * ncols, 4.0 * nrows), sharex=False)
+    fig, axes = new_figure(nrows, ncols, figsize=(6.0 * ncols, 4.0 * nrows), sharex=False)
     for k in range(nrows * ncols):
         ax = axes.flat[k]
         if k >= n:
@@ -183,7 +183,7 @@ def plot_locator(b, *, title: str | None = None) -> Figure:
     the parameter (numbered in order; Newton steps, bisections and bracket ends in different markers), and,
     after each evaluation, the width of the smallest bracket with opposite signs of g at its ends and the
     distance of the evaluated point from the final estimate."""
-    fig, axes = _figure(1, 2, figsize=(10.0, 4.0), sharex=False)
+    fig, axes = new_figure(1, 2, figsize=(10.0, 4.0), sharex=False)
     ax, aw = axes[0, 0], axes[0, 1]
     hist = [h for h in b.history if np.isfinite(h[1])]
     markers = {"end": ("s", "k"), "newton": ("o", "C0"), "bisect": ("v", "C1"), "multisection": ("d", "C2")}
@@ -228,7 +228,7 @@ def plot_locator(b, *, title: str | None = None) -> Figure:
 def plot_boundary(boundary, *, title: str | None = None) -> Figure:
     """A boundary p*(q) traced by `trace_boundary`: located points with their final brackets as error bars
     (usually far below the marker size), lost or failed points marked on the q axis."""
-    fig, axes = _figure(1, 1, figsize=(6.5, 4.5))
+    fig, axes = new_figure(1, 1, figsize=(6.5, 4.5))
     ax = axes[0, 0]
     q, p = np.asarray(boundary.along_values), np.asarray(boundary.values)
     ok = np.isfinite(p)

@@ -18,7 +18,7 @@ CORNERS = ("D", "E", "F", "H")
 CORNER_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red")
 ARROW_CAP = 1.5  # longest drawn arrow, in units of the weight's arrow length
 # faces of the box as indices into the 8 vertices: bottom D E F H (0-3), then the top corners above them (4-7)
-_FACES = ((0, 1, 2, 3), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))
+FACES = ((0, 1, 2, 3), (4, 5, 6, 7), (0, 1, 5, 4), (1, 2, 6, 5), (2, 3, 7, 6), (3, 0, 4, 7))
 
 
 def _rotation(q: np.ndarray) -> np.ndarray:

@@ -19,7 +19,7 @@ from ..._physics import rigid
 
 
 @dataclasses.dataclass(frozen=True)
-class _Options:
+class Options:
     rtol: float
     atol: float
     max_steps: int
@@ -108,7 +108,7 @@ class _StallGuard(diffrax.AbstractAdaptiveStepSizeController):
         return keep, next_t0, next_t1, jump, (state, t_mark, n), result
 
 
-def _phase_solve(scenario, c, phase, settings, y0, t0, t1, ts, options: _Options, inextensible: bool = False):
+def _phase_solve(scenario, c, phase, settings, y0, t0, t1, ts, options: Options, inextensible: bool = False):
     event = diffrax.Event(
         rigid.event_condition,
         root_finder=optx.Bisection(rtol=1e-14, atol=options.event_atol),
@@ -131,7 +131,7 @@ def _phase_solve(scenario, c, phase, settings, y0, t0, t1, ts, options: _Options
     return sol.ts, sol.ys, sol.result, sol.stats["num_accepted_steps"], sol.stats["num_rejected_steps"]
 
 
-def _controller(options: _Options):
+def _controller(options: Options):
     """The phase solves' step size controller: PID at (rtol, atol), with the progress check of
     `_StallGuard` when `options.stall_window` > 0."""
     if options.stall_window <= 0:
@@ -141,12 +141,12 @@ def _controller(options: _Options):
     )
 
 
-_phase_solve_jit = eqx.filter_jit(_phase_solve)
-_raw_guards_jit = eqx.filter_jit(rigid.raw_guards)
+phase_solve_jit = eqx.filter_jit(_phase_solve)
+raw_guards_jit = eqx.filter_jit(rigid.raw_guards)
 
 
 @eqx.filter_jit
-def _eval_candidates(t, y, scenario, c, settings, contact, hints, rope, inextensible=False):
+def eval_candidates(t, y, scenario, c, settings, contact, hints, rope, inextensible=False):
     """Contact forces, corner accelerations, body accelerations and rope tension for a batch of
     configurations (rope mode `rope`, an integer array)."""
 
@@ -159,45 +159,45 @@ def _eval_candidates(t, y, scenario, c, settings, contact, hints, rope, inextens
 
 
 @eqx.filter_jit
-def _eval_rope_impulses(t, y, scenario, c, modes, slip_dirs, normal_target, rcond):
+def eval_rope_impulses(t, y, scenario, c, modes, slip_dirs, normal_target, rcond):
     return jax.vmap(lambda m, s: rigid.rope_impulse_response(t, y, scenario, c, m, s, normal_target, rcond))(
         modes, slip_dirs
     )
 
 
 @eqx.filter_jit
-def _eval_impulses(y, scenario, c, modes, slip_dirs, normal_target, rcond):
+def eval_impulses(y, scenario, c, modes, slip_dirs, normal_target, rcond):
     return jax.vmap(lambda m, s: rigid.impulse_response(y, scenario, c, m, s, normal_target, rcond))(
         modes, slip_dirs
     )
 
 
-_contact_matrices = eqx.filter_jit(rigid.contact_matrices)
+contact_matrices_jit = eqx.filter_jit(rigid.contact_matrices)
 
 
 @eqx.filter_jit
-def _rope_direction(t, y, scenario, c):
+def rope_direction_jit(t, y, scenario, c):
     return rigid.loads(t, y, scenario, c).rope_direction
 
 
 @eqx.filter_jit
-def _rope_state(t, y, scenario, c):
+def rope_state(t, y, scenario, c):
     """|AB| - l(t) [m], d|AB|/dt - dl/dt [m/s] and ds/dt [m/s] of the inextensible rope."""
     ld = rigid.loads(t, y, scenario, c, inextensible=True)
     return ld.stretch, ld.rope_rate_error, ld.hoist_rate
 
 
-class _Jam(Exception):
+class Jam(Exception):
     """No consistent contact configuration while corners on the ground slide: resolve by a tangential
     impact (`_Driver.jam`), then choose again."""
 
 
-class _RopeWouldPush(Exception):
+class RopeWouldPush(Exception):
     """No configuration (or impulse) with the taut inextensible rope has S >= 0: try the slack rope."""
 
 
 @eqx.filter_jit
-def _forces(t, y, scenario, c, phase, settings, inextensible=False):
+def forces(t, y, scenario, c, phase, settings, inextensible=False):
     return rigid.contact_dynamics(t, y, scenario, c, phase, settings, inextensible).force
 
 
@@ -212,7 +212,7 @@ def _outputs(ts, ys, scenario, c, phases, settings, inextensible=False):
 OUTPUT_CHUNK = 1024
 
 
-def _chunked_outputs(ts, states, phase_index, phases, scenario, c, settings, inextensible):
+def chunked_outputs(ts, states, phase_index, phases, scenario, c, settings, inextensible):
     """`rigid.output` at every saved time, in chunks of `OUTPUT_CHUNK` samples (the last one padded by
     repeating its final sample), concatenated on the host. One compiled evaluation of fixed shape serves
     every number of saved times; a single vmap over all of them (25 001 samples) did not return.
@@ -237,9 +237,9 @@ def _chunked_outputs(ts, states, phase_index, phases, scenario, c, settings, ine
     return jax.tree_util.tree_map(lambda *xs: jnp.asarray(np.concatenate(xs)), *parts)
 
 
-def _tree_index(tree, i):
+def tree_index(tree, i):
     return jax.tree_util.tree_map(lambda x: x[i], tree)
 
 
-def _np(x):
+def as_numpy(x):
     return np.asarray(x)

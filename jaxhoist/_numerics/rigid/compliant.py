@@ -42,7 +42,7 @@ from ..._errors import ScenarioError
 from ..._physics import elastic, forces, kinematics, rigid
 from ..._physics import energy as energy_mod
 from ..._physics.params import RegularisedCoulomb, Scenario
-from .compiled import _rope_state
+from .compiled import rope_state
 from .records import RigidContactError
 
 
@@ -372,7 +372,7 @@ def handback(drv, sc_c: Scenario, t: float, y: elastic.State, loaded: np.ndarray
         drv.rope_taut = bool(taut)
     if drv.inextensible and drv.rope_taut:
         # The taut rope at its rate as well: d|AB|/dt = dl/dt.
-        _, rate_error, _ = map(float, _rope_state(jnp.asarray(t), y, drv.sc, drv.c))
+        _, rate_error, _ = map(float, rope_state(jnp.asarray(t), y, drv.sc, drv.c))
         y, _ = drv._project_taut(t, y, np.zeros(4, dtype=bool), loaded, rate_error=rate_error)
     elif np.any(loaded):
         y, _ = drv._project(t, y, np.zeros(4, dtype=bool), loaded)

@@ -19,22 +19,22 @@ from ..._physics.params import Scenario
 from ..._physics.rigid import FREE, SLIDE, STICK, Phase
 from . import impacts as rigid_impacts
 from .compiled import (
-    _contact_matrices,
-    _eval_candidates,
-    _forces,
-    _Jam,
-    _np,
-    _Options,
-    _phase_solve_jit,
-    _raw_guards_jit,
-    _rope_state,
-    _RopeWouldPush,
+    Jam,
+    Options,
+    RopeWouldPush,
+    as_numpy,
+    contact_matrices_jit,
+    eval_candidates,
+    forces,
+    phase_solve_jit,
+    raw_guards_jit,
+    rope_state,
 )
 from .coulomb import coulomb_pattern
-from .records import _fmt
+from .records import fmt
 
 
-class _Inconsistent(Exception):
+class Inconsistent(Exception):
     """No contact configuration is consistent and fallback 3 (the least-violating one as a regularised
     phase) is switched off (`_Driver.allow_regularised`, at the end of a compliant phase): the message
     names the least violation."""
@@ -57,13 +57,13 @@ class _Candidates:
     mats: object
 
 
-class _Driver:
+class Driver:
     def __init__(
         self,
         scenario: Scenario,
         c: Constants,
         settings: rigid.Settings,
-        options: _Options,
+        options: Options,
         restitution: float,
         tol: dict,
     ):
@@ -100,18 +100,18 @@ class _Driver:
         return out
 
     def guards(self, t, y, phase) -> np.ndarray:
-        return _np(
-            _raw_guards_jit(jnp.asarray(t), y, self.sc, self.c, phase, self.settings, self.inextensible)
+        return as_numpy(
+            raw_guards_jit(jnp.asarray(t), y, self.sc, self.c, phase, self.settings, self.inextensible)
         )
 
     def matrices(self, t, y, rope: int = rigid.ROPE_ELASTIC):
-        m = _contact_matrices(jnp.asarray(t), y, self.sc, self.c, self.settings, rope)
-        return jax.tree_util.tree_map(_np, m)
+        m = contact_matrices_jit(jnp.asarray(t), y, self.sc, self.c, self.settings, rope)
+        return jax.tree_util.tree_map(as_numpy, m)
 
     def kin(self, t, y):
         """Corners [m], corner velocities [m/s] and the load's kinetic energy [J]."""
         m = self.matrices(t, y)
-        u = np.concatenate([_np(y.velocity), _np(y.angular_velocity)])
+        u = np.concatenate([as_numpy(y.velocity), as_numpy(y.angular_velocity)])
         return m.corners, m.corner_velocity, float(0.5 * u @ m.mass @ u)
 
     def with_offsets(self, t, y, phase: Phase) -> Phase:
@@ -123,13 +123,13 @@ class _Driver:
         # Strongly typed float64 everywhere (a weakly typed leaf would compile the solve a second time).
         t0, t1 = jnp.asarray(t0, dtype=jnp.float64), jnp.asarray(t1, dtype=jnp.float64)
         ts_c = jnp.clip(jnp.asarray(ts, dtype=jnp.float64), t0, t1)
-        out = _phase_solve_jit(
+        out = phase_solve_jit(
             self.sc, self.c, phase, self.settings, y, t0, t1, ts_c, self.options, self.inextensible
         )
         sts, sys_, result, acc, rej = out
         self.accepted += int(acc)
         self.rejected += int(rej)
-        return _np(sts), sys_, result
+        return as_numpy(sts), sys_, result
 
     # ---------------------------------------------------------------------------- configurations
     def near_ground(self, t, y):
@@ -147,7 +147,7 @@ class _Driver:
         if not rows:
             return y, 0.0
         J = np.concatenate(rows, axis=0)
-        u = np.concatenate([_np(y.velocity), _np(y.angular_velocity)])
+        u = np.concatenate([as_numpy(y.velocity), as_numpy(y.angular_velocity)])
         Minv = np.linalg.inv(mats.mass)
         du = -Minv @ J.T @ np.linalg.pinv(J @ Minv @ J.T, rcond=1e-10) @ (J @ u)
         u1 = u + du
@@ -165,14 +165,14 @@ class _Driver:
         rows += [mats.jacobians[i, 2:3] for i in range(4) if normal[i] and not full[i]]
         if not rows:
             return y, 0.0
-        u = np.concatenate([_np(y.velocity), _np(y.angular_velocity), _np(y.tip_velocity)])
+        u = np.concatenate([as_numpy(y.velocity), as_numpy(y.angular_velocity), as_numpy(y.tip_velocity)])
         J = np.concatenate(rows + [mats.rope_row[None, :]], axis=0)
         b = np.zeros(J.shape[0])
         b[-1] = mats.rope_row @ u - rate_error  # the rope keeps its rate (less rate_error)
         Minv = np.linalg.inv(mats.mass)
         lam = np.linalg.pinv(J @ Minv @ J.T, rcond=1e-10) @ (J @ u - b)
         u1 = u - Minv @ J.T @ lam
-        _, _, s_dot = map(float, _rope_state(jnp.asarray(t), y, self.sc, self.c))
+        _, _, s_dot = map(float, rope_state(jnp.asarray(t), y, self.sc, self.c))
         work = float(lam[-1]) * s_dot  # the rope impulse P = λ_rope pulls the tip towards B
         loss = work - (0.5 * u1 @ mats.mass @ u1 - 0.5 * u @ mats.mass @ u)
         y1 = eqx.tree_at(
@@ -192,7 +192,7 @@ class _Driver:
             return eqx.tree_at(
                 lambda s: (s.velocity, s.angular_velocity), y, (jnp.zeros(3), jnp.zeros(3))
             ), ke
-        contact, starting = _np(phase.contact), _np(phase.starting)
+        contact, starting = as_numpy(phase.contact), as_numpy(phase.starting)
         full, normal = (contact == STICK) | ((contact == SLIDE) & starting), contact != FREE
         if self.inextensible and int(phase.rope) == rigid.ROPE_TAUT:
             return self._project_taut(t, y, full, normal)
@@ -209,7 +209,7 @@ class _Driver:
         if self.rope_taut:
             try:
                 return self._select(t, y, where, previous, rigid.ROPE_TAUT)
-            except _RopeWouldPush:
+            except RopeWouldPush:
                 self.rope_taut = False
         return self._select(t, y, where, previous, rigid.ROPE_SLACK)
 
@@ -220,7 +220,7 @@ class _Driver:
         **Returns** `(phase, y, loss [J])`: `y` after the jam (or unchanged), its kinetic energy loss."""
         try:
             return self.select(t, y, where, previous), y, 0.0
-        except _Jam:
+        except Jam:
             pass
         y1, loss = self.jam(t, y)
         self.allow_jam = False
@@ -251,7 +251,7 @@ class _Driver:
             g = self.guards(t, y, rest_phase)
             if g[8] >= -self.tol["rest"] and g[9] >= -self.tol["rest"]:
                 if g[10] < -self.tol["force"]:  # the taut rope would push: it is slack
-                    raise _RopeWouldPush
+                    raise RopeWouldPush
                 return rest_phase
 
         cand = self._candidates(t, y, near, resting, rope)
@@ -270,17 +270,17 @@ class _Driver:
 
         excluded: list[int] = []  # consistent but not repeated (noted where that changed the choice)
 
-        strict, why, rope_rejected, (violation, reasons) = self._check(
+        strict, why, rope_rejected, (violation, reasons) = self.check_value(
             cand, 1.0, near, resting, rope, t, where
         )
         consistent = not_again(strict)
         if not consistent and rope_rejected:
-            raise _RopeWouldPush  # only the rope's S >= 0 failed: it goes slack
+            raise RopeWouldPush  # only the rope's S >= 0 failed: it goes slack
         if not consistent:
             # Fallbacks, in order (each recorded in the phase log; see docs/rigid-model.md, "Resolution"):
             # 1. a degenerate contact (a load, acceleration or slip direction within rounding of its limit):
             #    the consistency tolerances relaxed by `relax`;
-            relaxed = not_again(self._check(cand, self.tol["relax"], near, resting, rope, t, where)[0])
+            relaxed = not_again(self.check_value(cand, self.tol["relax"], near, resting, rope, t, where)[0])
             if relaxed:
                 consistent = relaxed
                 self.notes.append(f"tolerances x{self.tol['relax']:g} (degenerate contact)")
@@ -293,7 +293,7 @@ class _Driver:
                 #    jamming; an impulse at the corners on the ground with zero normal velocity after it,
                 #    sticking where the cone allows, friction dropped if that has no solution), then choose
                 #    again.
-                raise _Jam(why)
+                raise Jam(why)
             else:
                 # 3. the least inconsistent configuration, as a short regularised phase (its guards end it).
                 #    Chosen `ChatterRule.max_regularised` times in a row, a compliant phase takes over
@@ -301,15 +301,15 @@ class _Driver:
                 k = int(np.argmin(violation))
                 least = f"least violation {violation[k]:.2g} ({reasons[k]})"
                 if not self.allow_regularised:
-                    raise _Inconsistent(least)
+                    raise Inconsistent(least)
                 self.regularised = least
                 consistent = [k]
                 self.notes.append(f"regularised: no consistent configuration, {least}")
         if previous is not None and int(previous.rope) != rope:
             previous = eqx.tree_at(lambda p: p.rope, previous, jnp.asarray(rope, dtype=jnp.int32))
         if previous is not None:
-            prev_N = _np(
-                _forces(jnp.asarray(t), y, self.sc, self.c, previous, self.settings, self.inextensible)
+            prev_N = as_numpy(
+                forces(jnp.asarray(t), y, self.sc, self.c, previous, self.settings, self.inextensible)
             )[:, 2]
         else:
             prev_N = None
@@ -320,7 +320,7 @@ class _Driver:
             and self._rank(combos, consistent + excluded, force, accel, prev_N, n_ref, near, mats, quiet=True)
             in excluded
         ):
-            self.notes.append(f"{_fmt(self.exclude)} not repeated after its guard fired")
+            self.notes.append(f"{fmt(self.exclude)} not repeated after its guard fired")
         combo = combos[best]
         hint = np.where((combo == SLIDE)[:, None], hints[best], 0.0)
         flat3 = bool(np.all(near)) and int(np.sum(combo != FREE)) == 3
@@ -364,7 +364,7 @@ class _Driver:
         hints[: len(combos)] = np.array(hints_list)
         if ref_row == len(combos):  # a skipped (rest-like) configuration leaves room for it
             contact[ref_row], hints[ref_row] = reference
-        force, acc_c, accel, tension = _eval_candidates(
+        force, acc_c, accel, tension = eval_candidates(
             jnp.asarray(t),
             y,
             self.sc,
@@ -375,7 +375,7 @@ class _Driver:
             jnp.asarray(rope, dtype=jnp.int32),
             self.inextensible,
         )
-        force, acc_c, accel, tension = map(_np, (force, acc_c, accel, tension))
+        force, acc_c, accel, tension = map(as_numpy, (force, acc_c, accel, tension))
         return _Candidates(
             combos=combos,
             hints=hints,
@@ -387,7 +387,7 @@ class _Driver:
             mats=mats,
         )
 
-    def _check(self, cand: _Candidates, scale: float, near, resting, rope: int, t, where: str):
+    def check_value(self, cand: _Candidates, scale: float, near, resting, rope: int, t, where: str):
         """Consistency of every candidate with the tolerances times `scale`: (consistent indices,
         [(combo, reason)] of the others, whether only the rope's S >= 0 failed somewhere, and per
         candidate its largest violation in units of G or g)."""
@@ -439,7 +439,7 @@ class _Driver:
             (consistent if ok else why).append(k if ok else (combo, reason))
             if self.debug and scale == 1.0:
                 print(
-                    f"  [{where} t={t:.9g}] {_fmt(combo)}: {'ok' if ok else reason}; "
+                    f"  [{where} t={t:.9g}] {fmt(combo)}: {'ok' if ok else reason}; "
                     f"N={np.round(N, 1)} accel={np.round(accel[k], 6)}"
                 )
         return consistent, why, rope_rejected, (violation, reasons)
@@ -493,7 +493,7 @@ class _Driver:
                 else "least constraint"
             )
             ref = f" (N_ref = {np.round(n_ref, 1).tolist()} N)" if rule.startswith("stiff") else ""
-            self.notes.append(f"{rule}: {_fmt(combos[best])} over {_fmt(combos[k])}{ref}")
+            self.notes.append(f"{rule}: {fmt(combos[best])} over {fmt(combos[k])}{ref}")
         return best
 
     # ---------------------------------------------------------------------------- impacts

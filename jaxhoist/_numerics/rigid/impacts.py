@@ -15,14 +15,14 @@ from ..._physics import rigid
 from ..._physics.elastic import State
 from ..._physics.rigid import FREE, SLIDE, STICK
 from .compiled import (
-    _eval_impulses,
-    _eval_rope_impulses,
-    _np,
-    _rope_direction,
-    _rope_state,
-    _RopeWouldPush,
+    RopeWouldPush,
+    as_numpy,
+    eval_impulses,
+    eval_rope_impulses,
+    rope_direction_jit,
+    rope_state,
 )
-from .records import RigidContactError, _fmt
+from .records import RigidContactError, fmt
 
 
 def impact(drv, t, y, striking: list[int], taut: bool = False, normal_only: bool = False):
@@ -45,9 +45,9 @@ def impact(drv, t, y, striking: list[int], taut: bool = False, normal_only: bool
             normal_target[i] = -drv.e * cv[i, 2]
     if taut:
         try:
-            y1, _, loss = _rope_jerk(drv, t, y, striking, normal_target)
+            y1, _, loss = rope_jerk(drv, t, y, striking, normal_target)
             return y1, loss
-        except _RopeWouldPush:
+        except RopeWouldPush:
             drv.rope_taut = False
     vh = cv[:, :2]
     speed = np.linalg.norm(vh, axis=1)
@@ -61,8 +61,8 @@ def impact(drv, t, y, striking: list[int], taut: bool = False, normal_only: bool
         # Sliding impulses need a direction: the pre-impact slip, else the opposite of the sticking one.
         sticking = _modes([np.where(cb == SLIDE, STICK, cb) for cb in combos])
         _, _, imp0, _ = map(
-            _np,
-            _eval_impulses(
+            as_numpy,
+            eval_impulses(
                 y,
                 sc,
                 drv.c,
@@ -74,8 +74,8 @@ def impact(drv, t, y, striking: list[int], taut: bool = False, normal_only: bool
         )
         sd = _slide_directions(combos, slipping, dirs, imp0) if mu > 0 else np.zeros((81, 4, 2))
         out = map(
-            _np,
-            _eval_impulses(
+            as_numpy,
+            eval_impulses(
                 y,
                 sc,
                 drv.c,
@@ -104,7 +104,7 @@ def impact(drv, t, y, striking: list[int], taut: bool = False, normal_only: bool
     if not consistent:
         y1, _ = drv._project(t, y, np.zeros(4, dtype=bool), mask)
         drv.notes.append(f"no impulse at {names}: normal velocities projected out")
-        v1, w1 = _np(y1.velocity)[None], _np(y1.angular_velocity)[None]
+        v1, w1 = as_numpy(y1.velocity)[None], as_numpy(y1.angular_velocity)[None]
         consistent = [0]
     best = consistent[0]
     u_best = np.concatenate([v1[best], w1[best]])
@@ -126,7 +126,7 @@ def impact(drv, t, y, striking: list[int], taut: bool = False, normal_only: bool
         # Newton's law is not unique for simultaneous multi-corner impacts: maximal dissipation.
         ke = {k: drv.kin(t, after(k))[2] for k in [best, *tied]}
         new = min(ke, key=lambda k: ke[k])
-        drv.notes.append(f"{len(tied) + 1} consistent impulses: maximal dissipation, {_fmt(combos[new])}")
+        drv.notes.append(f"{len(tied) + 1} consistent impulses: maximal dissipation, {fmt(combos[new])}")
         best = new
     y1 = eqx.tree_at(
         lambda s: (s.velocity, s.angular_velocity), y, (jnp.asarray(v1[best]), jnp.asarray(w1[best]))
@@ -200,7 +200,7 @@ def _consistent_impulses(combos, imp, cv1, sd, involved, mu, tP, tV) -> list[int
 def _rope_impulses(drv, sc, tj, y: State, modes, sd, normal_target):
     """`_eval_rope_impulses` for every contact combination (`modes`, slide directions `sd`), on the host:
     (v+, ω+, tip v+, corner impulses, rope impulse P [N s], corner velocities+)."""
-    out = _eval_rope_impulses(
+    out = eval_rope_impulses(
         tj,
         y,
         sc,
@@ -210,7 +210,7 @@ def _rope_impulses(drv, sc, tj, y: State, modes, sd, normal_target):
         jnp.asarray(normal_target),
         drv.settings.rcond,
     )
-    return tuple(map(_np, out))
+    return tuple(map(as_numpy, out))
 
 
 def _jerk_on_tip_alone(drv, tj, y: State, cv, cv1, s_dot, m0, striking, flat, tip_alone):
@@ -227,8 +227,8 @@ def _jerk_on_tip_alone(drv, tj, y: State, cv, cv1, s_dot, m0, striking, flat, ti
     of the load at all."""
     rest = float(drv.settings.rest_velocity)
     if not striking and flat and float(np.max(np.linalg.norm(cv1, axis=1))) < rest:
-        e = _np(_rope_direction(tj, y, drv.sc, drv.c))
-        v_A = _np(y.tip_velocity)
+        e = as_numpy(rope_direction_jit(tj, y, drv.sc, drv.c))
+        v_A = as_numpy(y.tip_velocity)
         P_tip = m0 * (float(e @ v_A) + s_dot)  # tip alone: e·v_A+ = dl/dt = -ds/dt, load at rest
         work = P_tip * s_dot
         y1 = eqx.tree_at(
@@ -238,14 +238,14 @@ def _jerk_on_tip_alone(drv, tj, y: State, cv, cv1, s_dot, m0, striking, flat, ti
         )
         return y1, work
     if tip_alone or (not striking and flat and float(np.max(np.linalg.norm(cv1 - cv, axis=1))) < rest):
-        e = _np(_rope_direction(tj, y, drv.sc, drv.c))
-        _, rate_error, _ = map(float, _rope_state(tj, y, drv.sc, drv.c))
+        e = as_numpy(rope_direction_jit(tj, y, drv.sc, drv.c))
+        _, rate_error, _ = map(float, rope_state(tj, y, drv.sc, drv.c))
         P_tip = m0 * rate_error  # e·(v_A+ - v_B) = -ds/dt
         work = P_tip * s_dot
         y1 = eqx.tree_at(
             lambda s: (s.tip_velocity, s.hoist_work),
             y,
-            (jnp.asarray(_np(y.tip_velocity) - (P_tip / m0) * e), y.hoist_work + work),
+            (jnp.asarray(as_numpy(y.tip_velocity) - (P_tip / m0) * e), y.hoist_work + work),
         )
         if not tip_alone:
             drv.notes.append("jerk on the tip alone")
@@ -253,7 +253,7 @@ def _jerk_on_tip_alone(drv, tj, y: State, cv, cv1, s_dot, m0, striking, flat, ti
     return None
 
 
-def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=None, fallback: bool = False):
+def rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=None, fallback: bool = False):
     """The inextensible rope snapping taut (or the hoist starting with a speed jump): a plastic jerk that
     sets d|AB|/dt = dl/dt, with the corners on the ground taking impulses as in `_Driver.impact` (every
     combination of free / slide / stick tried; consistent: P >= 0, normal impulses >= 0, sticking ones in
@@ -301,16 +301,16 @@ def _rope_jerk(drv, t: float, y: State, striking=(), normal_target=None, t_rate=
             consistent, tip_alone = [0], True
             drv.notes.append("no consistent jerk: on the tip alone")
     if not consistent:
-        raise _RopeWouldPush(
+        raise RopeWouldPush(
             f"t = {t:.9g} s: the jerk of the inextensible rope has no consistent impulse "
             "(Painlevé-type impact inconsistency)"
         )
     best = consistent[0]
-    _, _, s_dot = map(float, _rope_state(tj, y, drv.sc, drv.c))
+    _, _, s_dot = map(float, rope_state(tj, y, drv.sc, drv.c))
     m0 = float(drv.sc.boom.tip_mass)
 
     def ke(yy):
-        return drv.kin(t, yy)[2] + 0.5 * m0 * float(np.sum(_np(yy.tip_velocity) ** 2))
+        return drv.kin(t, yy)[2] + 0.5 * m0 * float(np.sum(as_numpy(yy.tip_velocity) ** 2))
 
     work = float(P[best]) * s_dot
     y1 = eqx.tree_at(

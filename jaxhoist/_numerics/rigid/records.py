@@ -95,7 +95,7 @@ class RigidTrajectory(Trajectory):
         return "\n".join(str(p) for p in self.phases)
 
 
-def _merge(previous: PhaseRecord, short: PhaseRecord) -> PhaseRecord:
+def merge(previous: PhaseRecord, short: PhaseRecord) -> PhaseRecord:
     """One record for `previous` followed by a phase `short` that lasted less than `min_phase` (1 µs): two
     events closer than the phase solves resolve time (their event root finder works to 1e-10 s, the
     solution to rtol 1e-8) are one event of the log. The merged record keeps the previous phase's contact
@@ -116,5 +116,5 @@ def _merge(previous: PhaseRecord, short: PhaseRecord) -> PhaseRecord:
     return dataclasses.replace(previous, t_end=short.t_end, end=end, state_end=short.state_end, merged=n)
 
 
-def _fmt(combo) -> str:
+def fmt(combo) -> str:
     return " ".join(f"{c}:{rigid.MODE_NAMES[int(m)]}" for c, m in zip(rigid.CORNERS, combo, strict=True))

@@ -17,29 +17,29 @@ from ..._physics import rigid
 from ..._physics.elastic import Constants, State
 from ..._physics.rigid import FREE, SLIDE, STICK, Phase
 from .compiled import (
-    _chunked_outputs,
-    _Jam,
-    _np,
-    _rope_state,
-    _RopeWouldPush,
-    _tree_index,
+    Jam,
+    RopeWouldPush,
+    as_numpy,
+    chunked_outputs,
+    rope_state,
+    tree_index,
 )
 from .compliant import ChatterRule, run_episode, with_compliant_outputs
-from .driver import _Driver, _Inconsistent
-from .impacts import _rope_jerk
-from .records import PhaseRecord, RigidContactError, RigidTrajectory, _fmt, _merge
+from .driver import Driver, Inconsistent
+from .impacts import rope_jerk
+from .records import PhaseRecord, RigidContactError, RigidTrajectory, fmt, merge
 
 #: The persistent-contact rule after impacts (docs/rigid-model.md); False only to compare without it.
 PERSISTENT_CONTACT = True
 
 
-class _Run:
+class Run:
     """The phase loop of one `simulate_rigid` call: the saved samples, the phase log and the booked impact
     losses, filled phase by phase (`step`), and the trajectory assembled from them (`result`)."""
 
     def __init__(
         self,
-        drv: _Driver,
+        drv: Driver,
         ts: np.ndarray,
         t1: float,
         max_phases: int,
@@ -69,7 +69,7 @@ class _Run:
         less than `min_phase` (see `_merge`)."""
         records = self.records
         if records and rec.t_end - rec.t_start < self.drv.tol["min_phase"]:
-            records[-1] = _merge(records[-1], rec)
+            records[-1] = merge(records[-1], rec)
         else:
             records.append(rec)
         self.record_of.append(len(records) - 1)
@@ -82,12 +82,12 @@ class _Run:
             # A taut inextensible rope and a hoist already running at t = 0+: the start is a rope jerk.
             # The hoist speed just after the start (a jump at t = 0 may leave ds/dt(0) = 0 exactly).
             t_plus = 1e-9
-            stretch, rate_error, _ = map(float, _rope_state(jnp.asarray(t_plus), y, drv.sc, drv.c))
+            stretch, rate_error, _ = map(float, rope_state(jnp.asarray(t_plus), y, drv.sc, drv.c))
             drv.rope_taut = stretch >= -drv.tol["z"] * drv.L  # rope.slack = 0: just taut
             if drv.rope_taut and rate_error > drv.tol["v"] * drv.V:
                 try:
-                    y, _, loss = _rope_jerk(drv, 0.0, y, t_rate=t_plus)
-                except _RopeWouldPush as err:
+                    y, _, loss = rope_jerk(drv, 0.0, y, t_rate=t_plus)
+                except RopeWouldPush as err:
                     raise RigidContactError(str(err)) from None
                 self.impact_total += loss
         phase, y, loss = drv.select_or_jam(t, y, "start")
@@ -120,17 +120,19 @@ class _Run:
         y, loss = drv.project(t, y, phase)
         self.impact_total += loss
         phase = drv.with_offsets(t, y, phase)
-        g_start = drv.guards(t, y, phase) + _np(phase.guard_offset)
+        g_start = drv.guards(t, y, phase) + as_numpy(phase.guard_offset)
         sts, sys_, result = drv.solve(y, phase, t, self.t1, self.ts)
         last = int(np.nonzero(np.isfinite(sts))[0][-1])  # the final state is saved after the last ts kept
         t_end = float(sts[last])
-        y_end = _tree_index(sys_, last)
+        y_end = tree_index(sys_, last)
         ok = result == diffrax.RESULTS.successful
         event = result == diffrax.RESULTS.event_occurred
         if not (bool(ok) or bool(event)):
             return self.stalled(t, y, phase, result)
         self.save(t, t_end, phase, sys_)
-        modes = cast(tuple[str, str, str, str], tuple(rigid.MODE_NAMES[int(m)] for m in _np(phase.contact)))
+        modes = cast(
+            tuple[str, str, str, str], tuple(rigid.MODE_NAMES[int(m)] for m in as_numpy(phase.contact))
+        )
         rope_name = rigid.ROPE_NAMES[int(phase.rope)]
         if not bool(event) or t_end >= self.t1:
             self.log(PhaseRecord(t, t_end, modes, bool(phase.rest), "t1", y_end, rope_name, self.choice))
@@ -192,8 +194,8 @@ class _Run:
             how_stalled = "stalled at max_steps"
         if self.retried_at != t and not bool(phase.rest):
             self.retried_at = t
-            stalled = _fmt(_np(phase.contact))
-            drv.exclude = _np(phase.contact).copy()
+            stalled = fmt(as_numpy(phase.contact))
+            drv.exclude = as_numpy(phase.contact).copy()
             try:
                 phase, y, loss = drv.select_or_jam(t, y, "after a stalled phase")
             finally:
@@ -216,14 +218,14 @@ class _Run:
             self.saved_states = jax.tree_util.tree_map(
                 lambda x: np.zeros((self.ts.size,) + np.shape(x), np.asarray(x).dtype), y
             )
-        return self.compliant(t, y, phase, f"{_fmt(_np(phase.contact))} {how_stalled}, twice")
+        return self.compliant(t, y, phase, f"{fmt(as_numpy(phase.contact))} {how_stalled}, twice")
 
     def after_event(self, t, t_end, y_end, phase, g_start, modes, rope_name):
         """The guards of `phase` fired at (t_end, y_end): log the phase, resolve an impact or rope jerk, and
         choose the next phase. Returns `(next phase, state)`."""
         drv = self.drv
         drv.regularised = ""  # set again only if the choice below is fallback 3
-        g = drv.guards(t_end, y_end, phase) + _np(phase.guard_offset)
+        g = drv.guards(t_end, y_end, phase) + as_numpy(phase.guard_offset)
         # Fired: near zero now, and well below where the guard started (a guard that started at its small
         # offset and stayed there has not fired).
         fired = [k for k in range(rigid.N_GUARDS) if g[k] <= drv.tol["trigger"] and g[k] <= 0.5 * g_start[k]]
@@ -232,7 +234,7 @@ class _Run:
         if drv.debug:
             print(f"  guards at start {g_start}\n  guards at end   {g}")
         end = ",".join(rigid.GUARD_NAMES[k] for k in fired)
-        contact = _np(phase.contact)
+        contact = as_numpy(phase.contact)
         corners, cv, _ = drv.kin(t_end, y_end)
         striking = [k for k in fired if k < 4 and contact[k] == FREE and not bool(phase.rest)]
         hard = [i for i in striking if cv[i, 2] < -drv.tol["v"] * drv.V]
@@ -243,13 +245,13 @@ class _Run:
 
         if 11 in fired:
             # The slack inextensible rope reaches its length: a jerk if it would stretch, then a new phase.
-            _, rate_error, _ = map(float, _rope_state(jnp.asarray(t_end), y_end, drv.sc, drv.c))
+            _, rate_error, _ = map(float, rope_state(jnp.asarray(t_end), y_end, drv.sc, drv.c))
             y_before = y_end
             drv.rope_taut = True
             if rate_error > drv.tol["v"] * drv.V:
                 try:
-                    y_end, _, loss = _rope_jerk(drv, t_end, y_end, fallback=True)
-                except _RopeWouldPush as err:
+                    y_end, _, loss = rope_jerk(drv, t_end, y_end, fallback=True)
+                except RopeWouldPush as err:
                     raise RigidContactError(str(err)) from None
                 self.impact_total += loss
                 self.impact_events.append((t_end, loss))
@@ -349,7 +351,7 @@ class _Run:
             try:
                 phase, y, loss = drv.select_or_jam(ep.t_end, ep.y_end, "after a compliant phase")
                 break
-            except _Inconsistent as err:
+            except Inconsistent as err:
                 drv.take_notes()  # the notes of a choice not taken
                 extended.append(f"{ep.t_end:.6f} s: {err}")
                 t, y_el = ep.t_end, ep.y_before_handback  # go on from the compliant state
@@ -406,7 +408,7 @@ class _Run:
         for k in np.nonzero(~self.filled)[0]:  # cannot happen unless ts extends past the last phase
             raise RigidContactError(f"saved time {ts[k]} s was not reached")
         states = jax.tree_util.tree_map(jnp.asarray, saved_states)
-        out = _chunked_outputs(
+        out = chunked_outputs(
             ts, saved_states, self.saved_phase, self.phases, drv.sc, c, settings, drv.inextensible
         )
         if np.any(self.compliant_mask):
@@ -438,12 +440,12 @@ class _Run:
         )
 
 
-def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[int], ts):
+def _transition(drv: Driver, t_e: float, y_e: State, phase: Phase, fired: list[int], ts):
     """The next phase after the guards `fired` of `phase` reached zero at (t_e, y_e) (no impact).
 
     **Returns** `(phase, y, loss [J])`: `y` is `y_e`, or `y_e` after a tangential impact (`_Driver.jam`)
     where no configuration was consistent."""
-    contact, starting = _np(phase.contact), _np(phase.starting)
+    contact, starting = as_numpy(phase.contact), as_numpy(phase.starting)
     _, cv, _ = drv.kin(t_e, y_e)
     speed = np.linalg.norm(cv[:, :2], axis=1)
     tangential = [k - 4 for k in fired if 4 <= k < 8 and contact[k - 4] == SLIDE and not phase.rest]
@@ -453,7 +455,7 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
     grown = [i for i in tangential if starting[i] and speed[i] >= 1.5 * drv.v_stop]
     turned = [i for i in tangential if starting[i] and 0.05 * drv.v_stop <= speed[i] < 1.5 * drv.v_stop]
     if (grown or turned) and len(grown) + len(turned) == len(fired):
-        hint, start = _np(phase.slip_hint).copy(), starting.copy()
+        hint, start = as_numpy(phase.slip_hint).copy(), starting.copy()
         for i in grown + turned:
             hint[i] = cv[i, :2] / speed[i]
         for i in grown:
@@ -464,7 +466,7 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
                 rest=False,
                 slip_hint=hint,
                 starting=start,
-                free_on_ground=_np(phase.free_on_ground),
+                free_on_ground=as_numpy(phase.free_on_ground),
                 rope=int(phase.rope),
             ),
             y_e,
@@ -482,7 +484,7 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
     for _ in range(11):
         t_la = t_e + dt
         sts, sys_, result = drv.solve(y_e, blind, t_e, t_la, ts)
-        y_la = _tree_index(sys_, int(np.nonzero(np.isfinite(sts))[0][-1]))
+        y_la = tree_index(sys_, int(np.nonzero(np.isfinite(sts))[0][-1]))
         g = drv.guards(t_la, y_la, phase)
         if all(g[k] < -drv.tol["lookahead"] for k in fired):
             break
@@ -493,7 +495,7 @@ def _transition(drv: _Driver, t_e: float, y_e: State, phase: Phase, fired: list[
     drv.exclude = contact.copy() if hard and not bool(phase.rest) else None
     try:
         return drv.select(t_la, y_la, where, phase), y_e, 0.0
-    except _Jam:
+    except Jam:
         # The tangential impact where the event happened, then choose there.
         return drv.select_or_jam(t_e, y_e, where, phase)
     finally:

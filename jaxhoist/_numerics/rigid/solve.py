@@ -50,15 +50,15 @@ from ..._physics.rigid.model import InextensibleRope, RigidGround
 from ..times import TimesLike, as_times
 from .compiled import (
     OUTPUT_CHUNK,
+    Options,
     StallRule,
-    _Options,
 )
 from .compliant import ChatterRule
 from .coulomb import coulomb_pattern
-from .driver import _Driver
+from .driver import Driver
 from .options import DRIVER_TOLERANCES, RigidOptions
 from .records import PhaseRecord, RigidContactError, RigidTrajectory
-from .run import _Run
+from .run import Run
 
 __all__ = [
     "ChatterRule",
@@ -133,7 +133,7 @@ def simulate_rigid(
         raise ScenarioError("ts must be a 1-D, strictly increasing array from 0 to t1 [s]")
     settings = rigid.Settings() if options.settings is None else options.settings
     stall = options.stall
-    phase_options = _Options(
+    phase_options = Options(
         rtol=float(options.rtol),
         atol=float(options.atol),
         max_steps=int(options.max_steps),
@@ -142,11 +142,11 @@ def simulate_rigid(
         stall_step=0.0 if stall is None else float(stall.min_step),
     )
     y0, c = rigid.initial_state(scenario)
-    drv = _Driver(scenario, c, settings, phase_options, float(model.restitution), dict(DRIVER_TOLERANCES))
+    drv = Driver(scenario, c, settings, phase_options, float(model.restitution), dict(DRIVER_TOLERANCES))
     drv.debug = verbose == "debug"
     drv.inextensible = isinstance(model.rope, InextensibleRope)
 
-    run = _Run(drv, ts, t1, int(options.max_phases), int(options.max_steps), options.chatter, verbose)
+    run = Run(drv, ts, t1, int(options.max_phases), int(options.max_steps), options.chatter, verbose)
     run.start(y0)
     while run.step():
         pass

@@ -313,7 +313,7 @@ def rope_accel_target(ld: Loads, settings: Settings) -> Scalar:
     return -ld.hoist_accel - 2.0 * beta * ld.rope_rate_error - beta**2 * ld.stretch
 
 
-def _tip_free_accel(ld: Loads, scenario: Scenario) -> Vec3:
+def tip_free_accel(ld: Loads, scenario: Scenario) -> Vec3:
     """Boom-tip acceleration (2.13) without the rope force (inextensible rope: S = 0 in `ld`)."""
     g = scenario.gravity
     return (ld.boom_force - ld.rope_tension * ld.rope_direction) / scenario.boom.tip_mass - g * jnp.array(
@@ -327,11 +327,11 @@ def rest_rope_tension(ld: Loads, scenario: Scenario, settings: Settings) -> Scal
     e = ld.rope_direction
     m0 = scenario.boom.tip_mass
     return m0 * (
-        jnp.dot(e, _tip_free_accel(ld, scenario)) + ld.rope_curvature - rope_accel_target(ld, settings)
+        jnp.dot(e, tip_free_accel(ld, scenario)) + ld.rope_curvature - rope_accel_target(ld, settings)
     )
 
 
-def _mass_inverse(scenario: Scenario, c: Constants) -> Float[Array, "6 6"]:
+def mass_inverse(scenario: Scenario, c: Constants) -> Float[Array, "6 6"]:
     m = scenario.load.mass
     z = jnp.zeros((3, 3))
     return jnp.block([[jnp.eye(3) / m, z], [z, c.inertia_inv]])
@@ -346,7 +346,7 @@ def slip_directions(corner_velocity: CornerVecs, slip_hint: Float[Array, "4 2"],
     return jnp.where(pos[:, None], w / n[:, None], 0.0)
 
 
-def _maps(contact: Int[Array, "4"], tdir: Float[Array, "4 2"], mu: Scalar):
+def maps(contact: Int[Array, "4"], tdir: Float[Array, "4 2"], mu: Scalar):
     """Per corner: the force map P_i (world force = P_i λ_i) and the constrained-row selector S_i (3x3)."""
     stick = contact == STICK
     slide = contact == SLIDE
@@ -365,7 +365,7 @@ def _maps(contact: Int[Array, "4"], tdir: Float[Array, "4 2"], mu: Scalar):
     return P, s_rows
 
 
-def _block_diag(blocks: Float[Array, "4 3 3"]) -> Float[Array, "12 12"]:
+def block_diag(blocks: Float[Array, "4 3 3"]) -> Float[Array, "12 12"]:
     out = jnp.zeros((12, 12))
     for i in range(4):
         out = out.at[3 * i : 3 * i + 3, 3 * i : 3 * i + 3].set(blocks[i])
@@ -386,7 +386,7 @@ def solve_contact_system(jacobians, Minv, P, s_rows, target, mass, rcond):
     Bbig = jacobians.reshape(12, 6)
     K = Bbig @ Minv @ Bbig.T
     s = s_rows.reshape(12)
-    A = mass * (s[:, None] * K @ _block_diag(P)) + jnp.diag(1.0 - s)
+    A = mass * (s[:, None] * K @ block_diag(P)) + jnp.diag(1.0 - s)
     rhs = mass * s * target.reshape(12)
     four = jnp.all(s_rows[:, 2] > 0)
     w_row = jnp.zeros(12).at[jnp.array([2, 5, 8, 11])].set(jnp.asarray(statics._W))
@@ -410,7 +410,7 @@ def solve_rope_contact_system(jacobians, Minv, P, s_rows, target, g_rope, m0, rh
     """
     Bbig = jacobians.reshape(12, 6)
     s = s_rows.reshape(12)
-    PB = _block_diag(P)
+    PB = block_diag(P)
     A_cc = s[:, None] * (Bbig @ Minv @ Bbig.T @ PB) + jnp.diag(1.0 - s)
     A_cs = s * (Bbig @ Minv @ g_rope)
     A_sc = g_rope @ Minv @ Bbig.T @ PB
@@ -474,7 +474,7 @@ def contact_matrices(
     m0 = scenario.boom.tip_mass
     e = ld.rope_direction
     M9 = jnp.zeros((9, 9)).at[:6, :6].set(M).at[6:, 6:].set(m0 * jnp.eye(3))
-    f9 = jnp.concatenate([ld.generalised_force, m0 * _tip_free_accel(ld, scenario)])
+    f9 = jnp.concatenate([ld.generalised_force, m0 * tip_free_accel(ld, scenario)])
     jac9 = jnp.concatenate([ld.jacobians, jnp.zeros((4, 3, 3))], axis=2)
     # d²|AB|/dt² = e·(a_A - J_B u̇ - bias_B) + curvature = target.
     row = jnp.concatenate([-e @ ld.rope_jacobian, e])

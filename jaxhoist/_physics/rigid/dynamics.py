@@ -25,17 +25,17 @@ from .contact import (
     Loads,
     Phase,
     Settings,
-    _maps,
-    _mass_inverse,
-    _tip_free_accel,
     inextensible_loads,
     loads,
+    maps,
+    mass_inverse,
     rest_rope_tension,
     rope_accel_target,
     scales,
     slip_directions,
     solve_contact_system,
     solve_rope_contact_system,
+    tip_free_accel,
     with_tension,
 )
 
@@ -72,19 +72,19 @@ def rest_friction(ld: Loads, c: Constants, scenario: Scenario) -> Float[Array, "
     return -0.25 * F[None, :2] + alpha * jnp.stack([-d[:, 1], d[:, 0]], axis=1)
 
 
-def _rest_loads(ld: Loads, scenario: Scenario, phase: Phase, settings: Settings) -> Loads:
+def rest_loads(ld: Loads, scenario: Scenario, phase: Phase, settings: Settings) -> Loads:
     """`ld` of a load held fixed, with the taut inextensible rope's tension (if any) applied."""
     taut = phase.rope == ROPE_TAUT
     return with_tension(ld, rest_rope_tension(ld, scenario, settings), taut)
 
 
-def _rest_contact_rope(
+def rest_contact_rope(
     ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings
 ) -> Contact:
-    return _rest_contact(_rest_loads(ld, scenario, phase, settings), scenario, c, phase, settings)
+    return rest_contact(rest_loads(ld, scenario, phase, settings), scenario, c, phase, settings)
 
 
-def _rest_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Contact:
+def rest_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings) -> Contact:
     # Held fixed: zero acceleration; the corner loads of the linear law (2.3), made nonnegative.
     S_body = ld.rotation.T @ (ld.rope_tension * ld.rope_direction)
     st = statics.rest_statics_loads(scenario, S_body)
@@ -98,20 +98,20 @@ def _rest_contact(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, set
     )
 
 
-def _motion_contact_rope(
+def motion_contact_rope(
     ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings
 ) -> Contact:
     return jax.lax.cond(
-        phase.rope == ROPE_TAUT, _motion_contact_taut, _motion_contact_free, ld, scenario, c, phase, settings
+        phase.rope == ROPE_TAUT, motion_contact_taut, motion_contact_free, ld, scenario, c, phase, settings
     )
 
 
-def _contact_problem(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
+def contact_problem(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
     """M⁻¹, the sliding directions t̂_i, the force maps P_i and row selectors of `_maps`, and the corner
     accelerations the contact forces must add (Baumgarte target minus the unconstrained ones)."""
-    Minv = _mass_inverse(scenario, c)
+    Minv = mass_inverse(scenario, c)
     tdir = slip_directions(ld.corner_velocity, phase.slip_hint, settings.slip_velocity)
-    P, s_rows = _maps(phase.contact, tdir, scenario.foundation.friction_coefficient)
+    P, s_rows = maps(phase.contact, tdir, scenario.foundation.friction_coefficient)
     beta = settings.baumgarte
     z_only = jnp.array([0.0, 0.0, 1.0])
     a_free = jnp.einsum("kij,j->ki", ld.jacobians, Minv @ ld.generalised_force) + ld.bias
@@ -119,7 +119,7 @@ def _contact_problem(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, 
     return Minv, tdir, P, s_rows, a_target - a_free
 
 
-def _contact_from_multipliers(ld: Loads, Minv, tdir, P, lam) -> Contact:
+def contact_from_multipliers(ld: Loads, Minv, tdir, P, lam) -> Contact:
     """Corner forces F_i = P_i λ_i and the resulting body and corner accelerations."""
     F = jnp.einsum("kij,kj->ki", P, lam.reshape(4, 3))
     accel = Minv @ (ld.generalised_force + jnp.einsum("kij,ki->j", ld.jacobians, F))
@@ -127,25 +127,25 @@ def _contact_from_multipliers(ld: Loads, Minv, tdir, P, lam) -> Contact:
     return Contact(accel=accel, force=F, corner_accel=corner_accel, slip_direction=tdir, loads=ld)
 
 
-def _motion_contact_free(
+def motion_contact_free(
     ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings
 ) -> Contact:
-    Minv, tdir, P, s_rows, target = _contact_problem(ld, scenario, c, phase, settings)
+    Minv, tdir, P, s_rows, target = contact_problem(ld, scenario, c, phase, settings)
     lam = solve_contact_system(ld.jacobians, Minv, P, s_rows, target, scenario.load.mass, settings.rcond)
-    return _contact_from_multipliers(ld, Minv, tdir, P, lam)
+    return contact_from_multipliers(ld, Minv, tdir, P, lam)
 
 
-def _motion_contact_taut(
+def motion_contact_taut(
     ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings
 ) -> Contact:
     """The moving load with a taut inextensible rope: unknowns λ (12) and the tension S, from "constrained
     corner accelerations vanish" (Baumgarte-stabilised) and d²|AB|/dt² = `rope_accel_target`, with the
     boom tip's acceleration (2.13) m_0 a_A = boom force - S e - m_0 g."""
-    Minv, tdir, P, s_rows, target = _contact_problem(ld, scenario, c, phase, settings)
+    Minv, tdir, P, s_rows, target = contact_problem(ld, scenario, c, phase, settings)
     e = ld.rope_direction
     a_B_free = ld.rope_jacobian @ (Minv @ ld.generalised_force) + ld.rope_bias
     rhs_s = (
-        jnp.dot(e, _tip_free_accel(ld, scenario))
+        jnp.dot(e, tip_free_accel(ld, scenario))
         - jnp.dot(e, a_B_free)
         + ld.rope_curvature
         - rope_accel_target(ld, settings)
@@ -162,7 +162,7 @@ def _motion_contact_taut(
         scenario.load.mass,
         settings.rcond,
     )
-    return _contact_from_multipliers(with_tension(ld, S, True), Minv, tdir, P, lam)
+    return contact_from_multipliers(with_tension(ld, S, True), Minv, tdir, P, lam)
 
 
 def contact_dynamics(
@@ -180,22 +180,20 @@ def contact_dynamics(
     forces (`Contact.loads` carries it); without, the elastic rope (2.14)."""
     ld = loads(t, y, scenario, c)
     if inextensible:
-        return _contact_rope(t, y, ld, scenario, c, phase, settings)
-    return _contact_elastic(t, y, ld, scenario, c, phase, settings)
+        return contact_rope(t, y, ld, scenario, c, phase, settings)
+    return contact_elastic(t, y, ld, scenario, c, phase, settings)
 
 
-def _contact_elastic(t, y, ld, scenario, c, phase, settings) -> Contact:
-    return jax.lax.cond(phase.rest, _rest_contact, _motion_contact_free, ld, scenario, c, phase, settings)
+def contact_elastic(t, y, ld, scenario, c, phase, settings) -> Contact:
+    return jax.lax.cond(phase.rest, rest_contact, motion_contact_free, ld, scenario, c, phase, settings)
 
 
-def _contact_rope(t, y, ld, scenario, c, phase, settings) -> Contact:
+def contact_rope(t, y, ld, scenario, c, phase, settings) -> Contact:
     ld = inextensible_loads(t, y, ld, scenario, c)
-    return jax.lax.cond(
-        phase.rest, _rest_contact_rope, _motion_contact_rope, ld, scenario, c, phase, settings
-    )
+    return jax.lax.cond(phase.rest, rest_contact_rope, motion_contact_rope, ld, scenario, c, phase, settings)
 
 
-def _unpack(args):
+def unpack(args):
     """`args = (scenario, constants, phase, settings[, inextensible])` -> the five, inextensible a bool."""
     scenario, c, phase, settings, *rest = args
     return scenario, c, phase, settings, bool(rest[0]) if rest else False
@@ -204,7 +202,7 @@ def _unpack(args):
 def vector_field(t: Scalar, y: State, args) -> State:
     """dy/dt of the rigid model in the phase `args = (scenario, constants, phase, settings[, inextensible])`
     (`inextensible`: a Python bool, the rope model of the solve, default False: the elastic rope)."""
-    scenario, c, phase, settings, inextensible = _unpack(args)
+    scenario, c, phase, settings, inextensible = unpack(args)
     boom, g = scenario.boom, scenario.gravity
     ct = contact_dynamics(t, y, scenario, c, phase, settings, inextensible)
     ld = ct.loads
@@ -255,13 +253,13 @@ def raw_guards(
     ld = loads(t, y, scenario, c, inextensible=inextensible)
     if inextensible:
         return jax.lax.cond(
-            phase.rest, _rest_guards_rope, _motion_guards_rope, ld, scenario, c, phase, settings
+            phase.rest, rest_guards_rope, motion_guards_rope, ld, scenario, c, phase, settings
         )
-    g = jax.lax.cond(phase.rest, _rest_guards, _motion_guards, ld, scenario, c, phase, settings)
+    g = jax.lax.cond(phase.rest, rest_guards, motion_guards, ld, scenario, c, phase, settings)
     return jnp.concatenate([g, jnp.ones(2)])
 
 
-def _rope_guards(ld: Loads, scenario: Scenario, phase: Phase) -> Float[Array, "2"]:
+def rope_guards(ld: Loads, scenario: Scenario, phase: Phase) -> Float[Array, "2"]:
     """The inextensible rope: while taut, its tension S / G (it goes slack at 0); while slack,
     (l(t) - |AB|) / L (it becomes taut again at 0). +1 otherwise."""
     sc = scales(scenario)
@@ -270,26 +268,26 @@ def _rope_guards(ld: Loads, scenario: Scenario, phase: Phase) -> Float[Array, "2
     return jnp.stack([slack, taut])
 
 
-def _rest_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
+def rest_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
     tip, rho = rest_conditions(ld, scenario, c)
     return jnp.concatenate([jnp.ones(8), jnp.stack([tip, 1.0 - rho])])
 
 
-def _rest_guards_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
-    ld = _rest_loads(ld, scenario, phase, settings)
-    g = _rest_guards(ld, scenario, c, phase, settings)
-    return jnp.concatenate([g, _rope_guards(ld, scenario, phase)])
+def rest_guards_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
+    ld = rest_loads(ld, scenario, phase, settings)
+    g = rest_guards(ld, scenario, c, phase, settings)
+    return jnp.concatenate([g, rope_guards(ld, scenario, phase)])
 
 
-def _motion_guards_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
-    ct = _motion_contact_rope(ld, scenario, c, phase, settings)
-    g = _motion_guards(ld, scenario, c, phase, settings, ct)
-    return jnp.concatenate([g, _rope_guards(ct.loads, scenario, phase)])
+def motion_guards_rope(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings):
+    ct = motion_contact_rope(ld, scenario, c, phase, settings)
+    g = motion_guards(ld, scenario, c, phase, settings, ct)
+    return jnp.concatenate([g, rope_guards(ct.loads, scenario, phase)])
 
 
-def _motion_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings, ct=None):
+def motion_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, settings: Settings, ct=None):
     sc = scales(scenario)
-    ct = _motion_contact_free(ld, scenario, c, phase, settings) if ct is None else ct
+    ct = motion_contact_free(ld, scenario, c, phase, settings) if ct is None else ct
     ld = ct.loads
     mu = scenario.foundation.friction_coefficient
     N = ct.force[:, 2]
@@ -318,7 +316,7 @@ def _motion_guards(ld: Loads, scenario: Scenario, c: Constants, phase: Phase, se
 
 def event_condition(t, y, args, **kwargs) -> Scalar:
     """min over the guards (+ offsets): > 0 while the phase is valid; its zero ends the phase."""
-    scenario, c, phase, settings, inextensible = _unpack(args)
+    scenario, c, phase, settings, inextensible = unpack(args)
     return jnp.min(raw_guards(t, y, scenario, c, phase, settings, inextensible) + phase.guard_offset)
 
 
@@ -343,13 +341,13 @@ def impulse_response(
     **Returns** `(velocity, angular_velocity, impulses (4, 3), corner_velocity_after (4, 3))`.
     """
     R = kinematics.quat_to_matrix(y.quaternion)
-    Minv = _mass_inverse(scenario, c)
+    Minv = mass_inverse(scenario, c)
     jac = jax.vmap(lambda rho: jnp.concatenate([jnp.eye(3), -R @ kinematics.skew(rho)], axis=1))(
         c.corners_rel
     )
     u = jnp.concatenate([y.velocity, y.angular_velocity])
     v = jnp.einsum("kij,j->ki", jac, u)
-    P, s_rows = _maps(modes, slip_dirs, scenario.foundation.friction_coefficient)
+    P, s_rows = maps(modes, slip_dirs, scenario.foundation.friction_coefficient)
     target = jnp.concatenate([jnp.zeros((4, 2)), normal_target[:, None]], axis=1)
     lam = solve_contact_system(jac, Minv, P, s_rows, target - v, scenario.load.mass, rcond)
     imp = jnp.einsum("kij,kj->ki", P, lam.reshape(4, 3))
@@ -378,10 +376,10 @@ def rope_impulse_response(
     (4, 3))`.
     """
     ld = loads(t, y, scenario, c, inextensible=True)
-    Minv = _mass_inverse(scenario, c)
+    Minv = mass_inverse(scenario, c)
     u = jnp.concatenate([y.velocity, y.angular_velocity])
     v = jnp.einsum("kij,j->ki", ld.jacobians, u)
-    P, s_rows = _maps(modes, slip_dirs, scenario.foundation.friction_coefficient)
+    P, s_rows = maps(modes, slip_dirs, scenario.foundation.friction_coefficient)
     m0 = scenario.boom.tip_mass
     target = jnp.concatenate([jnp.zeros((4, 2)), normal_target[:, None]], axis=1)
     lam, P_rope = solve_rope_contact_system(
