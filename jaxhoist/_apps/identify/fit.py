@@ -155,13 +155,13 @@ def residual_function(
     measurement,
     params,
     *,
+    options: SolverOptions | None = None,
+    fit: FitOptions | None = None,
     signals: Sequence[str] | None = None,
     noise: Mapping[str, float | str] | None = None,
     start: Mapping[str, Any] | None = None,
     bounds: Mapping[str, tuple[float, float]] | None = None,
     t1: float | None = None,
-    options: SolverOptions | None = None,
-    fit: FitOptions | None = None,
 ):
     """The whitened residual vector of `identify`'s problem as a plain numpy function of θ (flat, in the
     order of `IdentificationResult.names`), for comparisons with other optimisers (e.g. scipy with finite
@@ -177,18 +177,8 @@ def residual_function(
     if fit is not None and not isinstance(fit, FitOptions):
         raise ScenarioError(f"fit must be a jaxhoist.FitOptions, got {type(fit).__name__}")
     weights = None if fit is None else fit.weights
-    prob = _setup(
-        scenario,
-        measurement,
-        params,
-        signals=signals,
-        noise=noise,
-        weights=weights,
-        start=start,
-        bounds=bounds,
-        t1=t1,
-        options=fit_solver_options(options),
-    )
+    data: dict[str, Any] = dict(signals=signals, noise=noise, start=start, bounds=bounds, t1=t1)
+    prob = _setup(scenario, measurement, params, weights=weights, options=fit_solver_options(options), **data)
     reverse = prob.cfg.options.replace(adjoint=diffrax.RecursiveCheckpointAdjoint())
     cfg = dataclasses.replace(prob.cfg, options=reverse)
 
