@@ -1,4 +1,4 @@
-"""`jaxhoist identify`: the command line of `apps.identify.identify` (argument parsing, what it prints
+"""`jaxhoist identify`: the command line of `apps.identify.fit.identify` (argument parsing, what it prints
 and writes)."""
 
 from __future__ import annotations
