@@ -353,7 +353,7 @@ def no_compile(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("identify compiled before rejecting invalid input")
 
-    monkeypatch.setattr(ident, "_compiled_core", boom)
+    monkeypatch.setattr(ident, "compiled_core", boom)
     monkeypatch.setattr(identify_core, "_fit_core", boom)
 
 

@@ -163,8 +163,9 @@ def scene_from_result(
     )
 
 
-def load_scene(result_dir: str | Path, **kw) -> Scene:
-    """The `Scene` of `RESULT_DIR/trajectory.npz` + `trajectory.json` (see `scene_from_result`).
+def load_scene(result_dir: str | Path, *, arrow_length: float | None = None) -> Scene:
+    """The `Scene` of `RESULT_DIR/trajectory.npz` + `trajectory.json` (see `scene_from_result`; `arrow_length`
+    [m] as there).
 
     **Raises** `ScenarioError` if the folder holds no trajectory result.
     """
@@ -179,4 +180,4 @@ def load_scene(result_dir: str | Path, **kw) -> Scene:
         meta = load_metadata(npz)
     except json.JSONDecodeError as e:
         raise ScenarioError(f"{npz.with_suffix('.json')}: not valid JSON: {e}") from None
-    return scene_from_result(load_trajectory(npz), meta, npz, **kw)
+    return scene_from_result(load_trajectory(npz), meta, npz, arrow_length=arrow_length)
