@@ -647,7 +647,7 @@ from jaxtyping import install_import_hook
 install_import_hook("jaxhoist", "beartype.beartype")
 from test_scan import KW, MU, MUS, T1, oblique_box
 from jaxhoist._numerics.observables import resolve
-from jaxhoist._apps.scan import _fingerprint
+from jaxhoist._apps.scan.run import _fingerprint
 from jaxhoist._numerics.batch import BatchSpec as _Spec
 import jaxhoist as jh
 spec = _Spec(paths=(MU,), observables=tuple(resolve(KW["observables"])), histories=(),
