@@ -53,16 +53,17 @@ def _trap(*args, **kwargs):
 
 def _install_traps():
     # internal on purpose: traps the compile/solve entry points, to see what validation lets through
-    import jaxhoist._apps.scan as scan_mod
+    import jaxhoist._apps.scan.run as scan_mod
     import jaxhoist._numerics.solve as solve_mod
-    from jaxhoist._apps import bifurcation_cli, simulate_cli
+    from jaxhoist._apps.cli import bifurcation as bifurcation_cli
+    from jaxhoist._apps.cli import simulate as simulate_cli
 
     simulate_cli._compiled_solve = _trap
     solve_mod._solve_jit = _trap
     scan_mod._fingerprint = _trap  # scan(): called after every host-side check, before compiling
     for name in ("scan", "locate_bifurcation", "trace_boundary"):
         setattr(bifurcation_cli, name, _trap)
-    import jaxhoist._numerics.rigid_solve as rigid
+    import jaxhoist._numerics.rigid.solve as rigid
 
     rigid.simulate_rigid = _trap
 
@@ -80,14 +81,14 @@ def run_py(fn) -> str:
     except jh.ScenarioError as e:
         return _classify_error(str(e))
     except TypeError as e:
-        return "clear" if 'adjoint="forward"' in str(e) else "traceback"
+        return "clear" if "adjoint=diffrax.ForwardMode()" in str(e) else "traceback"
     except Exception:
         return "traceback"
     return "accepted"
 
 
 def run_cli(argv) -> str:
-    from jaxhoist._apps import cli
+    from jaxhoist._apps.cli import app as cli
 
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):

@@ -279,7 +279,9 @@ def main(argv=None):
     dt, t1 = 1.5e-3, (0.15 if args.quick else 0.3)
     n_steps = round(t1 / dt)
     ts = jnp.array([0.0, t1])
-    opt = SolverOptions(solver=diffrax.Bosh3(), fixed_step=True, dt0=dt, max_steps=100_000)
+    opt = SolverOptions(
+        solver=diffrax.Bosh3(), stepsize_controller=diffrax.ConstantStepSize(), dt0=dt, max_steps=100_000
+    )
     steps = {}
     fns = {}
     for name, core in (("diffrax_constant_step", solve), ("lean_fixed_step", solve_fixed)):

@@ -41,7 +41,7 @@ import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist import get_param, set_param  # noqa: E402
-from jaxhoist._apps.classify import json_safe  # noqa: E402  (internal: the JSON writer of the CLI's records)
+from jaxhoist._apps.bifurcation.classify import json_safe  # noqa: E402  (internal: the JSON writer of the CLI's records)
 
 MU = "foundation.friction_coefficient"
 XI = "load.mass_centre[0]"

@@ -72,6 +72,8 @@ from jaxhoist import (  # noqa: E402
 )
 
 MU = "foundation.friction_coefficient"
+#: The search method of each `--method` name.
+METHODS = {"newton": jh.Newton, "bisection": jh.Bisection, "multisection": jh.Multisection}
 EPS = "foundation.friction.regularisation_velocity"
 DELTA = "foundation.friction.deflection"
 E = 1  # corner order D, E, F, H
@@ -313,7 +315,8 @@ def main(argv=None):
     def locator_kw(ts=ts, rtol=args.rtol, atol=args.atol) -> dict:
         """The locator's settings: `args.method` to `tol`; Tsit5 at the scans' tolerances."""
         options = jh.SolverOptions(diffrax.Tsit5(), rtol=rtol, atol=atol, max_steps=400_000)
-        return dict(times=jh.Times(ts=ts), search=jh.SearchOptions(args.method, tol), options=options)
+        search = jh.SearchOptions(METHODS[args.method](), tol)
+        return dict(times=jh.Times(ts=ts), search=search, options=options)
 
     base = jh.load_scenario("paper-4.2")
     bristle = jh.BristleFriction(deflection=delta_list[0], breakaway_ratio=0.5, relaxation_time=0.01)

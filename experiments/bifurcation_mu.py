@@ -44,6 +44,8 @@ import jaxhoist as jh  # noqa: E402
 from jaxhoist import BifurcationError, find_jumps, locate_bifurcation, scan, trace_boundary  # noqa: E402
 
 MU = "foundation.friction_coefficient"
+#: The search method of each `--method` name.
+METHODS = {"newton": jh.Newton, "bisection": jh.Bisection, "multisection": jh.Multisection}
 OBSERVABLES = [
     "final_x",
     "final_y",
@@ -267,7 +269,8 @@ def main(argv=None):
                 MU,
                 j.observable,
                 (j.lo, j.hi),
-                search=jh.SearchOptions(args.method, tol),  # multisection: 16 points per round, 16 lanes
+                # multisection: 16 points per round, 16 lanes
+                search=jh.SearchOptions(METHODS[args.method](), tol),
                 options=locator_options,
                 times=jh.Times(t1, n=refine_n_save),
             )
@@ -294,7 +297,7 @@ def main(argv=None):
         MU,
         "final_psi",
         (mus[steep], mus[steep + 1]),
-        search=jh.SearchOptions(args.method, tol),
+        search=jh.SearchOptions(METHODS[args.method](), tol),
         options=locator_options,
         times=jh.Times(t1, n=refine_n_save),
     )

@@ -37,7 +37,7 @@ import scipy.optimize  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist import identify, residual_function, synthetic_measurement, write_measurement  # noqa: E402
-from jaxhoist._apps.identify import plot_fit  # noqa: E402  (internal: the CLI's plotting helper)
+from jaxhoist._apps.identify.fit import plot_fit  # noqa: E402  (internal: the CLI's plotting helper)
 
 PARAMS = ["mu", "k", "h", "c_l", "b_l"]
 PATHS = {

@@ -10,10 +10,10 @@ time after compilation (a second, identical call), and the first call's time (wi
     python experiments/locator_solver.py --tol 1e-7 --only w  # one candidate
 
 The candidates: Tsit5 at rtol 1e-6 (the locator's default) and the Rosenbrock-W solver in
-forward mode (`SolverOptions(adjoint="forward")`: Newton's slopes are the error-controlled sensitivities of
-`_numerics/sensitivity.py`): as it was until 2026-11-27 (no ∂f/∂t term, integral controller, rtol 1e-3,
-atol 1e-5), at its default now (the term, PI controller, rtol 5e-4, atol 1e-5) and at tighter tolerances
-(the term and the PI controller, atol = rtol / 100).
+forward mode (`SolverOptions(adjoint=diffrax.ForwardMode())`: Newton's slopes are the error-controlled
+sensitivities of `_numerics/sensitivity.py`): as it was until 2026-11-27 (no ∂f/∂t term, integral
+controller, rtol 1e-3, atol 1e-5), at its default now (the term, PI controller, rtol 5e-4, atol 1e-5) and
+at tighter tolerances (the term and the PI controller, atol = rtol / 100).
 
 Measured 2026-11-25 at 65642d2 (load average 2-3): reference μ* = 0.3635004;
     tsit5 rtol 1e-6   0.3635002 (-1.4e-7), 4 solves,  6.4 s
@@ -63,11 +63,13 @@ BRACKET = (0.362, 0.365)
 CANDIDATES = {
     "tsit5 rtol 1e-6": lambda: jh.SolverOptions(diffrax.Tsit5()),
     "w before 2026-11-27 (rtol 1e-3)": lambda: jh.SolverOptions(
-        jh.RosenbrockW(time_derivative=False), diffrax.PIDController(rtol=1e-3, atol=1e-5), adjoint="forward"
+        jh.RosenbrockW(time_derivative=False),
+        diffrax.PIDController(rtol=1e-3, atol=1e-5),
+        adjoint=diffrax.ForwardMode(),
     ),
-    "w default (rtol 5e-4)": lambda: jh.SolverOptions(adjoint="forward"),
-    "w rtol 1e-4": lambda: jh.SolverOptions(adjoint="forward", rtol=1e-4, atol=1e-6),
-    "w rtol 1e-5": lambda: jh.SolverOptions(adjoint="forward", rtol=1e-5, atol=1e-7),
+    "w default (rtol 5e-4)": lambda: jh.SolverOptions(adjoint=diffrax.ForwardMode()),
+    "w rtol 1e-4": lambda: jh.SolverOptions(adjoint=diffrax.ForwardMode(), rtol=1e-4, atol=1e-6),
+    "w rtol 1e-5": lambda: jh.SolverOptions(adjoint=diffrax.ForwardMode(), rtol=1e-5, atol=1e-7),
 }
 
 

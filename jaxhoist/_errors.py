@@ -97,8 +97,8 @@ _MESSAGES = {
 
 FORWARD_MODE_HINT = (
     "forward-mode differentiation (jax.jacfwd, jax.jvp) cannot pass through the default reverse-mode "
-    'adjoint of the solve: call simulate(..., options=SolverOptions(adjoint="forward")) for jacfwd/jvp; '
-    "keep the default for jax.grad"
+    "adjoint of the solve: call simulate(..., options=SolverOptions(adjoint=diffrax.ForwardMode())) for "
+    "jacfwd/jvp; keep the default for jax.grad"
 )
 
 
@@ -118,7 +118,7 @@ def is_forward_through_custom_vjp(error: BaseException) -> bool:
 @contextlib.contextmanager
 def forward_mode_hint():
     """Re-raise JAX's "can't apply forward-mode autodiff (jvp) to a custom_vjp function" as a `TypeError`
-    that says to pass `adjoint="forward"`; every other exception passes through unchanged.
+    that says to pass `adjoint=diffrax.ForwardMode()`; every other exception passes through unchanged.
 
     Wrap the call of the solve core with it (`with forward_mode_hint(): traj = _solve_jit(...)`).
 

@@ -1,5 +1,5 @@
-"""The 3-D animation of a saved lift (`jaxhoist._apps.animate`, `jaxhoist animate`): the files are valid
-images with the expected frame count, the drawn geometry is the saved geometry (corners, rope, boom tip,
+"""The 3-D animation of a saved lift (`jaxhoist._apps.plots.animation`, `jaxhoist animate`): the files are
+valid images with the expected frame count, the drawn geometry is the saved geometry (corners, rope, boom tip,
 box edges, force arrows scaled to the weight), the state text follows the contacts or the rigid model's phase
 log, and bad input is refused with one line before anything is rendered."""
 
@@ -17,8 +17,8 @@ from PIL import Image  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist import ScenarioError  # noqa: E402
-from jaxhoist._apps import animate as an  # noqa: E402
-from jaxhoist._apps import cli  # noqa: E402
+from jaxhoist._apps.cli import app as cli  # noqa: E402
+from jaxhoist._apps.plots import animation as an  # noqa: E402
 from jaxhoist._io import results  # noqa: E402
 
 try:  # share the compiled core with the physics tests (same saved-time count and solver options)
@@ -78,13 +78,13 @@ def test_gif_and_keyframes_are_valid_images_with_the_expected_frames(result_dir,
 
 
 def test_drawn_geometry_is_the_saved_geometry(result_dir, scene):
-    from jaxhoist._apps.animate import _figure
+    from jaxhoist._apps.plots.animation import new_figure
 
     arrays = results.load_trajectory(result_dir / "trajectory.npz")
     size = np.array([2.5, 6.0, 2.5])  # a, b, c of paper-4.2 [m]
     weight = 850.0 * 2.5 * 6.0 * 2.5 * 9.81  # m g [N]
     assert scene.weight == pytest.approx(weight, rel=1e-12)
-    fig, (ax,) = _figure(1)
+    fig, (ax,) = new_figure(1)
     limits = scene.limits()
     for k in (0, N_SAVE // 4, N_SAVE - 1):
         art = an.draw_frame(ax, scene, k, limits)

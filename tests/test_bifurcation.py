@@ -22,7 +22,7 @@ from jaxhoist._apps.bifurcation import (  # noqa: E402
     locate_bifurcation,
     trace_boundary,
 )
-from jaxhoist._apps.scan_result import ScanResult  # noqa: E402
+from jaxhoist._apps.scan.result import ScanResult  # noqa: E402
 from jaxhoist._numerics import observables as O  # noqa: E402
 from jaxhoist._physics import kinematics  # noqa: E402
 
@@ -251,7 +251,7 @@ def test_slide_or_tip_first_flips_at_the_static_friction_coefficient():
         obs,
         (0.514, 0.521),
         level=0.0,
-        search=SearchOptions("bisection", tol=1e-6),
+        search=SearchOptions(Bisection(), tol=1e-6),
         times=jh.Times(3.0, n=301),
     )
     assert b.converged and b.width <= 1e-6
@@ -333,7 +333,7 @@ def test_find_crossings_brackets_every_zero_of_a_continuous_indicator():
 def test_scan_plots_show_the_data_failures_and_located_values(newton_result, tmp_path):
     """The plots of a sweep (one panel per component, failed members ticked, located values as lines), of a
     2-D grid (a colour map per component) and of the locator's convergence, built without solving."""
-    from jaxhoist._apps import scan_plots
+    from jaxhoist._apps.plots import scan as scan_plots
 
     x = np.linspace(0.0, 1.0, 21)
     y = np.stack([x, x**2], axis=-1)
@@ -421,7 +421,7 @@ def test_scan_and_bifurcation_commands(tmp_path, capfd):
     the default level is the midpoint of the values at the bracket ends), lands on a/2."""
     import json
 
-    from jaxhoist._apps.cli import main
+    from jaxhoist._apps.cli.app import main
 
     path = tmp_path / "sym.toml"
     path.write_text(SYMMETRIC_TOML)
@@ -472,7 +472,7 @@ def test_trace_reports_a_vanished_jump_as_lost(monkeypatch):
     a stand-in (no solves): a jump of size 1 at q = 0 and 0.9, of size 1e-4 at q = 0.5."""
     import types
 
-    from jaxhoist._apps import bifurcation_trace
+    from jaxhoist._apps.bifurcation import trace as bifurcation_trace
 
     def fake_locate(sc, param, obs, br, level=None, search=SearchOptions(), **kw):
         q = float(sc.hoist.speed)
@@ -489,42 +489,14 @@ def test_trace_reports_a_vanished_jump_as_lost(monkeypatch):
     assert "lost" in tr.points[1].notes[0]
 
 
-def test_old_keywords_warn_once_and_give_the_same_result():
-    """The keywords of earlier versions (`tol=`, `method=`, `max_solves=`, `rtol=`, ..., `t1=`, `n_save=`)
-    map exactly onto `SearchOptions`, `SolverOptions` (Tsit5 when no solver is given) and `Times`: one
-    DeprecationWarning naming the new spelling, and the same evaluations to the last bit."""
-    import diffrax
-
-    kw = dict(level=0.0, **SYM_KW)
-    search = SearchOptions(Bisection(), tol=1e-3, max_solves=40)
-    options = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-7)
-    new = locate_bifurcation(
-        symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), search=search, options=options, **kw
-    )
-    with pytest.warns(
-        DeprecationWarning, match=r"times=Times\(.*search=SearchOptions\(.*options=SolverOptions"
-    ) as caught:
-        old = locate_bifurcation(
-            symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), tol=1e-3, method="bisection", max_solves=40,
-            rtol=1e-7, level=0.0, t1=0.2, n_save=101,
-        )  # fmt: skip
-    assert len(caught) == 1 and caught[0].filename == __file__
-    assert old.history == new.history and old.bracket == new.bracket and old.value == new.value
-    assert (old.steps, old.n_solves, old.method) == (new.steps, new.n_solves, "bisection")
-    with pytest.raises(jh.ScenarioError, match="either search= or tol"):
-        locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), search=search, tol=1e-3, **kw)
-    with pytest.raises(TypeError, match="tolerance"):
-        locate_bifurcation(symmetric_lift(), XI, E_MINUS_D, (0.46, 0.57), tolerance=1e-3, **kw)
-
-
-def test_trace_boundary_old_keywords_map_onto_the_settings(monkeypatch):
-    """`trace_boundary`'s earlier keywords reach every `locate_bifurcation` call as the same objects as the
-    new spelling (the locator replaced by a recorder: no solves)."""
+def test_trace_boundary_passes_its_settings_to_every_point(monkeypatch):
+    """`trace_boundary`'s `search`, `options` and `times` reach every `locate_bifurcation` call as the same
+    objects (the locator replaced by a recorder: no solves)."""
     import types
 
     import diffrax
 
-    from jaxhoist._apps import bifurcation_trace
+    from jaxhoist._apps.bifurcation import trace as bifurcation_trace
 
     seen = []
 
@@ -534,17 +506,12 @@ def test_trace_boundary_old_keywords_map_onto_the_settings(monkeypatch):
 
     monkeypatch.setattr(bifurcation_trace, "locate_bifurcation", record)
     args = (symmetric_lift(), XI, (0.46, 0.57), "hoist.speed", [0.05, 0.06], E_MINUS_D)
-    with pytest.warns(DeprecationWarning, match="trace_boundary"):
-        trace_boundary(
-            *args, tol=1e-5, method="multisection", points_per_round=4, lanes=4, initial_half_width=0.01,
-            max_expansions=3, atol=1e-9, t1=0.2,
-        )  # fmt: skip
     search = SearchOptions(
         Multisection(points_per_round=4, lanes=4), 1e-5, initial_half_width=0.01, max_expansions=3
     )
-    trace_boundary(*args, search=search, options=jh.SolverOptions(diffrax.Tsit5(), atol=1e-9), times=0.2)
-    assert len(seen) == 4
+    options = jh.SolverOptions(diffrax.Tsit5(), atol=1e-9)
+    trace_boundary(*args, search=search, options=options, times=0.2)
+    assert len(seen) == 2
     for s, o, kw in seen:
-        assert s == search and o == seen[2][1] and kw["times"] == jh.Times(0.2)
-    assert seen[0][1] == seen[2][1]
-    assert (seen[0][1].solver, seen[0][1].rtol, seen[0][1].atol) == (diffrax.Tsit5(), 1e-6, 1e-9)
+        assert s == search and o is options and kw["times"] == jh.Times(0.2)
+    assert (options.solver, options.rtol, options.atol) == (diffrax.Tsit5(), 1e-6, 1e-9)

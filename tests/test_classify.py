@@ -1,6 +1,6 @@
-"""`jaxhoist._apps.classify`: each kind of located change recognised on synthetic samples, the 10-90 % ramp
-width against its closed form, the `last_contact_time` observable against `liftoff_time`, and one cheap
-real case."""
+"""`jaxhoist._apps.bifurcation.classify`: each kind of located change recognised on synthetic samples, the
+10-90 % ramp width against its closed form, the `last_contact_time` observable against `liftoff_time`,
+and one cheap real case."""
 
 import math
 
@@ -13,7 +13,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist._apps.classify import classify_change, classify_samples, ramp_width  # noqa: E402
+from jaxhoist._apps.bifurcation.classify import classify_change, classify_samples, ramp_width  # noqa: E402
 from jaxhoist._numerics import observables as O  # noqa: E402
 
 BR = (0.4999995, 0.5000005)  # a located bracket of width 1e-6 around p* = 0.5
@@ -162,13 +162,12 @@ def test_classify_change_real_case():
     assert c.jump_fractions["final_x"] < 0.01
 
 
-def test_classify_change_earlier_time_keywords(monkeypatch):
-    """`classify_change`'s earlier `t1=`, `n_save=` (and `ts=`, through the scan keywords) reach `scan` as
-    the same `Times` as the new spelling, with one `DeprecationWarning` (the scan replaced by a recorder:
-    no solves); the default is 2501 saved times."""
+def test_classify_change_passes_its_times_to_scan(monkeypatch):
+    """`classify_change`'s `times` reach `scan` as given (a `Times` with n or ts), with its `options`; the
+    default is 2501 saved times (the scan replaced by a recorder: no solves)."""
     import diffrax
 
-    from jaxhoist._apps import scan as scan_mod
+    from jaxhoist._apps.scan import run as scan_mod
 
     seen = []
 
@@ -184,25 +183,16 @@ def test_classify_change_earlier_time_keywords(monkeypatch):
     args = dict(param="foundation.friction_coefficient", bracket=(0.3, 0.31))
     options = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-7)
     ts = np.linspace(0.0, 0.2, 5)
-    calls = [
-        (dict(times=jh.Times(0.2, n=201), options=options), None),
-        (dict(t1=0.2, n_save=201, rtol=1e-7, solver=diffrax.Tsit5()), "t1 -> times"),
-        (dict(times=jh.Times(ts=ts), options=options), None),
-        (dict(ts=ts, options=options), "ts -> times"),
-        (dict(options=options), None),
-    ]
-    for kw, warned in calls:
-        if warned is None:
-            with pytest.raises(Recorded):
-                classify_change(sc, **args, **kw)
-        else:
-            with pytest.warns(DeprecationWarning, match=warned) as rec:
-                with pytest.raises(Recorded):
-                    classify_change(sc, **args, **kw)
-            assert len(rec) == 1
-    assert seen[0] == seen[1] and seen[0][0] == jh.Times(0.2, n=201)
-    assert seen[2][0].ts is ts and seen[3][0].ts is ts
-    assert seen[4][0] == jh.Times(n=2501)
+    for kw in (
+        dict(times=jh.Times(0.2, n=201), options=options),
+        dict(times=jh.Times(ts=ts), options=options),
+        dict(options=options),
+    ):
+        with pytest.raises(Recorded):
+            classify_change(sc, **args, **kw)
+    assert seen[0] == (jh.Times(0.2, n=201), options)
+    assert seen[1][0].ts is ts
+    assert seen[2][0] == jh.Times(n=2501)
 
 
 def test_paper_43_preset_is_paper_42_with_the_fitted_mass_centre():
@@ -232,7 +222,7 @@ def test_cli_bifurcation_classify(tmp_path, capsys):
     the level crossing of the mass centre's x after 0.3 s of paper-4.2 is a continuous crossing."""
     import json
 
-    from jaxhoist._apps import cli
+    from jaxhoist._apps.cli import app as cli
 
     out = tmp_path / "bif"
     code = cli.main(

@@ -17,7 +17,8 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from jaxhoist._apps import cli, simulate_cli  # noqa: E402
+from jaxhoist._apps.cli import app as cli  # noqa: E402
+from jaxhoist._apps.cli import simulate as simulate_cli  # noqa: E402
 from jaxhoist._io import results  # noqa: E402
 from jaxhoist._io.scenario import SCHEMA  # noqa: E402
 
@@ -156,7 +157,7 @@ def test_simulate_csv_goes_into_identify_unchanged(tmp_path):
 
 
 def cli_plots():
-    from jaxhoist._apps import plots
+    from jaxhoist._apps.plots import trajectory as plots
 
     return plots.PLOTS
 
@@ -347,7 +348,7 @@ def test_library_hints_use_the_flag_names(monkeypatch, capsys):
 def test_scan_progress_bar_shows_members_rate_eta_failures(monkeypatch):
     import io
 
-    from jaxhoist._apps import progress as scan_mod
+    from jaxhoist._apps.scan import progress as scan_mod
 
     stream = io.StringIO()
     bar = cli.ScanProgressBar(stream=stream)
@@ -363,7 +364,7 @@ def test_scan_progress_bar_shows_members_rate_eta_failures(monkeypatch):
 
     # while a subcommand runs, the scan's default per-chunk line is this bar; afterwards it is restored
     saved = scan_mod.default_reporter()
-    with cli._scan_bars():
+    with cli.scan_bars():
         assert isinstance(scan_mod.default_reporter(), cli.ScanProgressBar)
     assert scan_mod.default_reporter() is saved
 
@@ -375,13 +376,13 @@ def test_printed_progress_lines_drive_the_bars():
 
     stream = io.StringIO()
     bar = tqdm(total=100.0, file=stream)
-    sink = cli._LineSink(cli._percent_to_bar(bar))
+    sink = cli.LineSink(cli.percent_to_bar(bar))
     sink.write("0.00%\n12.")  # diffrax's TextProgressMeter lines, possibly split
     sink.write("50%\n")
     assert bar.n == 12.5
     sink.write("100.00%\n")
     assert bar.n == 100.0
     bar = tqdm(total=4.0, file=stream)
-    sink = cli._LineSink(cli._phase_to_bar(bar))
+    sink = cli.LineSink(cli.phase_to_bar(bar))
     sink.write("  0.000000 -   0.300000 s  rest                     -> rest:slip [12 steps so far]\n")
     assert bar.n == pytest.approx(0.3)

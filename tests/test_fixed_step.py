@@ -1,4 +1,5 @@
-"""`jaxhoist._numerics.fixed_step`: the lean fixed-step Runge-Kutta loop used by `scan(fixed_step=True)`.
+"""`jaxhoist._numerics.fixed_step`: the lean fixed-step Runge-Kutta loop used by `scan` with constant steps
+(`diffrax.ConstantStepSize()`).
 
 It must take the same steps as diffrax's `ConstantStepSize` with the same tableau and give the same states
 to round-off; land on saved times that are not multiples of the step; carry forward-mode sensitivities
@@ -17,7 +18,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist._apps.scan import scan  # noqa: E402
+from jaxhoist._apps.scan.run import scan  # noqa: E402
 from jaxhoist._numerics import fixed_step  # noqa: E402
 from jaxhoist._numerics.options import SolverOptions  # noqa: E402
 from jaxhoist._numerics.solve import solve  # noqa: E402
@@ -47,7 +48,9 @@ def test_same_steps_and_states_as_diffrax_constant_steps(sc, solver):
     """Saved times on the step grid: every output equals diffrax's fixed-step solve to round-off (Bosh3
     carries its last stage into the next step, Heun evaluates it again: both code paths)."""
     ts = jnp.linspace(0.0, T1, 5)
-    opt = SolverOptions(solver=solver, fixed_step=True, dt0=DT, max_steps=10_000)
+    opt = SolverOptions(
+        solver=solver, stepsize_controller=diffrax.ConstantStepSize(), dt0=DT, max_steps=10_000
+    )
     ref = eqx.filter_jit(solve)(sc, ts, opt)
     lean = eqx.filter_jit(fixed_step.solve_fixed)(sc, ts, opt)
     assert int(lean.status) == 0 and int(ref.status) == 0
@@ -66,7 +69,9 @@ def test_lands_on_saved_times_off_the_step_grid(sc):
     final state differs from the on-grid solve only by the truncation error of the shorter steps."""
     ts_on = jnp.linspace(0.0, T1, 5)
     ts_off = jnp.array([0.0, 0.0125, 0.05, 0.1337, T1])
-    opt = SolverOptions(solver=diffrax.Bosh3(), fixed_step=True, dt0=DT, max_steps=10_000)
+    opt = SolverOptions(
+        solver=diffrax.Bosh3(), stepsize_controller=diffrax.ConstantStepSize(), dt0=DT, max_steps=10_000
+    )
     run = eqx.filter_jit(fixed_step.solve_fixed)
     on, off = run(sc, ts_on, opt), run(sc, ts_off, opt)
     assert int(off.num_accepted_steps) == fixed_step.steps_needed(ts_off, DT) == 13 + 38 + 84 + 67

@@ -13,7 +13,8 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 import jaxhoist as jh
-from jaxhoist._apps import cli, simulate_cli
+from jaxhoist._apps.cli import app as cli
+from jaxhoist._apps.cli import simulate as simulate_cli
 from jaxhoist._errors import MAX_MESSAGE_CHARS
 
 PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2", "paper-4.3")

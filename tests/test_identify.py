@@ -1,4 +1,5 @@
-"""Parameter identification (`jaxhoist._apps.identify`) and measurement files (`jaxhoist._io.measurement`).
+"""Parameter identification (`jaxhoist._apps.identify.fit`) and measurement files
+(`jaxhoist._io.measurement`).
 
 One compiled problem serves every fit here: μ of paper-4.2 from the mass-centre path on 21 samples over
 0.4 s (before the first corner touches down again: there the ground damper force jumps and the flow is not
@@ -18,10 +19,10 @@ import pytest  # noqa: E402
 import scipy.stats  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist._apps import identify as ident  # noqa: E402
-from jaxhoist._apps import identify_core  # noqa: E402
-from jaxhoist._apps.identify import identify, synthetic_measurement  # noqa: E402
-from jaxhoist._apps.identify_options import fit_solver_options  # noqa: E402
+from jaxhoist._apps.identify import core as identify_core  # noqa: E402
+from jaxhoist._apps.identify import fit as ident  # noqa: E402
+from jaxhoist._apps.identify.fit import identify, synthetic_measurement  # noqa: E402
+from jaxhoist._apps.identify.options import fit_solver_options  # noqa: E402
 from jaxhoist._io.measurement import Measurement, MeasurementError, read_measurement, write_measurement  # noqa: E402
 from jaxhoist._numerics import compile_cache  # noqa: E402
 
@@ -68,7 +69,7 @@ def test_mu_recovered_noise_free(scenario):
         ["mu"],
         start={"mu": 0.3},
         noise={"position": SIGMA},
-        options=TSIT5,  # with these fit settings, the compiled core of test_earlier_keywords_warn_...
+        options=TSIT5,
         fit=jh.FitOptions(lm_rtol=1e-10, lm_atol=1e-10),
     )
     assert res.converged
@@ -217,7 +218,7 @@ def test_collinear_parameters_give_condition_number_and_direction():
 
 
 def test_cli_identify_writes_estimates(scenario, clean, tmp_path, capfd):
-    from jaxhoist._apps.cli import main
+    from jaxhoist._apps.cli.app import main
 
     csv = write_measurement(tmp_path / "lift.csv", _noisy(clean, 100), units={"position_z": "mm"})
     out = tmp_path / "fit"
@@ -253,23 +254,23 @@ def test_cli_identify_writes_estimates(scenario, clean, tmp_path, capfd):
 
 def test_reparameterisations_round_trip(scenario):
     """log for positive leaves, scaled logit inside bounds (the box for the mass centre), affine otherwise."""
-    params, theta0 = ident._build_params(
+    params, theta0 = ident.build_params(
         scenario, ["k", "load.mass_centre", "rope.attachment[2]", "b_l"], {"b_l": 5e5}, {"k": (1e6, 1e8)}
     )
     assert [p.kind for p in params] == ["logit", "logit", "affine", "log"]
     np.testing.assert_array_equal(params[1].hi, np.asarray(scenario.load.size))  # default bounds: the box
     assert theta0[-1] == 5e5  # the start value
-    z = ident._flat_z(params, theta0)
-    np.testing.assert_allclose(ident._theta_of(params, z), theta0, rtol=1e-13)
+    z = ident.flat_z(params, theta0)
+    np.testing.assert_allclose(ident.theta_of(params, z), theta0, rtol=1e-13)
     # dθ/dz against a central difference of the transform.
     h = 1e-6
     num = [
-        (ident._theta_of(params, z + h * e) - ident._theta_of(params, z - h * e))[i] / (2 * h)
+        (ident.theta_of(params, z + h * e) - ident.theta_of(params, z - h * e))[i] / (2 * h)
         for i, e in enumerate(np.eye(z.size))
     ]
-    np.testing.assert_allclose(ident._flat_dtheta_dz(params, z), num, rtol=1e-6)
+    np.testing.assert_allclose(ident.flat_dtheta_dz(params, z), num, rtol=1e-6)
     # Any z maps inside the bounds.
-    th = ident._theta_of(params, np.full(z.size, 50.0))
+    th = ident.theta_of(params, np.full(z.size, 50.0))
     assert 1e6 < th[0] <= 1e8 and np.all(th[1:4] <= np.asarray(scenario.load.size))
 
 
@@ -352,7 +353,7 @@ def no_compile(monkeypatch):
     def boom(*a, **k):
         raise AssertionError("identify compiled before rejecting invalid input")
 
-    monkeypatch.setattr(ident, "_compiled_core", boom)
+    monkeypatch.setattr(ident, "compiled_core", boom)
     monkeypatch.setattr(identify_core, "_fit_core", boom)
 
 
@@ -426,53 +427,6 @@ def test_plot_fit_shows_angles_in_degrees():
     np.testing.assert_allclose(axes[2].lines[0].get_ydata(), 1.0 + t)
 
 
-def test_earlier_keywords_warn_and_give_the_same_fit(scenario, clean):
-    """Issue 11: `rtol`, `atol`, `max_steps` moved into `options`, the fit settings into `FitOptions`; the
-    earlier keywords still work, with one `DeprecationWarning` at the caller's line, and give the same fit
-    bit for bit (the same compiled core)."""
-    kw = dict(start={"mu": 0.3}, noise={"position": SIGMA})
-    new = identify(
-        scenario,
-        clean,
-        ["mu"],
-        # what the earlier keywords give (Tsit5); its compiled core is the one of the test comparing it with W
-        options=jh.SolverOptions(diffrax.Tsit5(), rtol=1e-6),
-        fit=jh.FitOptions(lm_rtol=1e-10, lm_atol=1e-10, condition_limit=1e10),
-        **kw,
-    )
-    with pytest.warns(DeprecationWarning, match=r"lm_rtol -> fit=FitOptions\(lm_rtol=...\)") as rec:
-        old = identify(
-            scenario, clean, ["mu"], rtol=1e-6, lm_rtol=1e-10, lm_atol=1e-10, condition_limit=1e10, **kw
-        )
-    assert len(rec) == 1 and rec[0].filename == __file__
-    assert "rtol -> options=SolverOptions(diffrax.Tsit5(), rtol=...)" in str(rec[0].message)
-    np.testing.assert_array_equal(old.values, new.values)
-    np.testing.assert_array_equal(old.std_errors, new.std_errors)
-    assert old.cost == new.cost and old.iterations == new.iterations
-
-
-def test_earlier_weights_keyword_moves_into_fit_options():
-    """`identify(weights=...)` (before 0.2) is `FitOptions(weights=...)` now: converted exactly, beside a
-    `fit` without weights too (the two were separate arguments), with one `DeprecationWarning`."""
-    from jaxhoist._apps.identify_options import convert_legacy
-
-    w = {"position": 100.0}
-    with pytest.warns(DeprecationWarning, match=r"weights -> fit=FitOptions\(weights=...\)") as rec:
-        _, fit = convert_legacy("identify", dict(weights=w, n_starts=2), None, None, stacklevel=3)
-    assert len(rec) == 1 and rec[0].filename == __file__
-    assert fit == jh.FitOptions(n_starts=2, weights=w)
-    with pytest.warns(DeprecationWarning, match="weights"):
-        _, fit = convert_legacy("identify", dict(weights=w), None, jh.FitOptions(seed=3))
-    assert fit == jh.FitOptions(seed=3, weights=w)
-    with pytest.raises(jh.ScenarioError, match="either fit or weights"):
-        convert_legacy("identify", dict(weights=w), None, jh.FitOptions(weights=w))
-    with pytest.warns(DeprecationWarning, match="weights"):
-        _, fit = convert_legacy("residual_function", dict(weights=w), None, None, allow_fit=("weights",))
-    assert fit == jh.FitOptions(weights=w)
-    with pytest.raises(TypeError, match="n_starts"):
-        convert_legacy("residual_function", dict(n_starts=2), None, None, allow_fit=("weights",))
-
-
 def test_fit_and_solver_options_checked_before_compiling(scenario, clean, no_compile):
     with pytest.raises(jh.ScenarioError, match="n_starts must be >= 1, got 0"):
         jh.FitOptions(n_starts=0)
@@ -486,9 +440,7 @@ def test_fit_and_solver_options_checked_before_compiling(scenario, clean, no_com
     assert isinstance(w.solver, jh.RosenbrockW) and w.forward_mode
     assert fit_solver_options(None) == w  # the default since 2026-11-27
     assert w.stepsize_controller == jh.SolverOptions().stepsize_controller  # rtol 5e-4, atol 1e-5, PI kept
-    with pytest.raises(jh.ScenarioError, match="either fit or n_starts"):
-        identify(scenario, clean, ["mu"], fit=jh.FitOptions(), n_starts=2)
     with pytest.raises(jh.ScenarioError, match="weights must be a mapping"):
         jh.FitOptions(weights=[1.0])
-    with pytest.raises(TypeError, match="unexpected keyword argument.*n_start"):
-        identify(scenario, clean, ["mu"], n_start=2)
+    with pytest.raises(TypeError, match="unexpected keyword argument.*n_starts"):
+        identify(scenario, clean, ["mu"], n_starts=2)  # pyright: ignore[reportCallIssue]  # it is in fit=

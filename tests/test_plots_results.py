@@ -12,7 +12,7 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist._apps import plots  # noqa: E402
+from jaxhoist._apps.plots import trajectory as plots  # noqa: E402
 from jaxhoist._io import results  # noqa: E402
 
 try:  # share the compiled core with the physics tests (same saved-time count and solver options)
@@ -145,7 +145,7 @@ def test_plots_from_loaded_file_and_save_all(traj42, tmp_path):
 
 
 def _fake_sweep(mu, data, units, components):
-    from jaxhoist._apps.scan_result import ScanResult
+    from jaxhoist._apps.scan.result import ScanResult
 
     n = mu.size
     return ScanResult(
@@ -168,7 +168,7 @@ def _fake_sweep(mu, data, units, components):
 
 
 def test_scan_plots_use_degrees_and_draw_no_empty_panels(tmp_path):
-    from jaxhoist._apps import scan_plots
+    from jaxhoist._apps.plots import scan as scan_plots
 
     mu = np.linspace(0.2, 0.4, 5)
     psi = np.stack([np.zeros(5), 0.1 * mu, np.zeros(5)], axis=1)  # final (φ, ψ, ϑ) [rad]
@@ -207,7 +207,7 @@ def test_rigid_results_keep_the_phase_log(traj42, tmp_path):
     """A rigid-model trajectory saves `impact_loss`, `phase_index` and the phase log (names per phase)."""
     import types
 
-    from jaxhoist._numerics.rigid_solve import PhaseRecord
+    from jaxhoist._numerics.rigid.solve import PhaseRecord
 
     scenario, traj = traj42
     n = N_SAVE

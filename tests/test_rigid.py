@@ -6,6 +6,7 @@ same number of times, so the compiled phase solves are shared by all tests of th
 
 import math
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -13,7 +14,7 @@ import numpy as np
 import pytest
 
 import jaxhoist as jh
-from jaxhoist._numerics.rigid_solve import RigidContactError, simulate_rigid
+from jaxhoist._numerics.rigid.solve import RigidContactError, simulate_rigid
 from jaxhoist._physics import rigid, statics
 
 N_SAVE = 61
@@ -274,7 +275,7 @@ def test_model_switch_and_cli_reach_the_rigid_driver(slide_run, tmp_path):
     """`simulate(..., model=RigidGround())` and `jaxhoist simulate --model rigid` run the same phase driver:
     the same sliding motion (bit for bit: same solver, same settings), and the CLI's energy residual includes
     the impact losses."""
-    from jaxhoist._apps.cli import main
+    from jaxhoist._apps.cli.app import main
     from jaxhoist._io.results import load_trajectory
 
     sc, ref = slide_run
@@ -284,9 +285,8 @@ def test_model_switch_and_cli_reach_the_rigid_driver(slide_run, tmp_path):
     assert isinstance(tr, jh.Trajectory) and bool(tr.ok)  # one trajectory type: the rigid one is a subclass
     np.testing.assert_array_equal(np.asarray(tr.position), np.asarray(ref.position))
     with pytest.raises(jh.ScenarioError, match="model"):
-        jh.simulate(sc, T1, model="rigid", fixed_step=True, dt0=1e-3)
-    with pytest.raises(jh.ScenarioError, match="model"):
-        jh.simulate(sc, T1, model="plastic")
+        fixed = jh.SolverOptions(diffrax.Tsit5(), diffrax.ConstantStepSize(), dt0=1e-3)
+        jh.simulate(sc, T1, model=jh.RigidGround(), options=fixed)
 
     path = tmp_path / "rigid.toml"
     a, b, c = (float(x) for x in sc.load.size)
@@ -339,38 +339,3 @@ damping = {np.asarray(sc.boom.damping).tolist()}
     arrays = load_trajectory(tmp_path / "out" / "trajectory")
     np.testing.assert_allclose(arrays["position"], np.asarray(ref.position), atol=1e-12)
     np.testing.assert_allclose(arrays["energy_residual"], np.asarray(ref.energy_residual()), atol=1e-9)
-
-
-def test_earlier_keywords_warn_and_build_the_same_objects():
-    """Issue 11: `simulate_rigid`'s `restitution`, `rope` moved into the model `RigidGround`, the phase
-    solver's settings into `RigidOptions`; the earlier keywords still work, with one `DeprecationWarning`
-    at the caller's line, converted to exactly those objects (the same run)."""
-    from jaxhoist._numerics.rigid_compliant import ChatterRule
-    from jaxhoist._numerics.rigid_options import convert_legacy
-
-    old = dict(restitution=0.3, rope="inextensible", rtol=1e-7, max_phases=50, chatter=None)
-    with pytest.warns(
-        DeprecationWarning, match=r"restitution -> model=RigidGround\(restitution=...\)"
-    ) as rec:
-        model, options = convert_legacy(dict(old), None, None, stacklevel=3)
-    assert len(rec) == 1 and rec[0].filename == __file__
-    assert "max_phases -> options=RigidOptions(max_phases=...)" in str(rec[0].message)
-    assert model == jh.RigidGround(rope=jh.InextensibleRope(), restitution=0.3)
-    assert options == jh.RigidOptions(rtol=1e-7, max_phases=50, chatter=None)
-    assert convert_legacy({}, None, None) == (jh.RigidGround(), jh.RigidOptions(chatter=ChatterRule()))
-    with pytest.raises(jh.ScenarioError, match="either model or rope"):
-        convert_legacy(dict(rope="elastic"), jh.RigidGround(), None)
-    with pytest.raises(TypeError, match="unexpected keyword argument.*restitutoin"):
-        simulate_rigid(_scenario(), T1, restitutoin=0.5)
-
-
-def test_earlier_keywords_give_the_same_run(slide_run):
-    """The sliding run of `slide_run` again through the earlier keywords (defaults spelled out): the same
-    trajectory bit for bit."""
-    sc, ref = slide_run
-    with pytest.warns(DeprecationWarning, match="rtol -> options=RigidOptions") as rec:
-        tr = simulate_rigid(sc, T1, n_save=N_SAVE, restitution=0.0, rtol=1e-8, atol=1e-9, rope="elastic")
-    assert len(rec) == 1 and rec[0].filename == __file__
-    assert "n_save -> times=Times(t1, n=...)" in str(rec[0].message)
-    np.testing.assert_array_equal(np.asarray(tr.position), np.asarray(ref.position))
-    np.testing.assert_array_equal(np.asarray(tr.normal_forces), np.asarray(ref.normal_forces))

@@ -15,7 +15,7 @@ import pytest
 from scipy.optimize import brentq
 
 import jaxhoist as jh
-from jaxhoist._numerics.rigid_solve import simulate_rigid
+from jaxhoist._numerics.rigid.solve import simulate_rigid
 
 N_SAVE = 61
 T1 = 1.5
@@ -174,14 +174,7 @@ def test_energy_balance_closes_with_the_rope_jerk_losses(jerk_runs):
 
 
 def test_rope_switch_errors():
-    sc = _scenario()
-    with pytest.raises(jh.ScenarioError, match="rope must be one of 'elastic', 'inextensible', got 'chain'"):
-        simulate_rigid(sc, jh.Times(T1, n=N_SAVE), rope="chain")
-    with pytest.raises(jh.ScenarioError, match="got 'chain'"):
-        jh.simulate(sc, T1, model="rigid", rope="chain")
-    with pytest.raises(jh.ScenarioError, match="rope='inextensible' is available with model='rigid' only"):
-        jh.simulate(sc, T1, rope="inextensible")
-    from jaxhoist._apps.cli import main
+    from jaxhoist._apps.cli.app import main
 
     assert main(["simulate", "paper-4.1", "--rope", "inextensible", "--quiet", "--no-plots"]) == 2
     with pytest.raises(SystemExit):
@@ -190,7 +183,7 @@ def test_rope_switch_errors():
 
 def test_model_switch_reaches_the_inextensible_rope(ramped_lift):
     """`jaxhoist.simulate(..., model=RigidGround(rope=InextensibleRope()))` is
-    `simulate_rigid(..., rope=...)`; the earlier strings give the same lift, with a `DeprecationWarning`."""
+    `simulate_rigid(..., model=RigidGround(rope=InextensibleRope()))`: the same lift."""
     sc, ref = ramped_lift
     # simulate and simulate_rigid share their defaults (max_steps is static in the compiled solve: the same
     # value reuses it).
@@ -199,17 +192,11 @@ def test_model_switch_reaches_the_inextensible_rope(ramped_lift):
     np.testing.assert_array_equal(np.asarray(tr.position), np.asarray(ref.position))
     assert [p.rope for p in tr.phases] == [p.rope for p in ref.phases]
     assert math.isfinite(float(tr.rope_tension[-1]))
-    # The earlier spelling: one DeprecationWarning, the same lift bit for bit.
-    with pytest.warns(DeprecationWarning, match="rope -> model=RigidGround") as rec:
-        old = jh.simulate(sc, T1, n_save=N_SAVE, model="rigid", rope="inextensible", rtol=1e-8, atol=1e-9)
-    assert len(rec) == 1 and "n_save -> times=Times(t1, n=...)" in str(rec[0].message)
-    np.testing.assert_array_equal(np.asarray(old.position), np.asarray(tr.position))
-    np.testing.assert_array_equal(np.asarray(old.impact_loss), np.asarray(tr.impact_loss))
 
 
 def test_cli_runs_the_inextensible_rope(ramped_lift, tmp_path):
     """`jaxhoist simulate FILE --model rigid --rope inextensible` gives the same lift."""
-    from jaxhoist._apps.cli import main
+    from jaxhoist._apps.cli.app import main
     from jaxhoist._io.results import load_trajectory
 
     _, ref = ramped_lift

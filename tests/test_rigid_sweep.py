@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import jaxhoist as jh
-from jaxhoist._numerics.rigid_solve import simulate_rigid
+from jaxhoist._numerics.rigid.solve import simulate_rigid
 
 N_SAVE = 201
 
@@ -59,7 +59,7 @@ def test_grazing_impact_drops_friction_and_is_logged(monkeypatch):
     16.92 s (under 2 µm of travel). No Coulomb impulse is consistent with F sticking; the documented
     fallback takes the frictionless impulse, books its (small) loss and notes it in the phase log; the lift
     goes on."""
-    from jaxhoist._numerics import rigid_run
+    from jaxhoist._numerics.rigid import run as rigid_run
 
     monkeypatch.setattr(rigid_run, "PERSISTENT_CONTACT", False)
     tr = _run(0.26, 17.0)
@@ -81,7 +81,7 @@ def test_grazing_impact_drops_friction_and_is_logged(monkeypatch):
 def test_chatter_rule_detects_dense_non_decaying_impacts_only():
     """The detection of `ChatterRule`: at least `min_impacts` impacts within `window` whose losses do not
     decay (or four times as many, decaying or not); a decaying train of a settling load is left alone."""
-    from jaxhoist._numerics.rigid_compliant import ChatterRule
+    from jaxhoist._numerics.rigid.compliant import ChatterRule
 
     rule = ChatterRule(window=0.05, min_impacts=12, decay=0.5)
     steady = [(10.0 + 1.7e-3 * k, 0.13) for k in range(20)]  # paper-2.3's F-H chatter: 0.13 J every 1.7 ms
@@ -113,7 +113,7 @@ def test_compliant_phase_passes_a_rocking_train_and_hands_back_at_rest():
     compliant phase; the energy balance closes with the hand-back booked with the impact losses."""
     import math
 
-    from jaxhoist._numerics.rigid_compliant import ChatterRule
+    from jaxhoist._numerics.rigid.compliant import ChatterRule
 
     sc = jh.Scenario(
         load=jh.Load([1.0, 1.0, 2.0], 1000.0),
@@ -190,7 +190,7 @@ def test_stall_rule_finds_a_stalled_phase_after_thousands_of_steps():
 
 
 def test_stall_rule_rejects_invalid_values():
-    from jaxhoist._numerics.rigid_solve import StallRule
+    from jaxhoist._numerics.rigid.solve import StallRule
 
     for bad in (StallRule(window=0), StallRule(min_step=0.0), StallRule(min_step=float("nan"))):
         with pytest.raises(jh.ScenarioError, match="StallRule"):
@@ -208,10 +208,10 @@ def _edge_run(chatter, max_phases: int, span: float):
     make_rigid_edge_state.py`), for `span` seconds, with the `ChatterRule` `chatter` and `max_phases`."""
     import jax.numpy as jnp
 
-    from jaxhoist._numerics.rigid_compiled import _Options
-    from jaxhoist._numerics.rigid_driver import _Driver
-    from jaxhoist._numerics.rigid_options import DRIVER_TOLERANCES
-    from jaxhoist._numerics.rigid_run import _Run
+    from jaxhoist._numerics.rigid.compiled import Options
+    from jaxhoist._numerics.rigid.driver import Driver
+    from jaxhoist._numerics.rigid.options import DRIVER_TOLERANCES
+    from jaxhoist._numerics.rigid.run import Run
     from jaxhoist._physics import rigid
     from jaxhoist._physics.elastic import State
 
@@ -222,9 +222,9 @@ def _edge_run(chatter, max_phases: int, span: float):
     _, c = rigid.initial_state(sc)
     o, settings = jh.RigidOptions(), rigid.Settings()
     assert o.stall is not None
-    opt = _Options(o.rtol, o.atol, o.max_steps, 1e-10, o.stall.window, o.stall.min_step)  # as simulate_rigid
-    drv = _Driver(sc, c, settings, opt, 0.0, dict(DRIVER_TOLERANCES))
-    run = _Run(drv, np.linspace(t0, t0 + span, 21), t0 + span, max_phases, o.max_steps, chatter, False)
+    opt = Options(o.rtol, o.atol, o.max_steps, 1e-10, o.stall.window, o.stall.min_step)  # as simulate_rigid
+    drv = Driver(sc, c, settings, opt, 0.0, dict(DRIVER_TOLERANCES))
+    run = Run(drv, np.linspace(t0, t0 + span, 21), t0 + span, max_phases, o.max_steps, chatter, False)
     run.resume(t0, y0)
     while run.step():
         pass
@@ -239,8 +239,8 @@ def test_repeated_least_violation_choice_goes_compliant_until_a_configuration_is
     until `max_phases` (the sweep, at 47.2 s); with it, the fourth such choice in a row hands over to the
     compliant phase, which is extended while its end would need the fallback again. The log says why; the
     energy balance closes."""
-    from jaxhoist._numerics.rigid_compliant import ChatterRule
-    from jaxhoist._numerics.rigid_records import RigidContactError
+    from jaxhoist._numerics.rigid.compliant import ChatterRule
+    from jaxhoist._numerics.rigid.records import RigidContactError
 
     with pytest.raises(RigidContactError, match="max_phases = 20"):
         _edge_run(ChatterRule(max_regularised=10**6), max_phases=20, span=0.1)

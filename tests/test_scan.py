@@ -1,4 +1,4 @@
-"""`jaxhoist.scan` (with `_io/scan_store.py`, `_apps/scan_result.py`): chunked, vmapped, sharded scans.
+"""`jaxhoist.scan` (with `_io/scan_store.py`, `_apps/scan/result.py`): chunked, vmapped, sharded scans.
 
 The scans here share one compiled core (same scenario structure, observables, options, saved times and
 chunk shape) wherever a test does not need another shape. The box is a 1 m cube of 1000 kg pulled
@@ -18,11 +18,11 @@ import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist._apps.scan import ScanResult, ScanStatus, scan  # noqa: E402
-from jaxhoist._apps.sweep import members as _members  # noqa: E402
-from jaxhoist._apps.sweep import parse_values  # noqa: E402
+from jaxhoist._apps.scan.run import ScanResult, ScanStatus, scan  # noqa: E402
+from jaxhoist._apps.scan.sweep import members as _members  # noqa: E402
+from jaxhoist._apps.scan.sweep import parse_values  # noqa: E402
 from jaxhoist._numerics import observables as O  # noqa: E402
-from jaxhoist._numerics.paths import get_param, parse_path, set_param  # noqa: E402
+from jaxhoist._physics.paths import get_param, parse_path, set_param  # noqa: E402
 
 MU = "foundation.friction_coefficient"
 MUS = np.array([0.1, 0.2, 0.3, 0.4, 0.5, 0.6])
@@ -335,7 +335,7 @@ def test_forward_sensitivities_match_differences(box, tmp_path):
     # The sensitivities of a vector observable keep both axes, labelled, in the netCDF file and the plots.
     import scipy.io
 
-    from jaxhoist._apps.scan_plots import _components
+    from jaxhoist._apps.plots.scan import _components
 
     assert res.axes("d_final_position") == [
         ("final_position_component", 3, ("x", "y", "z")),
@@ -544,7 +544,7 @@ def test_four_devices_and_resumes_across_device_counts(clean, tmp_path):
 def test_fingerprint_sees_constants_and_closures_of_custom_observables():
     """Issue 14: a custom observable whose constant or closed-over value changed must not reuse the chunks
     of the old one (the fingerprint hashed only the bytecode)."""
-    from jaxhoist._apps.scan import _fingerprint
+    from jaxhoist._apps.scan.run import _fingerprint
     from jaxhoist._numerics.batch import BatchSpec as _Spec
     from jaxhoist._numerics.observables import resolve
 
@@ -578,7 +578,7 @@ def test_fingerprint_sees_solver_settings_beyond_the_tolerances():
     PI coefficients) are not reused: the fingerprint has the solver's and the controller's fields."""
     import diffrax
 
-    from jaxhoist._apps.scan import _fingerprint
+    from jaxhoist._apps.scan.run import _fingerprint
     from jaxhoist._numerics.batch import BatchSpec as _Spec
     from jaxhoist._numerics.observables import resolve
 
@@ -652,7 +652,7 @@ from jaxtyping import install_import_hook
 install_import_hook("jaxhoist", "beartype.beartype")
 from test_scan import KW, MU, MUS, T1, oblique_box
 from jaxhoist._numerics.observables import resolve
-from jaxhoist._apps.scan import _fingerprint
+from jaxhoist._apps.scan.run import _fingerprint
 from jaxhoist._numerics.batch import BatchSpec as _Spec
 import jaxhoist as jh
 spec = _Spec(paths=(MU,), observables=tuple(resolve(KW["observables"])), histories=(),
@@ -668,7 +668,7 @@ def test_fingerprint_is_the_same_in_every_process():
     import sys
     from pathlib import Path
 
-    from jaxhoist._apps.scan import _fingerprint
+    from jaxhoist._apps.scan.run import _fingerprint
     from jaxhoist._numerics.batch import BatchSpec as _Spec
     from jaxhoist._numerics.observables import resolve
 
@@ -710,63 +710,11 @@ def test_every_chunk_records_the_devices_it_ran_on(box, tmp_path):
     assert recorded == {"0": [str(one[0])], "1": both}
 
 
-def test_earlier_keywords_warn_once_and_give_the_same_scan(box, clean):
-    """Issue 11: the keywords that moved into `SolverOptions`, `BatchOptions`, `Times` and the sweep objects
-    still work, with one `DeprecationWarning` naming the new spelling at the caller's line, and give the
-    clean scan bit for bit."""
-    old_kw = dict(observables=KW["observables"], n_save=31, lanes=2, max_steps=3000, solver=diffrax.Tsit5())
-    with pytest.warns(DeprecationWarning, match=r"lanes -> batch=BatchOptions\(lanes=...\)") as rec:
-        old = scan(box, {MU: MUS}, T1, mode="sweep", chunk_size=4, **old_kw)
-    assert len(rec) == 1 and rec[0].filename == __file__
-    assert "mode -> sweep=Sweep(path, values)" in str(rec[0].message)
-    assert "max_steps -> options=SolverOptions(max_steps=...)" in str(rec[0].message)
-    assert "n_save -> times=Times(t1, n=...)" in str(rec[0].message)
-    with pytest.warns(DeprecationWarning, match="params -> sweep"):
-        renamed = scan(box, params={MU: MUS}, times=TIMES, **kw(chunk_size=4))
-    with pytest.warns(DeprecationWarning, match=r"t1 -> times=Times\(t1\).*n_save -> times") as rec:
-        timed = scan(box, {MU: MUS}, t1=T1, n_save=31, **kw(chunk_size=4))
-    assert len(rec) == 1 and rec[0].filename == __file__
-    for res in (old, renamed, timed):
-        assert res.mode == clean.mode == "sweep"
-        np.testing.assert_array_equal(res.num_accepted_steps, clean.num_accepted_steps)
-        for k in clean.data:
-            np.testing.assert_array_equal(res[k], clean[k], err_msg=k)
-
-
-def test_earlier_keywords_build_the_same_objects():
-    """The conversion of the earlier keywords gives exactly the objects a caller would write now (equal
-    pytrees, so the same compiled core and the same numbers)."""
-    import equinox as eqx
-
-    from jaxhoist._apps.scan_layout import convert_legacy, scan_solver_options
-
-    dev = jax.devices()[:1]
-    old = dict(mode="points", solver=diffrax.Bosh3(), dt0=1e-3, fixed_step=True, max_steps=10, lanes=8)
-    with pytest.warns(DeprecationWarning):
-        mode, opts, batch = convert_legacy("scan", {**old, "sort": False, "devices": dev}, None, None, False)
-    assert mode == "points"
-    fixed = jh.SolverOptions(diffrax.Bosh3(), diffrax.ConstantStepSize(), dt0=1e-3, max_steps=10)
-    assert eqx.tree_equal(opts, fixed) and opts.fixed_step
-    assert batch == jh.BatchOptions(lanes=8, sort=False, devices=tuple(dev))
-    with pytest.warns(DeprecationWarning):
-        _, opts, _ = convert_legacy("scan", dict(rtol=1e-9, atol=1e-11), None, None, True)
-    now = scan_solver_options(jh.SolverOptions(diffrax.Tsit5(), rtol=1e-9, atol=1e-11), True)
-    assert eqx.tree_equal(opts, now) and now.forward_mode
-    # the default with derivatives: the Rosenbrock-W solver in forward mode (its sensitivity ODE)
-    assert eqx.tree_equal(scan_solver_options(None, True), jh.SolverOptions(adjoint="forward"))
-    with pytest.raises(jh.ScenarioError, match="either options or rtol"):
-        convert_legacy("scan", dict(rtol=1e-9), jh.SolverOptions(), None, False)
-    with pytest.raises(jh.ScenarioError, match="either batch or lanes"):
-        convert_legacy("scan", dict(lanes=4), None, jh.BatchOptions(), False)
-    with pytest.raises(TypeError, match="unexpected keyword argument.*lane"):
-        convert_legacy("scan", dict(lane=4), None, None, False)
-
-
 def test_sweep_objects_count_members_and_refuse_bad_input(box):
     """`Sweep`, `Grid` (outer product) and `Points` (zipped): member counts and layout; a plain mapping is a
     `Sweep` for one parameter and a `Grid` for several; bad input gives a one-line `ScenarioError` naming
     the path, before anything is compiled."""
-    from jaxhoist._apps.sweep import as_sweep
+    from jaxhoist._apps.scan.sweep import as_sweep
 
     g = jh.Grid({MU: "0.1:0.6:6", "hoist.speed": [0.2, 0.3]})
     assert g.size == len(g) == 12 and g.shape == (6, 2) and g.params == (MU, "hoist.speed")
@@ -802,13 +750,16 @@ def test_default_lanes_widen_with_the_member_count_only():
     next power of two."""
     from types import SimpleNamespace
 
-    from jaxhoist._apps.scan_layout import adaptive_lanes
+    from jaxhoist._apps.scan.layout import adaptive_lanes
 
     widths = {n: adaptive_lanes(n) for n in (1, 64, 511, 512, 1024, 4096, 65536)}
     assert widths == {1: 16, 64: 16, 511: 16, 512: 32, 1024: 64, 4096: 256, 65536: 256}
     for n, w in widths.items():
         assert w == 16 or n // w >= 16
-    adaptive, fixed = jh.SolverOptions(), jh.SolverOptions(diffrax.Bosh3(), dt0=1e-3, fixed_step=True)
+    adaptive, fixed = (
+        jh.SolverOptions(),
+        jh.SolverOptions(diffrax.Bosh3(), diffrax.ConstantStepSize(), dt0=1e-3),
+    )
     assert jh.BatchOptions().lanes_for(adaptive, 4096) == 256
     assert jh.BatchOptions(devices=jax.devices()[:1]).lanes_for(adaptive, 4096) == 256
     assert jh.BatchOptions().lanes_for(fixed, 100) == 128  # 256, capped at the next power of two

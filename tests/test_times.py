@@ -1,5 +1,5 @@
 """`jaxhoist.Times`: the saved times of every entry point (issue 11): resolution, defaults, checks before
-anything is compiled, `as_times`, the conversion of the earlier keywords, and a traced t1 under `jax.jit`."""
+anything is compiled, `as_times`, and a traced t1 under `jax.jit`."""
 
 import jax
 import jax.numpy as jnp
@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import jaxhoist as jh
-from jaxhoist._numerics.times import as_times, convert_legacy
+from jaxhoist._numerics.times import as_times
 
 
 @pytest.fixture(scope="module")
@@ -86,34 +86,6 @@ def test_as_times():
         as_times(np.zeros((2, 2)))
     with pytest.raises(jh.ScenarioError, match=r"^t1 must be a positive finite time"):
         as_times(-1.0)
-
-
-def test_earlier_keywords_convert_to_the_same_times():
-    """`convert_legacy` pops `t1`, `ts`, `n_save` and gives the `Times` that resolves to the earlier saved
-    times (n_save was not read with ts), with the new spelling of each for the one warning."""
-    ts = np.array([0.0, 0.5, 1.0])
-    cases = [
-        (None, dict(t1=2.0), jh.Times(2.0)),
-        (2.0, dict(n_save=11), jh.Times(2.0, n=11)),
-        (None, dict(t1=2.0, n_save=11.0), jh.Times(2.0, n=11)),
-        (None, dict(ts=ts, n_save=11), jh.Times(ts=ts)),
-        (1.0, dict(ts=ts), jh.Times(1.0, ts=ts)),
-        (None, dict(t1=None, n_save=5), jh.Times(n=5)),
-    ]
-    for times, old, want in cases:
-        kw = dict(old, rtol=1e-6)
-        got, moved = convert_legacy("f", times, kw)
-        assert kw == dict(rtol=1e-6) and set(moved) == set(old)
-        assert (got.t1, got.n) == (want.t1, want.n) and (got.ts is None) == (want.ts is None)
-    assert convert_legacy("f", 2.0, {}) == (jh.Times(2.0), {})
-    with pytest.raises(TypeError, match=r"f\(\) got t1 twice"):
-        convert_legacy("f", 2.0, dict(t1=2.0))
-    with pytest.raises(jh.ScenarioError, match="give either times"):
-        convert_legacy("f", jh.Times(2.0), dict(n_save=3))
-    with pytest.raises(jh.ScenarioError, match="t1 = 2 s contradicts ts"):
-        convert_legacy("f", 2.0, dict(ts=ts))
-    with pytest.raises(jh.ScenarioError, match=r"must be >= 2, got 1"):
-        convert_legacy("f", None, dict(n_save=1))
 
 
 def test_traced_t1_stays_traced_under_jit(sc):

@@ -12,7 +12,7 @@ import pytest
 
 import jaxhoist as jh
 import jaxhoist._numerics.solve as solve_mod
-from jaxhoist._physics.params import get_leaf
+from jaxhoist._physics.paths import get_leaf
 
 # Tight solves shared by the vmap, derivative and finite-difference tests (one compile per transform):
 # two saved times [0, t1] and rtol 1e-12.
@@ -192,57 +192,3 @@ def test_nan_leaf_rejected_before_compiling(paper42, monkeypatch):
             jh.simulate(paper42.replace(**{path: float("nan")}), 0.1)
     with pytest.raises(jh.ScenarioError, match=r"load\.mass_centre"):
         jh.simulate(paper42.replace(**{"load.mass_centre": [1.0, float("nan"), 1.0]}), 0.1)
-
-
-# ---------------------------------------------------------------------------- earlier keywords
-
-
-def test_earlier_keywords_warn_once_and_match(paper42):
-    """`simulate`'s earlier solver and time keywords and model strings still work: one `DeprecationWarning`
-    that names the new spelling and points at the caller, and the same result bit for bit."""
-    new = jh.simulate(paper42, jh.Times(0.05, n=3), options=LOOSE)
-    with pytest.warns(DeprecationWarning) as rec:
-        old = jh.simulate(paper42, 0.05, n_save=3, model="elastic", rtol=1e-4, atol=1e-6)
-    assert len(rec) == 1
-    assert rec[0].filename == __file__
-    msg = str(rec[0].message)
-    assert "rtol -> options=SolverOptions(rtol=...)" in msg and "model -> model=ElasticFoundation()" in msg
-    assert "n_save -> times=Times(t1, n=...)" in msg
-    assert bool(eqx.tree_equal(old, new))
-    # The time keywords alone, and the earlier positional t1 with ts= (checked against each other).
-    ts = np.array([0.0, 0.02, 0.05])
-    for old_kw in (dict(t1=0.05, n_save=3), dict(ts=ts), dict(t1=0.05, ts=ts)):
-        with pytest.warns(DeprecationWarning, match="times=Times") as rec:
-            old = jh.simulate(paper42, options=LOOSE, **old_kw)
-        assert len(rec) == 1 and rec[0].filename == __file__
-        want = new if "n_save" in old_kw else jh.simulate(paper42, jh.Times(ts=ts), options=LOOSE)
-        assert bool(eqx.tree_equal(old, want))
-    with pytest.warns(DeprecationWarning, match="ts -> times"):
-        assert bool(eqx.tree_equal(jh.simulate(paper42, 0.05, ts=ts, options=LOOSE), want))
-    with pytest.raises(jh.ScenarioError, match=r"t1 = 0.04 s contradicts ts"):
-        jh.simulate(paper42, 0.04, ts=ts, options=LOOSE)
-    with pytest.raises(TypeError, match="t1 twice"):
-        jh.simulate(paper42, 0.05, t1=0.05, options=LOOSE)
-    with pytest.raises(jh.ScenarioError, match="either times"):
-        jh.simulate(paper42, jh.Times(0.05), n_save=3, options=LOOSE)
-    # The conversion itself, keyword by keyword (no solve): the same options as the new spelling.
-    conv = solve_mod.convert_legacy
-    model, opts, moved = conv("rigid", None, dict(rope="inextensible", rtol=1e-8, max_steps=10))
-    assert model == jh.RigidGround(rope=jh.InextensibleRope())
-    assert bool(eqx.tree_equal(opts, jh.SolverOptions(diffrax.Tsit5(), rtol=1e-8, max_steps=10)))
-    assert set(moved) == {"model", "rope", "rtol", "max_steps"}
-    old_kw = dict(solver=diffrax.Tsit5(), adjoint="forward", fixed_step=True, dt0=1e-3, progress=True)
-    _, opts, _ = conv(jh.ElasticFoundation(), None, old_kw)
-    want = jh.SolverOptions(
-        diffrax.Tsit5(),
-        diffrax.ConstantStepSize(),
-        diffrax.ForwardMode(),
-        dt0=1e-3,
-        progress_meter=diffrax.TextProgressMeter(),
-    )
-    assert bool(eqx.tree_equal(opts, want))
-    assert conv(jh.ElasticFoundation(), None, {}) == (jh.ElasticFoundation(), None, {})
-    with pytest.raises(jh.ScenarioError, match="either options"):
-        conv(jh.ElasticFoundation(), LOOSE, dict(rtol=1e-3))
-    with pytest.raises(TypeError, match="rtoll"):
-        conv(jh.ElasticFoundation(), None, dict(rtoll=1e-3))

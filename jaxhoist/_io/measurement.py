@@ -38,8 +38,8 @@ from .signals import SIGNALS as SIGNALS
 from .signals import UNITS as UNITS
 from .signals import MeasurementError as MeasurementError
 from .signals import SignalSpec as SignalSpec
-from .signals import _hint
 from .signals import check_signal_names as check_signal_names
+from .signals import hint
 from .signals import signal_groups as signal_groups
 from .signals import unit_factor as unit_factor
 from .validate import parse_number, read_text
@@ -197,7 +197,7 @@ def _side_json(path: Path, units_file: str | Path | None) -> tuple[dict, str | N
     for key in data:
         if key not in ("units", "noise", "description", "metadata"):
             raise MeasurementError(
-                f"{side}: unknown key {key!r}{_hint(key, ['units', 'noise'])}; "
+                f"{side}: unknown key {key!r}{hint(key, ['units', 'noise'])}; "
                 f"expected 'units', 'noise', 'description', 'metadata'"
             )
     for key in ("units", "noise"):
@@ -294,7 +294,7 @@ def read_measurement(
         seen.add(n)
     if "t" not in names:
         raise MeasurementError(
-            f"{src}: no time column 't' in the header {names}{_hint('t', [n for n in names if n])}"
+            f"{src}: no time column 't' in the header {names}{hint('t', [n for n in names if n])}"
             f"; the first column should read 't [s]'"
         )
     check_signal_names([n for n in names if n != "t"], src)
@@ -302,7 +302,7 @@ def read_measurement(
     for key in side_units:
         if key not in names:
             raise MeasurementError(
-                f"{side_src}: units given for {key!r}, which is not a column of {src} {_hint(key, names)}"
+                f"{side_src}: units given for {key!r}, which is not a column of {src} {hint(key, names)}"
             )
     factors = {}
     for n, hu in zip(names, header_units, strict=True):
@@ -350,7 +350,7 @@ def read_measurement(
         if n not in cols:
             raise MeasurementError(
                 f"{side_src}: noise given for {n!r}, which is not a signal column of {src}"
-                f"{_hint(n, list(cols))}"
+                f"{hint(n, list(cols))}"
             )
         noise[n] = _noise_value(raw, n, factors[n], cols[n], side_src)  # pyright: ignore[reportArgumentType]  # where is None only for noise given on the command line, which _noise_value accepts
         if not (np.isfinite(noise[n]) and noise[n] > 0):

@@ -76,7 +76,7 @@ def signal_groups(name: str) -> list[str]:
     return [s for s in SIGNALS if s.startswith(name + "_")]
 
 
-def _hint(word: str, options: Iterable[str]) -> str:
+def hint(word: str, options: Iterable[str]) -> str:
     close = difflib.get_close_matches(word, list(options), n=1, cutoff=0.6)
     return f" (did you mean {close[0]!r}?)" if close else ""
 
@@ -90,7 +90,7 @@ def check_signal_names(names: Iterable[str], where: str, *, groups: bool = False
         if groups:
             options += sorted({s.rsplit("_", 1)[0] for s in SIGNALS})
         raise MeasurementError(
-            f"{where}: unknown signal {name!r}{_hint(name, options)}; "
+            f"{where}: unknown signal {name!r}{hint(name, options)}; "
             f"known signals are e.g. position_x, euler_phi, corners_D_z, normal_forces_E, "
             f"rope_tension (all: jaxhoist._io.measurement.SIGNALS)"
         )

@@ -1,7 +1,7 @@
 """The batch core of a scan: one member's solve and observables, a vmapped lock-step group of members, the
 groups of a chunk on each device (`lax.map`), and the devices in parallel (one single-device program per
 device, the same for any device count; failing group mates isolated: `CompiledChunk`). Pure: no I/O, no
-printing; a member's failure is its status, never an exception. `numerics.scan` lays the members out and
+printing; a member's failure is its status, never an exception. `apps.scan` lays the members out and
 runs the chunks.
 """
 
@@ -19,9 +19,9 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import SolveStatus
+from .._physics.paths import set_param
 from . import fixed_step as fixed_mod
 from .options import SolverOptions
-from .paths import set_param
 from .solve import solve
 
 

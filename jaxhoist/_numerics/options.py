@@ -1,15 +1,11 @@
 """Choices of numerics as objects: `SolverOptions` (which integrator, which step-size control, which adjoint,
-how many steps) and the models `ElasticFoundation` / `RigidGround` that `simulate` dispatches on.
+how many steps).
 
 Every choice is a real object (a diffrax solver, a diffrax step-size controller, a diffrax adjoint), the way
-`diffrax.diffeqsolve` takes them; the strings and flags of earlier versions (`rtol=`, `fixed_step=True`,
-`adjoint="forward"`, `model="rigid"`, `rope="inextensible"`) are still accepted and converted here, in one
-place.
+`diffrax.diffeqsolve` takes them.
 """
 
 from __future__ import annotations
-
-from typing import ClassVar
 
 import diffrax
 import equinox as eqx
@@ -72,12 +68,11 @@ class SolverOptions(eqx.Module):
     - `max_steps`: the step budget; reaching it is reported as `SolveStatus.MAX_STEPS`.
     - `progress_meter`: a diffrax progress meter (default `diffrax.NoProgressMeter()`).
 
-    Earlier keyword arguments still work and are converted: `rtol`, `atol` (a `PIDController`),
-    `fixed_step=True` (a `ConstantStepSize`), `adjoint="reverse" | "forward"`, `progress=True` (a
-    `TextProgressMeter`).
+    - `rtol`, `atol`: the tolerances of the default `PIDController` (relative; absolute in SI units of each
+      state); None: the solver's defaults above. Not together with `stepsize_controller`.
 
     **Raises** `ScenarioError` for a non-positive tolerance or step, a constant step without `dt0`, a step
-    budget below 1 or an unknown adjoint name.
+    budget below 1 or an adjoint that is not a diffrax adjoint.
     """
 
     solver: diffrax.AbstractSolver
@@ -91,15 +86,13 @@ class SolverOptions(eqx.Module):
         self,
         solver: diffrax.AbstractSolver | None = None,
         stepsize_controller: diffrax.AbstractStepSizeController | None = None,
-        adjoint: diffrax.AbstractAdjoint | str | None = None,
+        adjoint: diffrax.AbstractAdjoint | None = None,
         *,
         dt0: float | None = None,
         max_steps: int = DEFAULT_MAX_STEPS,
         progress_meter: diffrax.AbstractProgressMeter | None = None,
         rtol: float | None = None,
         atol: float | None = None,
-        fixed_step: bool = False,
-        progress: bool = False,
     ):
         if solver is None:
             from .rosenbrock import RosenbrockW
@@ -108,41 +101,35 @@ class SolverOptions(eqx.Module):
         self.solver = solver
         if not isinstance(self.solver, diffrax.AbstractSolver):
             raise ScenarioError(f"solver must be a diffrax solver, got {solver!r}")
-        if stepsize_controller is not None and (rtol is not None or atol is not None or fixed_step):
-            raise ScenarioError("give either stepsize_controller or rtol/atol/fixed_step, not both")
+        if stepsize_controller is not None and (rtol is not None or atol is not None):
+            raise ScenarioError("give either stepsize_controller or rtol/atol, not both")
         if stepsize_controller is None:
-            if fixed_step:
-                stepsize_controller = diffrax.ConstantStepSize()
-            else:
-                d_rtol, d_atol = default_tolerances(self.solver)
-                pcoeff, icoeff = default_controller_coefficients(self.solver)
-                stepsize_controller = diffrax.PIDController(
-                    rtol=_positive("rtol", d_rtol if rtol is None else rtol),
-                    atol=_positive("atol", d_atol if atol is None else atol),
-                    pcoeff=pcoeff,
-                    icoeff=icoeff,
-                )
+            d_rtol, d_atol = default_tolerances(self.solver)
+            pcoeff, icoeff = default_controller_coefficients(self.solver)
+            stepsize_controller = diffrax.PIDController(
+                rtol=_positive("rtol", d_rtol if rtol is None else rtol),
+                atol=_positive("atol", d_atol if atol is None else atol),
+                pcoeff=pcoeff,
+                icoeff=icoeff,
+            )
         elif isinstance(stepsize_controller, diffrax.PIDController):
             _positive("rtol", stepsize_controller.rtol)
             _positive("atol", stepsize_controller.atol)
         self.stepsize_controller = stepsize_controller
-        if adjoint is None or adjoint == "reverse":
+        if adjoint is None:
             adjoint = diffrax.RecursiveCheckpointAdjoint()
-        elif adjoint == "forward":
-            adjoint = diffrax.ForwardMode()
         elif not isinstance(adjoint, diffrax.AbstractAdjoint):
-            raise ScenarioError(f"solver option adjoint must be 'reverse' or 'forward', got {adjoint!r}")
+            raise ScenarioError(
+                "solver option adjoint must be a diffrax adjoint (diffrax.RecursiveCheckpointAdjoint() or "
+                f"diffrax.ForwardMode()), got {adjoint!r}"
+            )
         self.adjoint = adjoint
-        if progress_meter is None:
-            progress_meter = diffrax.TextProgressMeter() if progress else diffrax.NoProgressMeter()
-        self.progress_meter = progress_meter
+        self.progress_meter = diffrax.NoProgressMeter() if progress_meter is None else progress_meter
         if dt0 is not None:
             dt0 = _positive("dt0", dt0)
         self.dt0 = dt0
         if self.fixed_step and dt0 is None:
-            raise ScenarioError(
-                "a constant step (fixed_step=True, ConstantStepSize) needs the step size dt0 [s]"
-            )
+            raise ScenarioError("a constant step (diffrax.ConstantStepSize()) needs the step size dt0 [s]")
         if int(max_steps) < 1:
             raise ScenarioError(f"solver option max_steps must be >= 1, got {max_steps}")
         self.max_steps = int(max_steps)
@@ -190,86 +177,3 @@ class SolverOptions(eqx.Module):
             "fixed_step": self.fixed_step,
             "adjoint": type(self.adjoint).__name__,
         }
-
-
-# ------------------------------------------------------------------------------------------------ models
-
-
-class AbstractRope(eqx.Module):
-    """How the rigid-ground model treats the rope (the elastic model always has the elastic rope (2.14))."""
-
-    name: ClassVar[str]
-
-
-class ElasticRope(AbstractRope):
-    """The elastic, damped rope of eq. (2.14)."""
-
-    name: ClassVar[str] = "elastic"
-
-
-class InextensibleRope(AbstractRope):
-    """The inextensible rope of eq. (2.15): a constraint with the boom tip's motion (rigid model only)."""
-
-    name: ClassVar[str] = "inextensible"
-
-
-class AbstractModel(eqx.Module):
-    """A model of the ground contact that `simulate` can solve."""
-
-
-class ElasticFoundation(AbstractModel):
-    """The paper's §3 model: the box on four one-sided corner spring-dampers with friction; solved by
-    `diffrax.diffeqsolve` (differentiable, vmappable)."""
-
-
-class RigidGround(AbstractModel):
-    """The paper's §2 model: the box on a rigid ground, phases chosen by events (rest, sliding, tipping,
-    flight, impacts); solved by the host-side phase driver `simulate_rigid` (not differentiable).
-
-    - `rope`: `ElasticRope()` (2.14, default) or `InextensibleRope()` (2.15).
-    - `restitution`: Newton's coefficient e [-] of corner impacts, in [0, 1] (0, the default: plastic).
-
-    **Raises** `ScenarioError` for a restitution outside [0, 1].
-    """
-
-    rope: AbstractRope = ElasticRope()
-    restitution: float = 0.0
-
-    def __check_init__(self):
-        if not isinstance(self.rope, AbstractRope):
-            raise ScenarioError(f"rope must be ElasticRope() or InextensibleRope(), got {self.rope!r}")
-        e = float(self.restitution)
-        if not (0.0 <= e <= 1.0):
-            raise ScenarioError(f"restitution (e) must be in [0, 1], got {self.restitution}")
-
-
-def as_model(model, rope=None) -> AbstractModel:
-    """The model object for `model` (an `AbstractModel`, or the earlier strings "elastic"/"rigid") and the
-    earlier `rope` string ("elastic"/"inextensible").
-
-    **Raises** `ScenarioError` for an unknown name or an inextensible rope with the elastic model.
-    """
-    ropes = {"elastic": ElasticRope(), "inextensible": InextensibleRope()}
-    if rope is not None and not isinstance(rope, AbstractRope):
-        if rope not in ropes:
-            raise ScenarioError(f"rope must be one of {', '.join(map(repr, ropes))}, got {rope!r}")
-        rope = ropes[rope]
-    if isinstance(model, str):
-        if model == "elastic":
-            model = ElasticFoundation()
-        elif model == "rigid":
-            model = RigidGround(rope=rope or ElasticRope())
-            rope = None
-        else:
-            raise ScenarioError(f"model must be 'elastic' or 'rigid' (or a model object), got {model!r}")
-    if not isinstance(model, AbstractModel):
-        raise ScenarioError(f"model must be ElasticFoundation() or RigidGround(...), got {model!r}")
-    if rope is not None:
-        if isinstance(model, RigidGround):
-            model = RigidGround(rope=rope, restitution=model.restitution)
-        elif not isinstance(rope, ElasticRope):
-            raise ScenarioError(
-                f"rope={rope.name!r} is available with model='rigid' only (the elastic-foundation model of "
-                "§3 has the elastic rope (2.14)); use model=RigidGround(rope=InextensibleRope())"
-            )
-    return model

@@ -1,5 +1,6 @@
-"""`simulate`: validate on the host, then one `eqx.filter_jit` core that solves the elastic model with
-diffrax and evaluates every output at the saved times."""
+"""`simulate_elastic`, the elastic-foundation model of `simulate`: validate on the host, then one
+`eqx.filter_jit` core that solves the elastic model with diffrax and evaluates every output at the saved
+times. It knows nothing of the rigid model (`_apps/simulate.py` dispatches on the model type)."""
 
 from __future__ import annotations
 
@@ -10,20 +11,16 @@ import jax.numpy as jnp
 import numpy as np
 from jaxtyping import Array, Float, Int
 
-from .._deprecated import warn_moved
-from .._errors import ScenarioError, SolveStatus, forward_mode_hint, require_x64
+from .._errors import SolveStatus, forward_mode_hint
 from .._physics import energy as energy_mod
 from .._physics import kinematics
 from .._physics.elastic import Constants, State, snapshot, vector_field
 from .._physics.equilibrium import initial_state
 from .._physics.params import Scenario
 from .callback_free import callback_free, raise_on_status
-from .options import AbstractModel, ElasticFoundation, RigidGround, SolverOptions, as_model
-from .rigid_options import RigidOptions
-from .rigid_solve import simulate_rigid
+from .options import SolverOptions
 from .sensitivity import solve_forward, uses_tangent_solve
-from .times import TimesLike
-from .times import convert_legacy as convert_legacy_times
+from .times import Times
 from .trajectory import Trajectory as Trajectory
 
 
@@ -152,116 +149,26 @@ def as_float64_leaves(scenario: Scenario) -> Scenario:
 #: The number of saved times of `simulate` and `simulate_rigid` when `Times.n` is None.
 DEFAULT_N = 501
 
-_LEGACY_SOLVER_KW = ("solver", "rtol", "atol", "dt0", "max_steps", "adjoint", "progress", "fixed_step")
 
-#: The new spelling of each earlier keyword of `simulate` (for the deprecation warning).
-_NEW_SPELLING = {
-    "solver": "options=SolverOptions(solver)",
-    "rtol": "options=SolverOptions(rtol=...)",
-    "atol": "options=SolverOptions(atol=...)",
-    "dt0": "options=SolverOptions(dt0=...)",
-    "max_steps": "options=SolverOptions(max_steps=...)",
-    "adjoint": "options=SolverOptions(adjoint=diffrax.ForwardMode() | diffrax.RecursiveCheckpointAdjoint())",
-    "progress": "options=SolverOptions(progress_meter=diffrax.TextProgressMeter())",
-    "fixed_step": "options=SolverOptions(stepsize_controller=diffrax.ConstantStepSize(), dt0=...)",
-    "rope": "model=RigidGround(rope=ElasticRope() | InextensibleRope())",
-}
-
-
-def convert_legacy(
-    model: AbstractModel | str, options: SolverOptions | None, old: dict
-) -> tuple[AbstractModel, SolverOptions | None, dict[str, str]]:
-    """`(model, options, moved)` from `simulate`'s earlier keywords in `old` (the solver block `solver, rtol,
-    atol, dt0, max_steps, adjoint, progress, fixed_step` and `rope`) and the earlier model strings
-    "elastic"/"rigid", built exactly as the earlier `simulate` built them; `moved` (old name -> new
-    spelling) is for the one `DeprecationWarning`, which the caller gives once nothing can fail any more.
-    `options` stays None where neither it nor a solver keyword is given.
-
-    **Raises** `TypeError` for an unknown keyword, `ScenarioError` for an old keyword given with the object
-    that replaces it, an unknown model or rope name, or a solver keyword the rigid model does not read.
-    """
-    old = dict(old)
-    rope = old.pop("rope", None)
-    unknown = sorted(set(old) - set(_LEGACY_SOLVER_KW))
-    if unknown:
-        raise TypeError(f"simulate() got unexpected keyword argument(s): {', '.join(unknown)}")
-    moved = {k: _NEW_SPELLING[k] for k in old}
-    if rope is not None:
-        moved["rope"] = _NEW_SPELLING["rope"]
-    if isinstance(model, str):
-        moved["model"] = f"model={'RigidGround()' if model == 'rigid' else 'ElasticFoundation()'}"
-    model = as_model(model, rope)
-    if options is not None and old:
-        raise ScenarioError(f"give either options or the keywords {', '.join(sorted(old))}, not both")
-    if options is None and old:
-        if isinstance(model, RigidGround):
-            extra = set(old) - {"rtol", "atol", "max_steps"}
-            if extra and any(old[k] not in (None, False, "reverse") for k in extra):
-                raise ScenarioError("model='rigid' takes only t1, ts, n_save, rtol, atol, max_steps and rope")
-            kw = {k: v for k, v in old.items() if k in ("rtol", "atol", "max_steps")}
-            options = SolverOptions(diffrax.Tsit5(), **kw)  # for its default tolerances 1e-6, 1e-8
-        else:
-            options = SolverOptions(**old)
-    return model, options, moved
-
-
-def simulate(
-    scenario: Scenario,
-    times: TimesLike = None,
-    model: AbstractModel | str = ElasticFoundation(),
-    options: SolverOptions | None = None,
-    *,
-    throw: bool = True,
-    **deprecated,
+def simulate_elastic(
+    scenario: Scenario, times: Times, options: SolverOptions | None = None, *, throw: bool = True
 ) -> Trajectory:
-    """Simulate a lift from rest at t = 0 to the end time t1 [s] of `times`.
-
-    Works under `jax.jit`, `jax.vmap` over any scenario leaf, `jax.grad` (the default adjoint) and
-    `jax.jacfwd` (`SolverOptions(adjoint=diffrax.ForwardMode())`), for the elastic model. For derivatives
-    over long spans pass `options=SolverOptions(diffrax.Tsit5())`: through the default Rosenbrock-W solver
-    they are not reliable yet at high friction (see `RosenbrockW`).
+    """The elastic-foundation model (paper §3) of `jaxhoist.simulate`: check `scenario` on the host, then
+    one `eqx.filter_jit` core that solves with diffrax and evaluates every output at the saved `times`.
 
     **Arguments**
-    - `scenario`: a `Scenario` (see `load_scenario`).
-    - `times`: the saved times, a `Times(t1, n, ts)`: end time t1 [s] (default `ts[-1]` if `ts` is given,
-      else `scenario.t1`), `n` equally spaced times from 0 to t1 (default 501) or the saved times `ts` [s]
-      (starting at 0, ending at t1). A number is t1 [s], a 1-D array is ts [s]. Default `Times()`.
-    - `model`: `ElasticFoundation()` (paper §3, the default: one compiled, differentiable solve) or
-      `RigidGround(rope=ElasticRope() | InextensibleRope())` (paper §2, the event-driven reference
-      `simulate_rigid`: host-side phase loop, not differentiable or vmappable; it returns a
-      `RigidTrajectory` with the same output names plus `impact_loss` and the phase log). The earlier
-      strings "elastic" and "rigid" still work, with a `DeprecationWarning`.
-    - `options`: `SolverOptions` (solver, step-size controller, adjoint, dt0, max_steps, progress meter).
-      The rigid model reads only its tolerances and step budget.
+    - `scenario`: a `Scenario`.
+    - `times`: the saved times, a `Times` (its defaults resolved here: t1 the scenario's, 501 times).
+    - `options`: `SolverOptions` (default `SolverOptions()`, the Rosenbrock-W solver).
     - `throw`: raise if the solve fails (max steps, non-finite state, or an energy balance that does not
       close: `SolveStatus.ENERGY_BALANCE`, the solver's success contradicted by the result); with False,
       read `Trajectory.status`.
-    - `**deprecated`: the earlier keywords `t1`, `ts`, `n_save` (converted to `Times`: the same saved
-      times), `solver`, `rtol`, `atol`, `dt0`, `max_steps`, `adjoint`, `progress`, `fixed_step` (converted
-      to `SolverOptions` exactly as before; not together with `options`) and `rope` ("elastic" or
-      "inextensible", rigid model only; converted to `RigidGround`) still work, with one
-      `DeprecationWarning` naming the new spelling.
 
-    **Returns** a `Trajectory`: for the rigid model its subclass `RigidTrajectory`, which adds `impact_loss`
-    and the phase log.
+    **Returns** a `Trajectory`.
 
-    **Raises** `ScenarioError` for invalid input (before compiling), `Float64Error` without x64,
-    and (with `throw=True`) an `EquinoxRuntimeError` naming the failure.
+    **Raises** `ScenarioError` for invalid input (before compiling), and (with `throw=True`) an
+    `EquinoxRuntimeError` naming the failure.
     """
-    require_x64()
-    times, moved_times = convert_legacy_times("simulate", times, deprecated)
-    model, options, moved = convert_legacy(model, options, deprecated)
-    moved = moved_times | moved
-    if isinstance(model, RigidGround):
-        if options is None:
-            options = SolverOptions(diffrax.Tsit5())  # for its default tolerances 1e-6, 1e-8
-        warn_moved("simulate", moved)
-        rigid_options = RigidOptions(
-            rtol=options.rtol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
-            atol=options.atol,  # pyright: ignore[reportArgumentType]  # SolverOptions fills rtol/atol in
-            max_steps=options.max_steps,
-        )
-        return simulate_rigid(scenario, times, model, rigid_options)
     if not isinstance(scenario, Scenario):
         raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     scenario.check()
@@ -269,8 +176,7 @@ def simulate(
     if options is None:
         options = SolverOptions()
     _, ts = times.resolve(scenario, DEFAULT_N, jnp)
-    warn_moved("simulate", moved)
     ts = jnp.asarray(ts, dtype=jnp.float64)
-    with forward_mode_hint():  # jacfwd through the reverse adjoint: say to pass adjoint="forward"
+    with forward_mode_hint():  # jacfwd through the reverse adjoint: say to pass adjoint=diffrax.ForwardMode()
         traj = _solve_jit(scenario.unlabelled(), ts, options)  # one program for any labels
     return _raise_on_failure(traj) if throw else traj

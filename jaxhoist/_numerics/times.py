@@ -1,6 +1,5 @@
 """The saved times of a solve as one object: `Times(t1, n, ts)`, the one implementation of the time grid
-(checks, defaults, the equally spaced grid) that every entry point reads, and the conversion of the earlier
-keywords `t1=`, `ts=`, `n_save=` to it."""
+(checks, defaults, the equally spaced grid) that every entry point reads."""
 
 from __future__ import annotations
 
@@ -185,49 +184,3 @@ def as_times(spec: Any) -> Times:
     if ndim == 1:
         return Times(ts=spec)
     raise ScenarioError(f"times as an array must be 1-D (the saved times ts [s]), got shape {np.shape(spec)}")
-
-
-#: The new spelling of each earlier keyword (for the deprecation warning).
-_NEW_SPELLING = {
-    "t1": "times=Times(t1) (or a number: t1 [s])",
-    "ts": "times=Times(ts=...) (or the array itself)",
-    "n_save": "times=Times(t1, n=...)",
-}
-
-#: The earlier keywords of the saved times.
-LEGACY_KW = tuple(_NEW_SPELLING)
-
-
-def _is_number(x) -> bool:
-    return _is_real(x) and not isinstance(x, list | tuple) and np.ndim(x) == 0
-
-
-def convert_legacy(function: str, times: TimesLike, old: dict[str, Any]) -> tuple[Times, dict[str, str]]:
-    """`(times, moved)` from the earlier keywords `t1`, `ts`, `n_save`, popped from `old`, built so that
-    the saved times are exactly the earlier ones: `Times(t1, n=n_save, ts=ts)` (n_save was not used with
-    ts, so it is left out there), where `times` may be the earlier positional t1. `moved` (old name -> new
-    spelling) is for the caller's one `DeprecationWarning`.
-
-    **Raises** `TypeError` for t1 given twice (positionally and as `t1=`), `ScenarioError` for an earlier
-    keyword given with a `Times` or an array of saved times, or invalid times.
-    """
-    given = {k: old.pop(k) for k in LEGACY_KW if k in old}
-    if not given:
-        return as_times(times), {}
-    moved = {k: _NEW_SPELLING[k] for k in given}
-    t1 = given.get("t1")
-    if times is not None:
-        if "t1" in given:
-            raise TypeError(f"{function}() got t1 twice: as the times argument and as t1=")
-        if not _is_number(times):
-            raise ScenarioError(
-                f"{function}: give either times (a Times or an array) or the keywords "
-                f"{', '.join(given)}, not both"
-            )
-        t1 = times
-    ts, n = given.get("ts"), given.get("n_save")
-    if ts is not None:
-        n = None  # the earlier entry points did not read n_save with ts
-    elif n is not None and _is_number(n):
-        n = int(n)  # as the earlier int(n_save)
-    return Times(t1, n=n, ts=ts), moved  # pyright: ignore[reportArgumentType]  # t1 is a number here (checked)

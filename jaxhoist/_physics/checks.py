@@ -15,11 +15,11 @@ from jaxtyping import Array
 from .._errors import ScenarioError
 
 
-def _f64(x) -> Array:
+def f64(x) -> Array:
     return jnp.asarray(x, dtype=jnp.float64)
 
 
-def _concrete(x) -> np.ndarray | None:
+def concrete(x) -> np.ndarray | None:
     """The value of a leaf as numpy, or None if it is a tracer (inside jit/vmap/grad)."""
     if isinstance(x, jax.core.Tracer):  # pyright: ignore[reportAttributeAccessIssue]  # jax.core is a lazily loaded submodule
         return None
@@ -83,7 +83,7 @@ def check_plausible(module, prefix: str = "") -> None:
         rng = f.metadata.get(PLAUSIBLE)
         if rng is None or value is None:
             continue
-        v = _concrete(value)
+        v = concrete(value)
         if v is None or v.dtype.kind != "f":
             continue
         inside = (v >= rng.low) & (v <= rng.high)
@@ -95,12 +95,12 @@ def check_plausible(module, prefix: str = "") -> None:
             unit = f.metadata.get(UNIT, "")
             u = f" {unit}" if unit and unit != "-" else ""
             raise ScenarioError(
-                f"{prefix}{f.name} = {_show(v)}{u} is "
+                f"{prefix}{f.name} = {show(v)}{u} is "
                 f"outside its plausible range {rng.describe(unit)} ({rng.why}); {OPT_IN}"
             )
 
 
-def _show(v):
+def show(v):
     """A value for an error message: the list itself if short, else a summary (messages stay short)."""
     v = np.asarray(v)
     if v.size <= 6:
@@ -108,7 +108,7 @@ def _show(v):
     return f"<array of shape {v.shape}, from {np.nanmin(v):g} to {np.nanmax(v):g}>"
 
 
-def _check(
+def check_value(
     name: str,
     value,
     *,
@@ -124,7 +124,7 @@ def _check(
     """Raise `ScenarioError` naming `name` unless every element of `value` is finite and in range (the
     hard limits: a negative stiffness, a NaN; the plausible ranges are the fields' metadata, checked by
     `check_plausible`)."""
-    v = _concrete(value)
+    v = concrete(value)
     if v is None:
         return
     label = f"{name} ({symbol})" if symbol else name
@@ -139,15 +139,15 @@ def _check(
         raise ScenarioError(f"{label} must have shape {shape}, got {v.shape}")
     if not np.all(np.isfinite(v)):
         if not allow_posinf or np.any(np.isnan(v) | np.isneginf(v)):
-            raise ScenarioError(f"{label} must be finite, got {_show(v)}")
+            raise ScenarioError(f"{label} must be finite, got {show(v)}")
     unit_s = f" {unit}" if unit and unit != "-" else ""
     if low is not None:
         bad = v <= low if low_open else v < low
         if np.any(bad):
             rel = ">" if low_open else ">="
-            raise ScenarioError(f"{label} must be {rel} {low}{unit_s}, got {_show(v)}")
+            raise ScenarioError(f"{label} must be {rel} {low}{unit_s}, got {show(v)}")
     if high is not None:
         bad = v >= high if high_open else v > high
         if np.any(bad):
             rel = "<" if high_open else "<="
-            raise ScenarioError(f"{label} must be {rel} {high}{unit_s}, got {_show(v)}")
+            raise ScenarioError(f"{label} must be {rel} {high}{unit_s}, got {show(v)}")

@@ -1,5 +1,6 @@
 """The paper's §3 model: a rigid box on four vertical spring-dampers, pulled by an elastic rope from a
-sprung boom tip. `vector_field(t, y, args)` is the pure right-hand side dy/dt; nothing else lives here.
+sprung boom tip. `vector_field(t, y, args)` is the pure right-hand side dy/dt; `ElasticFoundation` names the
+model as a choice of `simulate` (`AbstractModel` is the base of both models).
 
 Newton-Euler form of (2.10)-(2.13): translation of the mass centre C in world axes, rotation in body
 axes (J dω/dt + ω x Jω = M_C), the boom tip as a particle. The paper derives the same equations by
@@ -199,3 +200,15 @@ def vector_field(t: Scalar, y: State, args: tuple[Scenario, Constants]) -> State
         damping_loss=snap.damping_rate,
         friction_work=snap.friction_rate,
     )
+
+
+# ------------------------------------------------------------------------------------------------ models
+
+
+class AbstractModel(eqx.Module):
+    """A model of the ground contact that `simulate` can solve."""
+
+
+class ElasticFoundation(AbstractModel):
+    """The paper's §3 model: the box on four one-sided corner spring-dampers with friction; solved by
+    `diffrax.diffeqsolve` (differentiable, vmappable)."""

@@ -11,7 +11,7 @@ import jax.numpy as jnp
 from jaxtyping import Array, Float
 
 from .._typing import Scalar
-from .checks import _check, _f64, plausible
+from .checks import check_value, f64, plausible
 from .paths import unit
 
 # ----------------------------------------------------------------------------------------- friction
@@ -57,7 +57,7 @@ class RegularisedCoulomb(AbstractFrictionLaw):
     state_size: ClassVar[int] = 0
 
     def __init__(self, regularisation_velocity=1e-3):
-        self.regularisation_velocity = _f64(regularisation_velocity)
+        self.regularisation_velocity = f64(regularisation_velocity)
 
     def force(self, mu, normal, velocity, state):
         eps = self.regularisation_velocity
@@ -68,7 +68,7 @@ class RegularisedCoulomb(AbstractFrictionLaw):
         return state
 
     def check(self):
-        _check(
+        check_value(
             "foundation.friction.regularisation_velocity",
             self.regularisation_velocity,
             unit="m/s",
@@ -106,9 +106,9 @@ class BristleFriction(AbstractFrictionLaw):
     state_size: ClassVar[int] = 2
 
     def __init__(self, deflection=1e-3, breakaway_ratio=0.5, relaxation_time=0.01):
-        self.deflection = _f64(deflection)
-        self.breakaway_ratio = _f64(breakaway_ratio)
-        self.relaxation_time = _f64(relaxation_time)
+        self.deflection = f64(deflection)
+        self.breakaway_ratio = f64(breakaway_ratio)
+        self.relaxation_time = f64(relaxation_time)
 
     def force(self, mu, normal, velocity, state):
         return -(mu * normal / self.deflection)[:, None] * state
@@ -129,10 +129,10 @@ class BristleFriction(AbstractFrictionLaw):
         return w * rate - (1.0 - w) * state / self.relaxation_time
 
     def check(self):
-        _check(
+        check_value(
             "foundation.friction.deflection", self.deflection, unit="m", low=0.0, low_open=True, symbol="δ"
         )
-        _check(
+        check_value(
             "foundation.friction.breakaway_ratio",
             self.breakaway_ratio,
             unit="-",
@@ -141,7 +141,7 @@ class BristleFriction(AbstractFrictionLaw):
             high_open=True,
             symbol="r_b",
         )
-        _check(
+        check_value(
             "foundation.friction.relaxation_time",
             self.relaxation_time,
             unit="s",

@@ -12,7 +12,7 @@ import numpy as np
 
 from .._errors import ScenarioError
 from .._typing import Scalar
-from .checks import _check, _concrete, _f64, _show, plausible
+from .checks import check_value, concrete, f64, plausible, show
 from .paths import unit
 
 
@@ -40,7 +40,7 @@ class ConstantSpeedHoist(AbstractHoistLaw):
     speed: Scalar = eqx.field(metadata=unit("m/s") | plausible(0.0, 20.0, "crane hoists run at up to ~3 m/s"))
 
     def __init__(self, speed):
-        self.speed = _f64(speed)
+        self.speed = f64(speed)
 
     def shortening(self, t):
         return self.speed * t
@@ -49,7 +49,7 @@ class ConstantSpeedHoist(AbstractHoistLaw):
         return self.speed * jnp.ones_like(t)
 
     def check(self):
-        _check("hoist.speed", self.speed, unit="m/s", low=0.0, symbol="v_l")
+        check_value("hoist.speed", self.speed, unit="m/s", low=0.0, symbol="v_l")
 
 
 class RampedHoist(AbstractHoistLaw):
@@ -70,9 +70,9 @@ class RampedHoist(AbstractHoistLaw):
     )
 
     def __init__(self, speed, ramp_time=0.0, travel=float("inf")):
-        self.speed = _f64(speed)
-        self.ramp_time = _f64(ramp_time)
-        self.travel = _f64(travel)
+        self.speed = f64(speed)
+        self.ramp_time = f64(ramp_time)
+        self.travel = f64(travel)
 
     def _g(self, t):
         # ∫_0^t smoothstep(τ/T) dτ, which is T (x³ - x⁴/2) on the ramp and T/2 + (t - T) after it.
@@ -89,13 +89,13 @@ class RampedHoist(AbstractHoistLaw):
         return self.speed * (self._g(t) - late)
 
     def check(self):
-        _check("hoist.speed", self.speed, unit="m/s", low=0.0, symbol="v_l")
-        _check("hoist.ramp_time", self.ramp_time, unit="s", low=0.0)
-        _check("hoist.travel", self.travel, unit="m", low=0.0, allow_posinf=True)
-        v, T, L = (_concrete(x) for x in (self.speed, self.ramp_time, self.travel))
+        check_value("hoist.speed", self.speed, unit="m/s", low=0.0, symbol="v_l")
+        check_value("hoist.ramp_time", self.ramp_time, unit="s", low=0.0)
+        check_value("hoist.travel", self.travel, unit="m", low=0.0, allow_posinf=True)
+        v, T, L = (concrete(x) for x in (self.speed, self.ramp_time, self.travel))
         if v is not None and T is not None and L is not None and np.any(L < v * T):
             raise ScenarioError(
-                f"hoist.travel must be >= speed * ramp_time = {_show(v * T)} m, got {_show(L)} m"
+                f"hoist.travel must be >= speed * ramp_time = {show(v * T)} m, got {show(L)} m"
             )
 
 

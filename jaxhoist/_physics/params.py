@@ -20,7 +20,7 @@ import numpy as np
 
 from .._errors import ScenarioError, require_x64
 from .._typing import Rot33, Scalar, Vec3
-from .checks import _check, _concrete, _f64, _show, check_plausible, plausible
+from .checks import check_plausible, check_value, concrete, f64, plausible, show
 from .friction import AbstractFrictionLaw as AbstractFrictionLaw
 from .friction import BristleFriction as BristleFriction
 from .friction import RegularisedCoulomb as RegularisedCoulomb
@@ -28,15 +28,13 @@ from .hoist import AbstractHoistLaw as AbstractHoistLaw
 from .hoist import ConstantSpeedHoist as ConstantSpeedHoist
 from .hoist import ProfileHoist as ProfileHoist
 from .hoist import RampedHoist as RampedHoist
-from .paths import get_leaf as get_leaf  # the dotted paths live in physics.paths (issue 11)
-from .paths import leaf_getter as leaf_getter
 from .paths import replace_leaves, unit
 
 # --------------------------------------------------------------------------------------------- load
 
 
 def _check_load_size(size) -> None:
-    _check("load.size", size, unit="m", shape=(3,), low=0.0, low_open=True, symbol="a, b, c")
+    check_value("load.size", size, unit="m", shape=(3,), low=0.0, low_open=True, symbol="a, b, c")
 
 
 class Load(eqx.Module):
@@ -64,24 +62,24 @@ class Load(eqx.Module):
     inertia: Rot33 | None = eqx.field(metadata=unit("kg m²"))
 
     def __init__(self, size, mass=None, *, density=None, mass_centre=None, inertia=None):
-        size = _f64(size)
+        size = f64(size)
         if (mass is None) == (density is None):
             raise ScenarioError("load: give exactly one of `mass` [kg] or `density` [kg/m^3]")
         if density is not None:
             # the size first: a bad size must be reported as such, not as the implausible mass it gives
             _check_load_size(size)
-            _check("load.density", _f64(density), unit="kg/m^3", low=0.0, low_open=True, symbol="ρ")
-            mass = _f64(density) * size[0] * size[1] * size[2]
-            m = _concrete(mass)
+            check_value("load.density", f64(density), unit="kg/m^3", low=0.0, low_open=True, symbol="ρ")
+            mass = f64(density) * size[0] * size[1] * size[2]
+            m = concrete(mass)
             if m is not None and not np.all(np.isfinite(m)):
                 raise ScenarioError(
-                    f"load.density (ρ) = {_show(np.asarray(density))} kg/m^3 is not plausible: the mass "
-                    f"ρabc = {_show(m)} kg overflows"
+                    f"load.density (ρ) = {show(np.asarray(density))} kg/m^3 is not plausible: the mass "
+                    f"ρabc = {show(m)} kg overflows"
                 )
         self.size = size
-        self.mass = _f64(mass)
-        self.mass_centre = 0.5 * size if mass_centre is None else _f64(mass_centre)
-        self.inertia = None if inertia is None else _f64(inertia)
+        self.mass = f64(mass)
+        self.mass_centre = 0.5 * size if mass_centre is None else f64(mass_centre)
+        self.inertia = None if inertia is None else f64(inertia)
 
     def inertia_tensor(self) -> Rot33:
         """J about C in body axes [kg m²] (the explicit `inertia`, or the parallel-axis default)."""
@@ -95,17 +93,17 @@ class Load(eqx.Module):
 
     def check(self) -> None:
         _check_load_size(self.size)
-        _check("load.mass", self.mass, unit="kg", low=0.0, low_open=True, symbol="m")
-        _check("load.mass_centre", self.mass_centre, unit="m", shape=(3,), symbol="ξ_C, η_C, ζ_C")
-        s, c = _concrete(self.size), _concrete(self.mass_centre)
+        check_value("load.mass", self.mass, unit="kg", low=0.0, low_open=True, symbol="m")
+        check_value("load.mass_centre", self.mass_centre, unit="m", shape=(3,), symbol="ξ_C, η_C, ζ_C")
+        s, c = concrete(self.size), concrete(self.mass_centre)
         if s is not None and c is not None and np.any((c <= 0) | (c >= s)):
             raise ScenarioError(
-                f"load.mass_centre must lie strictly inside the box 0 < C < size = {_show(s)} m, "
-                f"got {_show(c)} m"
+                f"load.mass_centre must lie strictly inside the box 0 < C < size = {show(s)} m, "
+                f"got {show(c)} m"
             )
         if self.inertia is not None:
-            _check("load.inertia", self.inertia, unit="kg m^2", shape=(3, 3), symbol="J")
-            j = _concrete(self.inertia)
+            check_value("load.inertia", self.inertia, unit="kg m^2", shape=(3, 3), symbol="J")
+            j = concrete(self.inertia)
             if j is not None and j.ndim == 2:
                 if not np.allclose(j, j.T, rtol=1e-12, atol=0.0):
                     raise ScenarioError("load.inertia (J) must be symmetric")
@@ -151,17 +149,19 @@ class Foundation(eqx.Module):
     )
 
     def __init__(self, stiffness, damping, friction_coefficient, friction=None, damping_onset=1e-4):
-        self.stiffness = _f64(stiffness)
-        self.damping = _f64(damping)
-        self.friction_coefficient = _f64(friction_coefficient)
+        self.stiffness = f64(stiffness)
+        self.damping = f64(damping)
+        self.friction_coefficient = f64(friction_coefficient)
         self.friction = RegularisedCoulomb(1e-3) if friction is None else friction
-        self.damping_onset = _f64(damping_onset)
+        self.damping_onset = f64(damping_onset)
 
     def check(self):
-        _check("foundation.stiffness", self.stiffness, unit="N/m", low=0.0, low_open=True, symbol="k")
-        _check("foundation.damping", self.damping, unit="N s/m", low=0.0, symbol="h")
-        _check("foundation.friction_coefficient", self.friction_coefficient, unit="-", low=0.0, symbol="μ")
-        _check("foundation.damping_onset", self.damping_onset, unit="m", low=0.0, symbol="p_0")
+        check_value("foundation.stiffness", self.stiffness, unit="N/m", low=0.0, low_open=True, symbol="k")
+        check_value("foundation.damping", self.damping, unit="N s/m", low=0.0, symbol="h")
+        check_value(
+            "foundation.friction_coefficient", self.friction_coefficient, unit="-", low=0.0, symbol="μ"
+        )
+        check_value("foundation.damping_onset", self.damping_onset, unit="m", low=0.0, symbol="p_0")
         self.friction.check()
 
 
@@ -193,18 +193,18 @@ class Rope(eqx.Module):
     )
 
     def __init__(self, stiffness, damping, attachment, slack=0.0, damping_onset=1e-4):
-        self.stiffness = _f64(stiffness)
-        self.damping = _f64(damping)
-        self.attachment = _f64(attachment)
-        self.slack = _f64(slack)
-        self.damping_onset = _f64(damping_onset)
+        self.stiffness = f64(stiffness)
+        self.damping = f64(damping)
+        self.attachment = f64(attachment)
+        self.slack = f64(slack)
+        self.damping_onset = f64(damping_onset)
 
     def check(self):
-        _check("rope.stiffness", self.stiffness, unit="N/m", low=0.0, low_open=True, symbol="c_l")
-        _check("rope.damping", self.damping, unit="N s/m", low=0.0, symbol="b_l")
-        _check("rope.attachment", self.attachment, unit="m", shape=(3,), symbol="B")
-        _check("rope.slack", self.slack, unit="m", low=0.0)
-        _check("rope.damping_onset", self.damping_onset, unit="m", low=0.0, symbol="δ_0")
+        check_value("rope.stiffness", self.stiffness, unit="N/m", low=0.0, low_open=True, symbol="c_l")
+        check_value("rope.damping", self.damping, unit="N s/m", low=0.0, symbol="b_l")
+        check_value("rope.attachment", self.attachment, unit="m", shape=(3,), symbol="B")
+        check_value("rope.slack", self.slack, unit="m", low=0.0)
+        check_value("rope.damping_onset", self.damping_onset, unit="m", low=0.0, symbol="δ_0")
 
 
 class Boom(eqx.Module):
@@ -232,15 +232,15 @@ class Boom(eqx.Module):
     )
 
     def __init__(self, tip_position, tip_mass, stiffness, damping=(0.0, 0.0, 0.0)):
-        self.tip_position = _f64(tip_position)
-        self.tip_mass = _f64(tip_mass)
-        self.stiffness = _f64(stiffness) * jnp.ones(3)
-        self.damping = _f64(damping) * jnp.ones(3)
+        self.tip_position = f64(tip_position)
+        self.tip_mass = f64(tip_mass)
+        self.stiffness = f64(stiffness) * jnp.ones(3)
+        self.damping = f64(damping) * jnp.ones(3)
 
     def check(self):
-        _check("boom.tip_position", self.tip_position, unit="m", shape=(3,), symbol="A")
-        _check("boom.tip_mass", self.tip_mass, unit="kg", low=0.0, low_open=True, symbol="m_0")
-        _check(
+        check_value("boom.tip_position", self.tip_position, unit="m", shape=(3,), symbol="A")
+        check_value("boom.tip_mass", self.tip_mass, unit="kg", low=0.0, low_open=True, symbol="m_0")
+        check_value(
             "boom.stiffness",
             self.stiffness,
             unit="N/m",
@@ -249,7 +249,7 @@ class Boom(eqx.Module):
             low_open=True,
             symbol="k_X, k_Y, k_Z",
         )
-        _check("boom.damping", self.damping, unit="N s/m", shape=(3,), low=0.0)
+        check_value("boom.damping", self.damping, unit="N s/m", shape=(3,), low=0.0)
 
 
 # ---------------------------------------------------------------------------------------- scenario
@@ -301,7 +301,7 @@ class Scenario(eqx.Module):
         self.rope = rope
         self.hoist = hoist
         self.boom = boom
-        self.gravity = _f64(gravity)
+        self.gravity = f64(gravity)
         self.name = name
         self.t1 = float(t1)
         self.description = str(description)
@@ -324,27 +324,27 @@ class Scenario(eqx.Module):
         self.rope.check()
         self.hoist.check()
         self.boom.check()
-        _check("gravity", self.gravity, unit="m/s^2", low=0.0, symbol="g")
+        check_value("gravity", self.gravity, unit="m/s^2", low=0.0, symbol="g")
         if not (np.isfinite(self.t1) and self.t1 > 0):
             raise ScenarioError(f"t1 must be a positive finite time [s], got {self.t1}")
-        s, b = _concrete(self.load.size), _concrete(self.rope.attachment)
+        s, b = concrete(self.load.size), concrete(self.rope.attachment)
         if s is not None and b is not None and np.any((b < -1e-12) | (b > s + 1e-12)):
             raise ScenarioError(
-                f"rope.attachment (B) must lie on or inside the box 0 <= B <= size = {_show(s)} m, "
-                f"got {_show(b)} m"
+                f"rope.attachment (B) must lie on or inside the box 0 <= B <= size = {show(s)} m, "
+                f"got {show(b)} m"
             )
         if not self.allow_implausible:
             check_plausible(self)
-        m, g, k = (_concrete(x) for x in (self.load.mass, self.gravity, self.foundation.stiffness))
+        m, g, k = (concrete(x) for x in (self.load.mass, self.gravity, self.foundation.stiffness))
         if s is not None and m is not None and g is not None and k is not None:
             with np.errstate(all="ignore"):
                 sink = m * g / (4.0 * k)
             c = s[..., 2]
             if np.any(~np.isfinite(sink) | (sink >= c)):
                 raise ScenarioError(
-                    f"foundation.stiffness (k) = {_show(k)} N/m is not plausible for load.mass m = "
-                    f"{_show(m)} kg: the load's weight would press the ground in by m g / (4 k) = "
-                    f"{_show(sink)} m, at least the box height c = {_show(c)} m (stiffen the ground or "
+                    f"foundation.stiffness (k) = {show(k)} N/m is not plausible for load.mass m = "
+                    f"{show(m)} kg: the load's weight would press the ground in by m g / (4 k) = "
+                    f"{show(sink)} m, at least the box height c = {show(c)} m (stiffen the ground or "
                     f"lighten the load)"
                 )
 

@@ -22,7 +22,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist._numerics.rigid_solve import simulate_rigid  # noqa: E402
+from jaxhoist._numerics.rigid.solve import simulate_rigid  # noqa: E402
 
 OUT = Path(__file__).parent / "rigid_edge_state.npz"
 T_FROM = 46.0  # [s]
@@ -35,10 +35,10 @@ def scenario() -> jh.Scenario:
 
 
 def main() -> None:
-    from jaxhoist._numerics import rigid_run
+    from jaxhoist._numerics.rigid import run as rigid_run
 
     found: dict = {}
-    step = rigid_run._Run.step
+    step = rigid_run.Run.step
 
     class _Found(Exception):
         pass
@@ -50,13 +50,13 @@ def main() -> None:
             raise _Found
         return more
 
-    rigid_run._Run.step = watching
+    rigid_run.Run.step = watching
     try:
         simulate_rigid(scenario(), jh.Times(T1, n=501))
     except _Found:
         pass
     finally:
-        rigid_run._Run.step = step
+        rigid_run.Run.step = step
     y = found["y"]
     fields = {k: np.asarray(getattr(y, k)) for k in y.__dataclass_fields__}
     np.savez(OUT, t=np.float64(found["t"]), **fields)

@@ -13,10 +13,11 @@ from typing import Any
 import numpy as np
 
 from ..._errors import ScenarioError, require_x64
+from ..._numerics.batch import ScanStatus
 from ..._numerics.times import TimesLike, as_times
 from ..._physics.params import Scenario
 from ..._physics.paths import check_path, param_unit
-from ..scan import BatchOptions, Grid, Points, ScanResult, ScanStatus, Sweep, scan
+from ..scan import BatchOptions, Grid, Points, ScanResult, Sweep, scan
 from .hazards import Hazard
 from .uncertain import check_uncertain, sample
 

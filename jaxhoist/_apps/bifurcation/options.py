@@ -1,0 +1,138 @@
+"""How `locate_bifurcation` and `trace_boundary` search, as objects: the refinement method (`Newton`,
+`Bisection`, `Multisection`), the tolerance and solve budget, and the bracketing of the continuation
+corrector (`SearchOptions`), and the locator's default solver settings."""
+
+from __future__ import annotations
+
+from typing import ClassVar
+
+import diffrax
+import equinox as eqx
+import numpy as np
+
+from ..._errors import ScenarioError
+from ..._numerics.options import SolverOptions
+
+
+class AbstractSearchMethod(eqx.Module):
+    """How the bracket around a change of character is narrowed."""
+
+    name: ClassVar[str]
+
+
+class Newton(AbstractSearchMethod):
+    """Safeguarded Newton on the indicator g, with dg/dp [1/unit of the parameter] from forward-mode
+    sensitivities; bisection whenever a Newton step leaves the bracket or does not shrink it fast enough."""
+
+    name: ClassVar[str] = "newton"
+
+
+class Bisection(AbstractSearchMethod):
+    """Bisection with value-only solves (~log2(width/tol) of them)."""
+
+    name: ClassVar[str] = "bisection"
+
+
+class Multisection(AbstractSearchMethod):
+    """`points_per_round` values per round in one vmapped `scan` (more solves, fewer rounds of wall time).
+
+    - `points_per_round`: values solved per round (>= 2).
+    - `lanes`: members per vmapped group of the scan.
+    """
+
+    name: ClassVar[str] = "multisection"
+    points_per_round: int = eqx.field(static=True, default=16)
+    lanes: int = eqx.field(static=True, default=16)
+
+    def __check_init__(self):
+        if self.points_per_round < 2:
+            raise ScenarioError(
+                f"points_per_round must be >= 2 for multisection, got {self.points_per_round}"
+            )
+
+
+_METHODS = {"newton": Newton, "bisection": Bisection, "multisection": Multisection}
+
+
+def as_method(method) -> AbstractSearchMethod:
+    """The method object for the command line's `--method` name ("newton", "bisection", "multisection"),
+    or an `AbstractSearchMethod` as it is."""
+    if isinstance(method, AbstractSearchMethod):
+        return method
+    if isinstance(method, str) and method in _METHODS:
+        return _METHODS[method]()
+    raise ScenarioError(f"method must be 'newton', 'bisection' or 'multisection', got {method!r}")
+
+
+class SearchOptions(eqx.Module):
+    """Settings of the bifurcation search (host-side numbers; nothing here is traced).
+
+    - `method`: `Newton()` (default), `Bisection()` or `Multisection(points_per_round, lanes)`.
+    - `tol`: the final bracket width [unit of the located parameter], > 0.
+    - `max_solves`: give up (converged=False) after this many solves.
+    - `initial_half_width`: `trace_boundary` only: the corrector's half-width at the second point [unit of
+      the parameter] (default None: 5 % of the initial bracket).
+    - `max_expansions`: `trace_boundary` only: how many times the corrector's bracket is doubled before a
+      point is given up.
+    - `min_jump_fraction`: `trace_boundary` only (with `level=None`): a point whose change across its final
+      bracket is below this fraction of the first point's is reported lost.
+
+    **Raises** `ScenarioError` for a non-positive `tol`, an unknown method, or fewer than 2 points per round.
+    """
+
+    method: AbstractSearchMethod
+    tol: float = eqx.field(static=True)
+    max_solves: int = eqx.field(static=True)
+    initial_half_width: float | None = eqx.field(static=True)
+    max_expansions: int = eqx.field(static=True)
+    min_jump_fraction: float = eqx.field(static=True)
+
+    def __init__(
+        self,
+        method: AbstractSearchMethod = Newton(),
+        tol: float = 1e-6,
+        max_solves: int = 200,
+        *,
+        initial_half_width: float | None = None,
+        max_expansions: int = 8,
+        min_jump_fraction: float = 0.1,
+    ):
+        if not isinstance(method, AbstractSearchMethod):
+            raise ScenarioError(f"method must be Newton(), Bisection() or Multisection(...), got {method!r}")
+        self.method = method
+        if not (np.isfinite(tol) and tol > 0):
+            raise ScenarioError(f"tol must be > 0, got {tol}")
+        self.tol = tol
+        self.max_solves = max_solves
+        self.initial_half_width = initial_half_width
+        self.max_expansions = max_expansions
+        self.min_jump_fraction = min_jump_fraction
+
+
+def default_solver_options() -> SolverOptions:
+    """The locator's solver settings: `diffrax.Tsit5()` with rtol 1e-6, atol 1e-8 (its default tolerances).
+    Not the Rosenbrock-W solver of `simulate` and `scan`: a locator needs the observable to well below its
+    `tol` and a slope per Newton step, and on the paper's §4.3 change (paper-4.3, ϑ(t1) = 15° in μ over
+    25 s, `experiments/locator_solver.py`) W at its rtol 1e-3 put μ* 6e-6 off (Tsit5: 1.4e-7) in 1.9x
+    Tsit5's time, at rtol 1e-4 1.1e-6 off in 4.2x: its error-controlled sensitivities
+    (`_numerics/sensitivity.py`) cost more than Tsit5's differentiated steps over these spans. With the
+    ∂f/∂t term (2026-11-27) W at its default rtol 5e-4 was 6.6e-6 off and at rtol 1e-4 5.9e-7 off in 0.7x
+    Tsit5's time after compilation, but its first call took 2.2x Tsit5's (27.5 against 12.6 s)."""
+    return SolverOptions(solver=diffrax.Tsit5())
+
+
+def settings(
+    search: SearchOptions | None, options: SolverOptions | None
+) -> tuple[SearchOptions, SolverOptions]:
+    """(search, options) with the defaults `SearchOptions()` and `default_solver_options()` filled in.
+
+    **Raises** `ScenarioError` for a `search` or `options` of the wrong type."""
+    if search is None:
+        search = SearchOptions()
+    elif not isinstance(search, SearchOptions):
+        raise ScenarioError(f"search must be a jaxhoist.SearchOptions, got {type(search).__name__}")
+    if options is None:
+        options = default_solver_options()
+    elif not isinstance(options, SolverOptions):
+        raise ScenarioError(f"options must be a jaxhoist.SolverOptions, got {type(options).__name__}")
+    return search, options

@@ -1,0 +1,152 @@
+"""Continuation of a two-parameter boundary: `trace_boundary` follows p*(q) with a secant predictor and
+`locate_bifurcation` as the corrector, instead of a dense grid in (p, q)."""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+from ..._errors import ScenarioError
+from ..._numerics.options import SolverOptions
+from ..._numerics.times import TimesLike, as_times
+from ..._physics.params import Scenario
+from ..._physics.paths import check_path, set_param
+from .eval import resolve_one
+from .locate import locate_bifurcation
+from .options import SearchOptions, settings
+from .result import BifurcationError, Boundary
+
+
+def trace_boundary(
+    scenario: Scenario,
+    param: str,
+    bracket: tuple[float, float],
+    along: str,
+    along_values: Sequence[float] | np.ndarray,
+    observable,
+    *,
+    level: float | None = None,
+    search: SearchOptions | None = None,
+    options: SolverOptions | None = None,
+    times: TimesLike = None,
+    progress: Callable[[dict], None] | None = None,
+) -> Boundary:
+    """Follow the boundary p*(q) in the (p, q) plane by continuation, not a dense grid.
+
+    At `along_values[0]`, p* is located in `bracket`. At each next q the predictor extrapolates the last two
+    points linearly (a secant along the boundary), and the corrector brackets the prediction by
+    ±w (w = half the last change of p*, at least 20 tol; at the second point `search.initial_half_width`,
+    default 5 % of `bracket`; doubled up to `search.max_expansions` times until the indicator changes sign)
+    and refines it with `locate_bifurcation`. With `level=None` the level is re-estimated in each bracket,
+    so the corrector always finds *some* crossing; a point whose change across its final bracket is below
+    `search.min_jump_fraction` of the first point's is therefore reported as lost (NaN, with a note on the
+    point): the jump has vanished or moved out of reach there, and a level crossing of a nearly flat
+    observable is not the boundary.
+
+    **Arguments**
+    - `scenario`, `param`, `bracket`, `observable`, `level`: as in `locate_bifurcation`, at q =
+      `along_values[0]`.
+    - `along`, `along_values`: the continuation parameter's path and its values q [its unit].
+    - `search`: `SearchOptions` (method, tol, max_solves of each point; the corrector's bracketing).
+    - `options`: `SolverOptions` (default `SolverOptions(diffrax.Tsit5())`, as in `locate_bifurcation`).
+    - `times`: the saved times, a `Times(t1, n, ts)` (a number is t1 [s], a 1-D array ts [s]), as in
+      `locate_bifurcation` (default 201 equally spaced times from 0 to the scenario's t1).
+    - `progress` (default None: silent) receives every report of the inner `locate_bifurcation` calls, with
+      `point` (index k of q), `n_points` and `along_value` (q) added.
+
+    **Returns** a `Boundary`.
+    """
+    times = as_times(times)
+    search, options = settings(search, options)
+    qs = np.asarray(along_values, dtype=np.float64)
+    if qs.ndim != 1 or qs.size < 1:
+        raise ScenarioError("along_values must be a non-empty 1-D sequence")
+    check_path(scenario, along)
+    check_path(scenario, param)
+    obs = resolve_one(observable)
+    lo, hi = (float(v) for v in bracket)
+    tol = search.tol
+    ps: list[float] = []
+    points: list = []
+    n_solves = 0
+    ref_size = None
+    for k, q in enumerate(qs):
+        sc = set_param(scenario, along, q)
+        inner: Callable[[dict], None] | None = None
+        if progress is not None:
+
+            def with_point(d, k=k, q=q):
+                progress(d | {"point": k, "n_points": int(qs.size), "along_value": float(q)})
+
+            inner = with_point
+
+        pt = None
+        for br in _candidate_brackets(qs, ps, k, q, lo, hi, search):
+            try:
+                pt = locate_bifurcation(
+                    sc,
+                    param,
+                    obs,
+                    br,
+                    level=level,
+                    search=search,
+                    options=options,
+                    times=times,
+                    progress=inner,
+                )
+                break
+            except BifurcationError as e:  # no sign change in this bracket: widen it
+                n_solves += e.n_solves
+            except ScenarioError:  # the widened bracket left the valid range of the parameter
+                break
+        lost = False
+        if pt is not None:
+            n_solves += pt.n_solves
+            size = abs(pt.y_hi - pt.y_lo)
+            if level is None and ref_size is None:
+                ref_size = size
+            elif level is None and ref_size is not None and not size >= search.min_jump_fraction * ref_size:
+                lost = True
+                pt.notes.append(
+                    f"lost: the change across the final bracket, {size:.3g}, is below "
+                    f"{search.min_jump_fraction:g} x the first point's {ref_size:.3g}; not the traced jump"
+                )
+        ps.append(pt.value if pt is not None and not lost else np.nan)
+        points.append(pt)
+    vals = np.asarray(ps)
+    fin = vals[np.isfinite(vals)]
+    span = max([hi, *fin.tolist()]) - min([lo, *fin.tolist()])
+    n_dense = int(qs.size * (math.ceil(span / tol) + 1))
+    widths = np.array([p.width if p is not None else np.nan for p in points])
+    return Boundary(
+        param=param,
+        along=along,
+        along_values=qs,
+        values=vals,
+        widths=widths,
+        n_solves=n_solves,
+        n_dense=n_dense,
+        points=points,
+        tol=tol,
+    )
+
+
+def _candidate_brackets(qs, ps, k, q, lo, hi, search: SearchOptions) -> list[tuple[float, float]]:
+    """The corrector's brackets at q = qs[k], narrowest first: the initial bracket until a point is found;
+    then ±w around the secant prediction from the last two points (or the last point), doubled
+    `search.max_expansions` - 1 times."""
+    tol = search.tol
+    good = [(qq, pp) for qq, pp in zip(qs[:k], ps, strict=True) if np.isfinite(pp)]
+    if not good:
+        return [(lo, hi)]
+    if len(good) >= 2:  # secant predictor along the boundary
+        (q0, p0), (q1, p1) = good[-2], good[-1]
+        pred = p1 + (p1 - p0) * (q - q1) / (q1 - q0)
+        w = max(20 * tol, 0.5 * abs(p1 - p0))
+    else:
+        pred = good[-1][1]
+        hw = search.initial_half_width
+        w = max(20 * tol, hw if hw else 0.05 * (hi - lo))
+    return [(pred - w * 2**i, pred + w * 2**i) for i in range(search.max_expansions)]

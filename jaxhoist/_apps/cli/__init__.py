@@ -1,0 +1,5 @@
+"""The `jaxhoist` command line: the parser and `main` (`app`), one module per command (`simulate`,
+`animate`, `scan`, `bifurcation`, `identify`), what they share (`common`) and the progress bars that draw the
+library's callbacks (`progress`). It imports the library; nothing in the library imports it."""
+
+from .app import main as main

@@ -1,0 +1,133 @@
+"""What the command-line modules share: the program name, float64 set-up, the tolerance help texts, the
+`--solver` choices and the rule for output folders."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import diffrax
+
+from ..._io.validate import MARKER as MARKER
+from ..._io.validate import mark_folder, marker_command
+from ..._numerics.rosenbrock import RosenbrockW
+
+PROG = "jaxhoist"
+
+CLI_SOLVERS = {  # `--solver` name -> solver class (`jaxhoist scan`, `jaxhoist identify`)
+    "rosenbrock-w": RosenbrockW,
+    "tsit5": diffrax.Tsit5,
+    "bosh3": diffrax.Bosh3,
+    "dopri5": diffrax.Dopri5,
+    "dopri8": diffrax.Dopri8,
+    "heun": diffrax.Heun,
+}
+
+
+def enable_x64() -> None:
+    import jax
+
+    jax.config.update("jax_enable_x64", True)
+
+
+RTOL_HELP = (
+    "relative tolerance of the adaptive step-size control: each step's local error estimate must stay "
+    "below atol + rtol |y| in every state component"
+)
+ATOL_HELP = (
+    "absolute tolerance of the adaptive step-size control, in the state's SI units (m, m/s, rad, ...); "
+    "it matters where a component is near zero"
+)
+
+
+# ------------------------------------------------------------------------------------- output folders
+#
+# One rule for every command that writes a folder (simulate, scan, bifurcation, identify): the folder gets
+# a marker file MARKER naming the command; a folder holding the marker of the same command is the
+# command's own and a re-run replaces its results there (scan resumes the same scan, recomputes another);
+# a non-empty folder without it (or with another command's) is refused unless --overwrite. Only the files
+# the command writes are ever removed; anything else in the folder stays.
+
+
+def default_out(scenario_arg: str, prefix: str = "") -> Path:
+    """The default output folder `out/<prefix><name>`: `name` is the preset name for a preset, else the
+    scenario FILE's name without its suffix (`my-lift.toml` -> `my-lift`), not the `name` field inside
+    it (a copy of a preset keeps the preset's name)."""
+    from ..._io.scenario import preset_names
+
+    s = str(scenario_arg)
+    name = s if s in preset_names() else Path(s).stem
+    return Path("out") / f"{prefix}{name}"
+
+
+def prepare_out_dir(path, command: str, *, flag: str = "--out", overwrite: bool = False) -> Path:
+    """Check, before any work, that `command` may write its results into the folder `path` (see MARKER).
+
+    **Arguments**
+    - `path`: the output folder (it need not exist).
+    - `command`: the subcommand (`"simulate"`, `"scan"`, ...), as its marker names it.
+    - `flag`: the option it came from, for the message.
+    - `overwrite`: allow a non-empty folder without the command's marker.
+
+    **Returns** `path` as a `Path`.
+
+    **Raises** `ScenarioError` naming `flag` and the folder: not writable, a file, or (without `overwrite`)
+    non-empty and not marked as written by `command`.
+    """
+    from ..._errors import ScenarioError
+    from ..._io.validate import check_out_dir
+
+    p = check_out_dir(path, flag)
+    if overwrite or not p.is_dir():
+        return p
+    names = sorted(x.name for x in p.iterdir() if x.name != MARKER)
+    owner = marker_command(p)
+    if not names or owner == command:
+        return p
+    more = f" and {len(names) - 3} more" if len(names) > 3 else ""
+    held = (
+        f"holds the results of `{PROG} {owner}`"
+        if owner
+        else f"holds files that {PROG} did not write there ({', '.join(names[:3])}{more})"
+    )
+    raise ScenarioError(
+        f"{flag} {p} {held}; choose another {flag}, or pass --overwrite to write the {command} results "
+        f"into it (only the files `{PROG} {command}` writes are replaced)"
+    )
+
+
+def claim_out_dir(path, command: str, outputs=()) -> Path:
+    """Make the folder `path`, remove the files of an earlier run of `command` there (`outputs`: file names
+    or glob patterns such as `scan_*.png`; nothing else is touched) and mark it as `command`'s.
+    **Returns** `path` as a `Path`."""
+    p = Path(path)
+    p.mkdir(parents=True, exist_ok=True)
+    for pattern in dict.fromkeys(outputs):
+        for f in p.glob(pattern):
+            if f.is_symlink() or f.is_file():
+                f.unlink()
+    mark_folder(p, command)
+    return p
+
+
+def rerun_scan(call, out: Path | None, resume: bool, note):
+    """`call(resume)` (a scan into `out`); when `out` holds the chunks of another scan (a folder this
+    command owns, checked by `prepare_out_dir`), says so through `note` and recomputes with resume off."""
+    from ..._io.scan_store import DifferentScanError
+
+    try:
+        return call(resume)
+    except DifferentScanError:
+        if not resume:
+            raise
+        note(f"{out} holds another scan's chunks: recomputing there")
+        return call(False)
+
+
+def add_allow_implausible(parser) -> None:
+    """The `--allow-implausible` flag of the commands that read a scenario."""
+    parser.add_argument(
+        "--allow-implausible",
+        action="store_true",
+        help="accept scenario values outside their plausible ranges (a typo like rope.stiffness=1e16 is "
+        "refused without it); the solve's own checks, e.g. the energy balance, still apply",
+    )
