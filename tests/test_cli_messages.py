@@ -17,8 +17,12 @@ from importlib import resources  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
-from jaxhoist._apps import bifurcation_cli, cli, identify_cli, scan_cli, simulate_cli  # noqa: E402
-from jaxhoist._apps.cli_common import (  # noqa: E402
+from jaxhoist._apps import cli  # noqa: E402
+from jaxhoist._apps.cli import bifurcation as bifurcation_cli  # noqa: E402
+from jaxhoist._apps.cli import identify as identify_cli  # noqa: E402
+from jaxhoist._apps.cli import scan as scan_cli  # noqa: E402
+from jaxhoist._apps.cli import simulate as simulate_cli  # noqa: E402
+from jaxhoist._apps.cli.common import (  # noqa: E402
     MARKER,
     claim_out_dir,
     default_out,
@@ -247,13 +251,13 @@ def test_rigid_summary_names_a_start_transient_and_reports_the_sustained_detachm
 def test_progress_bars_show_no_eta_while_compiling(monkeypatch):
     from tqdm import tqdm
 
-    from jaxhoist._apps import progress_bars
+    from jaxhoist._apps.cli import progress as progress_bars
 
     clock = iter([100.0, 101.0, 102.0])  # the first phase line comes after 100 s of compile
     monkeypatch.setattr(progress_bars.time, "perf_counter", lambda: next(clock))
     stream = io.StringIO()
     bar = tqdm(total=10.0, file=stream, bar_format="{n:.3f} [{elapsed}{postfix}]")
-    on_line = progress_bars._phase_to_bar(bar)
+    on_line = progress_bars.phase_to_bar(bar)
     on_line("  0.000000 -   0.000200 s  F slide -> tangential:F [12 steps so far]")
     assert "ETA" not in str(bar) and "F slide" in str(bar)
     on_line("  0.000200 -   1.000000 s  rest -> rest:slip [40 steps so far]")
@@ -263,7 +267,7 @@ def test_progress_bars_show_no_eta_while_compiling(monkeypatch):
 
 
 def test_located_value_printed_to_the_digits_its_bracket_supports():
-    from jaxhoist._apps.bifurcation_result import Bifurcation, fmt_located
+    from jaxhoist._apps.bifurcation.result import Bifurcation, fmt_located
 
     assert fmt_located(0.27952341234, 4.5e-7) == "0.2795234"
     assert fmt_located(0.27952322, 4.5e-7, -1) == "0.2795232"
@@ -293,8 +297,8 @@ def test_located_value_printed_to_the_digits_its_bracket_supports():
 
 
 def test_scan_says_why_a_plot_is_skipped():
-    from jaxhoist._apps import scan_plots
-    from jaxhoist._apps.scan_result import ScanResult
+    from jaxhoist._apps.plots import scan as scan_plots
+    from jaxhoist._apps.scan.result import ScanResult
 
     mu = np.linspace(0.2, 0.4, 3)
     res = ScanResult(

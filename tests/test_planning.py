@@ -463,7 +463,7 @@ def test_intervals_cover_the_truth(box, samples):
 
 
 def test_cli_specs_parse_to_the_library_objects():
-    from jaxhoist._apps.risk_cli import parse_distribution, parse_hazard
+    from jaxhoist._apps.cli.risk import parse_distribution, parse_hazard
 
     assert parse_distribution("uniform(0.2, 0.4)") == jh.Uniform(0.2, 0.4)
     assert parse_distribution("normal(1,0.05)") == jh.Normal(1.0, 0.05)

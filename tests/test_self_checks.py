@@ -22,7 +22,7 @@ from jaxhoist._apps import cli
 from jaxhoist._errors import MAX_MESSAGE_CHARS
 from jaxhoist._physics import energy
 from jaxhoist._physics.checks import PLAUSIBLE
-from jaxhoist._physics.params import get_leaf
+from jaxhoist._physics.paths import get_leaf
 
 BROKEN = {"rope.stiffness": 1e16}
 TIMES = jh.Times(1.0, n=51)

@@ -17,7 +17,7 @@ import jax
 import numpy as np
 
 from ..._errors import ScenarioError
-from ..._io.validate import check_out_dir, parse_values
+from ..._io.validate import parse_values
 from ..._numerics.options import SolverOptions
 from ..._numerics.times import Times
 from ..planning import (
@@ -37,7 +37,7 @@ from ..planning import (
     tilt,
 )
 from ..scan import BatchOptions, Grid, Sweep
-from .common import CLI_SOLVERS
+from .common import CLI_SOLVERS, add_allow_implausible, claim_out_dir, default_out, prepare_out_dir
 
 _DISTRIBUTIONS = {
     "uniform": (Uniform, "uniform(low,high)"),
@@ -172,10 +172,18 @@ def configure_parser(subparsers) -> None:
         "--chunk-size", type=int, default=None, help="members per compiled call (default: automatic)"
     )
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
+    add_allow_implausible(p)
     p.add_argument(
         "--out",
         default=None,
-        help="output folder for risk.nc, risk.json and the maps (default out/risk-<name>)",
+        help="output folder for risk.nc, risk.json and the maps (default out/risk-<preset name or scenario "
+        "file name>); a folder an earlier `jaxhoist risk` wrote is reused, its results replaced",
+    )
+    p.add_argument(
+        "--overwrite",
+        action="store_true",
+        help="write into a non-empty --out that `jaxhoist risk` did not write (only risk.nc, risk.json and "
+        "risk_*.png are replaced); without it, such a folder is refused",
     )
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument("--no-plots", action="store_true", help="do not write risk_<hazard>.png")
@@ -192,18 +200,25 @@ def _design(items: list[str]):
     return Sweep(*next(iter(axes.items()))) if len(axes) == 1 else Grid(axes)
 
 
+#: What `jaxhoist risk` writes into its folder (replaced when it runs there again).
+_RISK_OUTPUTS = ("risk.nc", "risk.json", "risk_*.png")
+
+
 def run_cli(args) -> int:
     jax.config.update("jax_enable_x64", True)
     from ..._io.scenario import apply_overrides, load_scenario
 
-    scenario, _ = apply_overrides(load_scenario(args.scenario), args.set)
+    scenario, _ = apply_overrides(
+        load_scenario(args.scenario, allow_implausible=args.allow_implausible), args.set
+    )
     uncertain = {}
     for item in args.uncertain:
         path, spec = _split(item, "--uncertain")
         uncertain[path] = parse_distribution(spec)
     hazards = [parse_hazard(h) for h in args.hazard]
     design = _design(args.design)
-    out = check_out_dir(Path(args.out) if args.out else Path("out") / f"risk-{scenario.name}", "--out")
+    out = Path(args.out) if args.out else default_out(args.scenario, "risk-")
+    prepare_out_dir(out, "risk", overwrite=args.overwrite)
     options = SolverOptions(
         CLI_SOLVERS[args.solver](), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps
     )
@@ -222,6 +237,7 @@ def run_cli(args) -> int:
         batch=BatchOptions(lanes=args.lanes, chunk_size=args.chunk_size),
         progress=not args.quiet,
     )
+    claim_out_dir(out, "risk", _RISK_OUTPUTS)
     print(f"risk          {scenario.name}: {risk.samples} samples x {int(np.prod(risk.shape))} design points")
     for p, d in risk.uncertain.items():
         print(f"uncertain     {p} ~ {d}")
