@@ -1,4 +1,4 @@
-"""The compliant phase of the rigid model: a regularised step for sustained contact cycles (issue 15).
+"""The compliant phase of the rigid model: a regularised step for sustained contact cycles.
 
 Some lifts drive the rigid model into a limit cycle of impacts that does not decay: the load pivoting on
 one corner while a second one strikes and lifts the first again (0.1-0.2 J per impact every ~2 ms), or,
