@@ -113,7 +113,7 @@ def default_solver_options() -> SolverOptions:
     """The locator's solver settings: `diffrax.Tsit5()` with rtol 1e-6, atol 1e-8 (its default tolerances).
     Not the Rosenbrock-W solver of `simulate` and `scan`: a locator needs the observable to well below its
     `tol` and a slope per Newton step; at its default tolerances W puts μ* further off than Tsit5 and its
-    first call compiles for about twice as long (docs/bifurcation-design.md, "Why Tsit5 for the locator",
+    first call compiles for about twice as long (docs/bifurcation-studies.md, "Why Tsit5 for the locator",
     `experiments/locator_solver.py`)."""
     return SolverOptions(solver=diffrax.Tsit5())
 
