@@ -79,8 +79,8 @@ def fit_solver_options(options: SolverOptions | None) -> SolverOptions:
     (`core._sensitivity_solve`); with `jaxhoist.RosenbrockW` its W serves every block, factorised
     once per step. On long records it is faster than Tsit5 at the same estimates (stiff friction holds
     Tsit5 at its stability limit); on short records, where the compile dominates, pass
-    `SolverOptions(diffrax.Tsit5())` (docs/identification.md, "Solver: Rosenbrock-W or Tsit5", has the measurement
-    and its command).
+    `SolverOptions(diffrax.Tsit5())` (docs/identification.md, "Solver: Rosenbrock-W or Tsit5", has the
+    measurement and its command).
 
     **Raises** `ScenarioError` for options that are not a `SolverOptions`.
     """
