@@ -56,7 +56,7 @@ class ChatterRule:
       (or at least 4 `min_impacts` impacts within `window`, decaying or not).
     - `stiffness` [N/m per corner]: the foundation of the compliant phase, critically damped
       (h = sqrt(k m)), damper onset 1e-4 m x 1.5e7 / k; `regularisation_velocity` [m/s]: ε of its friction.
-      k = 1.5e11 N/m: 100 x the stiffest row of the convergence table (docs/rigid-contact.md), so that the
+      k = 1.5e11 N/m: 100 x the stiffest row of the convergence table (docs/rigid-limit.md), so that the
       hand-back moves the corners by ~1 µm (their static penetration ~ G/k) and books well under 1 J; with
       critical damping and ε = 1e-4 m/s the friction, not k, sets the step size.
     - `rope_stiffness` [N/m]: the inextensible rope's stand-in (critically damped for the boom tip's mass;
