@@ -61,7 +61,7 @@ for j in jh.find_jumps(res, "liftoff_time")[:1]:
     )
     print(b.summary())
 """,
-    # The page fits the measurement of docs/cli.md's identify example (made here first), as written.
+    # The page fits the measurement of docs/cli-analysis.md's identify example (made here first), as written.
     "identify-five": """\
 import jax
 

@@ -71,7 +71,7 @@ def _hash_value(h, v, depth: int = 0) -> None:
 
 def _hash_code(h, code, depth: int = 0) -> None:
     h.update(code.co_code)
-    for c in code.co_consts:  # constants: `+ 1.0` -> `+ 2.0` keeps the bytecode (issue 14)
+    for c in code.co_consts:  # constants: `+ 1.0` -> `+ 2.0` keeps the bytecode
         _hash_value(h, c, depth)
 
 

@@ -167,7 +167,7 @@ class CompiledChunk:
     """One chunk's computation, compiled: `(scenario, ts, values (G, L, P), active (G,))` -> outputs with
     leading (G, L) as numpy arrays.
 
-    **One program whatever the device count** (issue 14). The G groups are split into equal contiguous
+    **One program whatever the device count**. The G groups are split into equal contiguous
     shares, one per device, and every share runs the *same single-device program* (`device_fn`) in its
     own host thread, so the shares run concurrently (`execution_targets`: on host CPU devices one compiled
     program serves every share; an accelerator gets its own compiled copy). A partitioned SPMD program
@@ -176,7 +176,7 @@ class CompiledChunk:
     solver on paper-4.2 after 3 s): with one single-device program, a member's result does not depend on
     how many devices share the scan, nor on the chunk size.
 
-    **Failing group mates are isolated** (issue 14). A lock-step group is one vmapped solve; a member that
+    **Failing group mates are isolated**. A lock-step group is one vmapped solve; a member that
     fails (exhausts its steps, blows up) can perturb its healthy group mates through the vectorised
     arithmetic they share (seen with Tsit5: 3e-8 rad and one step more for a group mate of a rope of
     stiffness 1e16 N/m on a tip of 1e-12 kg). So every group with both failed and healthy members is solved

@@ -56,7 +56,7 @@ class SolverOptions(eqx.Module):
 
     - `solver`: a diffrax solver. Default (None): `jaxhoist.RosenbrockW()`, the linearly implicit solver that
       treats the model's stiff contact, rope and boom forces implicitly (`numerics.rosenbrock`); any diffrax
-      solver works (`diffrax.Tsit5()` was the default before).
+      solver works (e.g. `diffrax.Tsit5()`, explicit, for short non-stiff spans).
     - `stepsize_controller`: a diffrax step-size controller: `diffrax.PIDController(rtol, atol)` for error
       control (the default; with the default solver rtol 5e-4, atol 1e-5 and the PI coefficients
       pcoeff = icoeff = 0.3, with any other rtol 1e-6, atol 1e-8 and diffrax's integral controller) or

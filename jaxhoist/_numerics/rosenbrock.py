@@ -23,8 +23,8 @@ velocity error set the step (98 % of the error norm, `experiments/w_error_budget
 (`RosenbrockW(time_derivative=True)`) the stages carry γ_i h ∂f/∂t (one forward-mode derivative in t per
 step, at the step's start, held fixed like W). On a stiff spring pulled at a constant rate with a W 30 %
 off its Jacobian that more than halves the error of a long step (tests/test_rosenbrock.py), and on
-paper-4.2 it took 40 % of the steps at the same accuracy (docs/performance.md, "The time derivative");
-`time_derivative=False` leaves it out (the default until 2026-11-27).
+paper-4.2 it takes 40 % of the steps at the same accuracy (docs/performance.md);
+`time_derivative=False` leaves it out.
 
 `RosenbrockW` is a diffrax solver: it runs inside `diffrax.diffeqsolve` with any step-size controller,
 `SaveAt`, adjoint (forward mode, checkpointed reverse mode) and under `jax.vmap`, like diffrax's own solvers.
@@ -259,8 +259,7 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
       a step is accepted when max(‖e_y‖, w ‖e_s‖) <= 1, so a sensitivity may carry 1/w times the
       relative local error of the state (`_numerics/sensitivity.py`). Default 0.1.
     - `time_derivative`: whether the stages carry the γ_i h ∂f/∂t term (the module docstring). Default
-      True; False (the default until 2026-11-27) took 2.4x the steps on paper-4.2 at the same accuracy
-      (docs/performance.md, "The time derivative").
+      True; False takes about 2.4x the steps on paper-4.2 at the same accuracy (docs/performance.md).
     - `time_column`: how ∂f/∂t is taken (`w_step`); None (default): forward mode in t of the whole vector
       field. The forward sensitivities' augmented system takes it of the state's block only
       (`_numerics/sensitivity.py`).
@@ -282,8 +281,7 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
     `adjoint=diffrax.RecursiveCheckpointAdjoint(checkpoints=max_steps)` or use forward mode. Dense output
     between steps is the cubic Hermite interpolant of y and f at the step's ends (order 3, like the method;
     f at both ends is computed anyway), so steps need not land on the saved times: with 201 saved times
-    over 25 s of paper-4.2 that saves the 3.6 % of steps that landing on them cost (until 2026-11-25 the
-    output was linear and `_numerics/solve.py` clipped the steps to the saved times).
+    over 25 s of paper-4.2 that saves the 3.6 % of steps that landing on them would cost.
     """
 
     linearise: Callable = eqx.field(static=True, default=elastic_linearise)

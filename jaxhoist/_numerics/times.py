@@ -29,7 +29,7 @@ def _concrete_float(x):
 def check_times(t1, ts) -> None:
     """Host-side checks of the time grid (concrete values only): t1 > 0 finite; ts 1-D, at least 2 times,
     starting at 0, finite, strictly increasing; and, where both are given, ts ending at t1 (a contradiction
-    used to be resolved silently in favour of ts).
+    is an error, never resolved silently).
 
     **Raises** `ScenarioError` naming `t1` or `ts`.
     """

@@ -401,5 +401,5 @@ def linearise_exact_slope(t: Scalar, y: State, args: tuple[Scenario, Constants])
     fooled the error estimate of the sensitivities: d(final mass centre)/dμ over 64 μ of paper-4.2, 25 s,
     against central differences of Tsit5 at rtol 1e-10 on 8 of them, was up to 15 % off with it (at
     μ = 0.6) and 1.9 % without, at about the same cost (12.2x and 10.2x the plain scan; `python
-    experiments/w_sensitivity.py --n 64 --t1 25 --ref 8 --weights 0.1`, 2026-11-25)."""
+    experiments/w_sensitivity.py --n 64 --t1 25 --ref 8 --weights 0.1`)."""
     return linearise(t, y, args, band_entry=False)

@@ -112,12 +112,9 @@ class SearchOptions(eqx.Module):
 def default_solver_options() -> SolverOptions:
     """The locator's solver settings: `diffrax.Tsit5()` with rtol 1e-6, atol 1e-8 (its default tolerances).
     Not the Rosenbrock-W solver of `simulate` and `scan`: a locator needs the observable to well below its
-    `tol` and a slope per Newton step, and on the paper's §4.3 change (paper-4.3, ϑ(t1) = 15° in μ over
-    25 s, `experiments/locator_solver.py`) W at its rtol 1e-3 put μ* 6e-6 off (Tsit5: 1.4e-7) in 1.9x
-    Tsit5's time, at rtol 1e-4 1.1e-6 off in 4.2x: its error-controlled sensitivities
-    (`_numerics/sensitivity.py`) cost more than Tsit5's differentiated steps over these spans. With the
-    ∂f/∂t term (2026-11-27) W at its default rtol 5e-4 was 6.6e-6 off and at rtol 1e-4 5.9e-7 off in 0.7x
-    Tsit5's time after compilation, but its first call took 2.2x Tsit5's (27.5 against 12.6 s)."""
+    `tol` and a slope per Newton step; at its default tolerances W puts μ* further off than Tsit5 and its
+    first call compiles for about twice as long (docs/bifurcation-studies.md, "Why Tsit5 for the locator",
+    `experiments/locator_solver.py`)."""
     return SolverOptions(solver=diffrax.Tsit5())
 
 

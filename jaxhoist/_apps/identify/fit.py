@@ -223,9 +223,8 @@ def identify(
     - `options`: `SolverOptions` of the simulations (solver, tolerances, step budget); default
       `SolverOptions()`, the Rosenbrock-W solver at rtol 5e-4, atol 1e-5 (one W for the state and every
       sensitivity). Forward mode is always used: the state is integrated with its sensitivities as one
-      error-controlled system. `SolverOptions(diffrax.Tsit5())` (rtol 1e-6, atol 1e-8; the default until
-      2026-11-27) compiles in about half the time and wins on short records (3 s of paper-4.2: 20 s against
-      35 s in all); over 25 s W took 44 s against Tsit5's 91 s, the estimates within 0.018 standard errors
+      error-controlled system. `SolverOptions(diffrax.Tsit5())` (rtol 1e-6, atol 1e-8) compiles in about
+      half the time and suits short records, where the compile dominates; W suits long ones
       (`options.fit_solver_options`, docs/identification.md).
     - `fit`: `FitOptions` (extra random starts, Levenberg-Marquardt termination and step budget,
       identifiability thresholds, and `weights`: signal or group -> residual weight [1/unit] for signals

@@ -77,12 +77,10 @@ def fit_solver_options(options: SolverOptions | None) -> SolverOptions:
 
     The state and its parameter sensitivities are integrated as one system under one step-size control
     (`core._sensitivity_solve`); with `jaxhoist.RosenbrockW` its W serves every block, factorised
-    once per step. It became the default on 2026-11-27: on paper-4.2 (`python experiments/identify_paper42.py
-    --no-scipy --solver tsit5 --solver rosenbrock-w`, μ, k, h, c_l, b_l from 5 mm / 1 % noise) the 25 s fit
-    took 20.0 s + 24.3 s compile against Tsit5's (rtol 1e-6, the default until then) 74.9 s + 15.8 s, the
-    estimates within 0.018 standard errors of Tsit5's; with 10x stiffer friction W was faster still (Tsit5
-    at its stability limit). It loses on short records, where the compile dominates: over 3 s 2.7 s + 32.0 s
-    against 3.9 s + 16.6 s; pass `SolverOptions(diffrax.Tsit5())` there (docs/identification.md).
+    once per step. On long records it is faster than Tsit5 at the same estimates (stiff friction holds
+    Tsit5 at its stability limit); on short records, where the compile dominates, pass
+    `SolverOptions(diffrax.Tsit5())` (docs/identification.md, "Solver: Rosenbrock-W or Tsit5", has the
+    measurement and its command).
 
     **Raises** `ScenarioError` for options that are not a `SolverOptions`.
     """

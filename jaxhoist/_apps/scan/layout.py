@@ -114,8 +114,8 @@ def adaptive_lanes(n: int, accelerator: bool = False) -> int:
 def scan_solver_options(options: SolverOptions | None, derivatives: bool) -> SolverOptions:
     """The scan's `SolverOptions`: `options`, or the default `SolverOptions()` (the Rosenbrock-W solver); with
     `derivatives`, forward mode (`diffrax.ForwardMode`), in which the W solver integrates the sensitivities
-    as their own error-controlled ODE (`_numerics/sensitivity.py`; differentiating the steps of Tsit5, the
-    earlier default, gave sensitivities that grew without bound over 25 s of paper-4.2)."""
+    as their own error-controlled ODE (`_numerics/sensitivity.py`; differentiating the steps of an
+    explicit solver such as Tsit5 gives sensitivities that grow without bound over 25 s of paper-4.2)."""
     if options is None:
         options = SolverOptions()
     elif not isinstance(options, SolverOptions):

@@ -331,7 +331,7 @@ class _Run:
     computed: int = 0
 
     def _here(self) -> list[str]:
-        """Which devices computed a chunk (issue 14): this run's, named by process with several."""
+        """Which devices computed a chunk: this run's, named by process with several."""
         here = describe_devices(self.spec.devices)
         if jax.process_count() == 1:
             return here

@@ -44,7 +44,7 @@ class StallRule:
     - `window` [-]: step attempts per progress check.
     - `min_step` [s]: the smallest mean step over a window.
 
-    Defaults (docs/rigid-model.md, "Resolution"), from the mean step over windows of 1000 attempts: stalled
+    Defaults (docs/rigid-contact.md, "Resolution"), from the mean step over windows of 1000 attempts: stalled
     phases 0.6-1.6e-7 s (paper-2.3, elastic rope, μ = 0.30 at 16.1-16.9 s; paper-4.2 at 0.3 ms), i.e. about
     ε_v/g; phases that complete: at least 3.3e-6 s in the presets paper-2.3 and paper-4.1 (both ropes, full
     length), 1.4e-6 s at the start of sliding (paper-2.3, μ = 0.30, 0.32 s), and the slowest, corner F of
@@ -74,7 +74,7 @@ class _StallGuard(diffrax.AbstractAdaptiveStepSizeController):
 
     The step sizes, acceptance and controller state are the PID controller's, unchanged: a solve that never
     falls below the floor takes exactly the steps it took without the guard. See `_Driver.solve` and
-    docs/rigid-model.md, "Resolution", for the values and why."""
+    docs/rigid-contact.md, "Resolution", for the values and why."""
 
     rtol: float
     atol: float

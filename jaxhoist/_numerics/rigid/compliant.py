@@ -1,4 +1,4 @@
-"""The compliant phase of the rigid model: a regularised step for sustained contact cycles (issue 15).
+"""The compliant phase of the rigid model: a regularised step for sustained contact cycles.
 
 Some lifts drive the rigid model into a limit cycle of impacts that does not decay: the load pivoting on
 one corner while a second one strikes and lifts the first again (0.1-0.2 J per impact every ~2 ms), or,
@@ -56,7 +56,7 @@ class ChatterRule:
       (or at least 4 `min_impacts` impacts within `window`, decaying or not).
     - `stiffness` [N/m per corner]: the foundation of the compliant phase, critically damped
       (h = sqrt(k m)), damper onset 1e-4 m x 1.5e7 / k; `regularisation_velocity` [m/s]: ε of its friction.
-      k = 1.5e11 N/m: 100 x the stiffest row of the convergence table (docs/rigid-model.md), so that the
+      k = 1.5e11 N/m: 100 x the stiffest row of the convergence table (docs/rigid-limit.md), so that the
       hand-back moves the corners by ~1 µm (their static penetration ~ G/k) and books well under 1 J; with
       critical damping and ε = 1e-4 m/s the friction, not k, sets the step size.
     - `rope_stiffness` [N/m]: the inextensible rope's stand-in (critically damped for the boom tip's mass;
@@ -71,7 +71,7 @@ class ChatterRule:
       regularised phase (fallback 3 of `_Driver._select`) this many times in a row. In the sweep such a
       fallback either stood alone (the next choice was consistent again) or repeated at microsecond
       intervals until the switching detection took over, 47 or 48 times (the load on an edge, E-F or F-H,
-      with both corners sticking; docs/rigid-model.md, "Resolution"): 4 separates the two with a margin on
+      with both corners sticking; docs/rigid-contact.md, "Resolution"): 4 separates the two with a margin on
       both sides.
       Whatever triggered it, a compliant phase is not left while the rigid model would need fallback 3 at
       its end: it is extended (from the compliant state, no hand-back in between) until a configuration is

@@ -1,7 +1,7 @@
 """The rigid model's phase driver state and its choice of contact configurations (paper §2, host side):
 `_Driver` holds the scenario, tolerances and counters of one `simulate_rigid` call, solves phases, projects
 velocities onto a phase's constraints, and chooses the next contact configuration by consistency and the
-resolution rule (`_Driver._rank`; docs/rigid-model.md, "Resolution of contact choices and impacts")."""
+resolution rule (`_Driver._rank`; docs/rigid-contact.md, "Resolution of contact choices and impacts")."""
 
 from __future__ import annotations
 
@@ -277,7 +277,7 @@ class Driver:
         if not consistent and rope_rejected:
             raise RopeWouldPush  # only the rope's S >= 0 failed: it goes slack
         if not consistent:
-            # Fallbacks, in order (each recorded in the phase log; see docs/rigid-model.md, "Resolution"):
+            # Fallbacks, in order (each recorded in the phase log; see docs/rigid-contact.md, "Resolution"):
             # 1. a degenerate contact (a load, acceleration or slip direction within rounding of its limit):
             #    the consistency tolerances relaxed by `relax`;
             relaxed = not_again(self.check_value(cand, self.tol["relax"], near, resting, rope, t, where)[0])
@@ -445,7 +445,7 @@ class Driver:
         return consistent, why, rope_rejected, (violation, reasons)
 
     def _rank(self, combos, consistent, force, accel, prev_N, n_ref, near, mats, quiet=False) -> int:
-        """The resolution rule among consistent configurations (docs/rigid-model.md, "Resolution"):
+        """The resolution rule among consistent configurations (docs/rigid-contact.md, "Resolution"):
 
         1. the most corners in contact (every corner that can carry load does);
         2. the most continuous normal forces, |N - N_prev| within `jump` G (after an event: the corner whose

@@ -1,6 +1,6 @@
 """Impacts of the rigid model (paper §2): corner impacts with Newton's restitution law and Coulomb friction
 impulses, and the plastic jerk of the inextensible rope (2.15), with their resolution rules
-(docs/rigid-model.md, "Resolution of contact choices and impacts"). Host side; `drv` is the phase
+(docs/rigid-contact.md, "Resolution of contact choices and impacts"). Host side; `drv` is the phase
 driver (`numerics.rigid.driver._Driver`)."""
 
 from __future__ import annotations
@@ -31,7 +31,7 @@ def impact(drv, t, y, striking: list[int], taut: bool = False, normal_only: bool
     rate), unless that would need a push: then it goes slack in the impact. `normal_only`: no
     restitution (every involved corner ends with zero normal velocity; the tangential impact of `jam`).
 
-    Resolution (docs/rigid-model.md, "Resolution"), each step after the first recorded in `notes`:
+    Resolution (docs/rigid-contact.md, "Resolution"), each step after the first recorded in `notes`:
     the consistent Coulomb impulse with the most contacts, then the most sticking corners, then the
     largest kinetic energy loss (maximal dissipation) where several remain; if none is consistent
     (a grazing touch, a Painlevé-type impact), the frictionless impulse ("friction dropped"); if that

@@ -43,7 +43,7 @@ class RigidOptions(eqx.Module):
       ends at `max_phases`, or raises at the second stall).
     - `stall`: a `StallRule`: a phase solve whose mean step over `stall.window` step attempts falls below
       `stall.min_step` [s] has stalled (as one that reaches `max_steps`, found after thousands of steps
-      instead of `max_steps`); None: only `max_steps` ends a stalled phase (the behaviour before the rule).
+      instead of `max_steps`); None: only `max_steps` ends a stalled phase.
 
     **Raises** `ScenarioError` for a non-positive tolerance, a budget below 1 or an invalid `ChatterRule`
     or `StallRule`.

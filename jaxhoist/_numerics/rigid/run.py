@@ -29,7 +29,7 @@ from .driver import Driver, Inconsistent
 from .impacts import rope_jerk
 from .records import PhaseRecord, RigidContactError, RigidTrajectory, fmt, merge
 
-#: The persistent-contact rule after impacts (docs/rigid-model.md); False only to compare without it.
+#: The persistent-contact rule after impacts (docs/rigid-contact.md); False only to compare without it.
 PERSISTENT_CONTACT = True
 
 
@@ -303,7 +303,7 @@ class Run:
             # Persistent contact: every corner on the ground leaves the impact with a normal velocity
             # below rest_velocity (a corner the impulse lifts, or one still approaching): their normal
             # velocities are removed (plastic for all of them) and the next configuration is chosen
-            # with all of them on the ground (docs/rigid-model.md, "Persistent contact").
+            # with all of them on the ground (docs/rigid-contact.md, "Persistent contact").
             lifted = [rigid.CORNERS[i] for i in range(4) if near[i] and cv1[i, 2] > drv.tol["v"] * drv.V]
             if lifted:
                 taut_now = drv.inextensible and drv.rope_taut

@@ -28,7 +28,7 @@ consistent Coulomb impulse (a grazing touch) take the frictionless one; several 
 most dissipative. A phase that stalls (its mean step over a window of steps falls below a floor,
 `StallRule`; or it reaches `max_steps`) is chosen again once without its configuration.
 Each such step is recorded in the phase log (`PhaseRecord.choice`, or the impact's
-`end`); see docs/rigid-model.md, "Resolution of contact choices and impacts". `RigidContactError` is left
+`end`); see docs/rigid-contact.md, "Resolution of contact choices and impacts". `RigidContactError` is left
 for inputs that cannot be continued: too many phases, a failed phase solve, an impact that would gain
 energy with the given restitution, an inextensible rope that cannot start.
 
