@@ -9,6 +9,7 @@ import math
 import numbers
 import sys
 import time
+import warnings
 from collections.abc import Callable, Mapping
 from typing import Any
 
@@ -45,17 +46,18 @@ NOT_SMOOTH = frozenset(
 def optimise_lift(
     scenario: Scenario,
     uncertain: Mapping[str, Any],
-    objective: str | Mapping[str, float],
-    design_bounds: Mapping[str, tuple[float, float]],
+    objective: str | Mapping[str, Any],  # checked by _check_objective, with messages naming the term
+    design_bounds: Mapping[str, Any],  # path -> (low, high), checked by _check_bounds
     *,
-    hazard_limits: Mapping[Hazard, float] | None = None,
+    hazard_limits: Mapping[Any, Any] | None = None,  # Hazard -> probability, checked by _check_limits
     samples: int = 64,
     seed: int = 0,
     times: TimesLike = None,
-    x0: Mapping[str, float] | None = None,
+    x0: Mapping[str, Any] | None = None,
     hoist_distance: float | None = None,
     penalty: float = 0.0,
     penalty_width: float = 0.1,
+    starts: int = 1,
     max_iterations: int = 30,
     tolerance: float = 1e-4,
     check_samples: int = 256,
@@ -115,6 +117,11 @@ def optimise_lift(
     - `hoist_distance`: d [m] of the `"hoist_time"` term (needed with it).
     - `penalty`, `penalty_width`: the weight of the smooth hazard penalty (0: none) and its width as a
       share of each threshold.
+    - `starts`: 1 (default): L-BFGS-B starts at `x0`. More: J (without derivatives, one scan of
+      `starts` x `samples` members) is screened at `x0` and `starts` - 1 scrambled Sobol points of the
+      box (seeded by `seed`), and L-BFGS-B starts at the best of them; J is often not convex in the
+      design (a tip that pulls the load sideways may be better than one straight above it only at low
+      speed), and a local method finds the minimum of the basin it starts in.
     - `max_iterations`: L-BFGS-B iterations at most (each takes one or more evaluations).
     - `tolerance`: stop when J / |J(x0)| decreases by less than this in an iteration, or the projected
       gradient in the unit box is below it (default 1e-4: J carries the adaptive solver's error, and a
@@ -144,6 +151,7 @@ def optimise_lift(
         hoist_distance=hoist_distance,
         penalty=penalty,
         penalty_width=penalty_width,
+        starts=starts,
         max_iterations=max_iterations,
         tolerance=tolerance,
         check_samples=check_samples,
@@ -157,9 +165,9 @@ def optimise_lift(
     hz, dists, weights = tuple(limits), prep["dists"], prep["weights"]
     fresh: int = prep["check_seed"]
     lo, hi, samples, seed, t1 = problem.lo, problem.hi, prep["samples"], prep["seed"], prep["t1"]
-    max_iterations, tol = prep["max_iterations"], prep["tolerance"]
+    max_iterations, tol, starts = prep["max_iterations"], prep["tolerance"], prep["starts"]
     wall0 = time.perf_counter()
-    run = _minimise(problem, start, max_iterations, tol, _reporter(progress, paths))
+    run = _minimise(problem, start, max_iterations, tol, _reporter(progress, paths), starts, seed)
     best = run["best"]
     check = None
     if hz:
@@ -192,6 +200,7 @@ def optimise_lift(
         start_terms=run["start"]["terms"],
         gradient=best["grad"],
         n_failed=best["n_failed"],
+        screened=run["screened"],
         iterations=run["iterations"],
         evaluations=run["evaluations"],
         samples=samples,
@@ -226,6 +235,7 @@ def _prepare(
     hoist_distance,
     penalty,
     penalty_width,
+    starts,
     max_iterations,
     tolerance,
     check_samples,
@@ -257,6 +267,7 @@ def _prepare(
     if not 0 < float(confidence) < 1:
         raise ScenarioError(f"confidence must be in (0, 1), got {confidence}")
     max_iterations = _integer("max_iterations", max_iterations, low=1)
+    starts = _integer("starts", starts, low=1)
     tol = _number("tolerance", tolerance, low=0.0)
     t1 = float(np.asarray(as_times(times).resolve(scenario, 201)[1])[-1])
     penalised = tuple(h for h in hz if pen > 0 and _smooth_scalar(h.observable_name))
@@ -290,6 +301,7 @@ def _prepare(
         t1=t1,
         max_iterations=max_iterations,
         tolerance=tol,
+        starts=starts,
     )
 
 
@@ -544,8 +556,8 @@ class _Problem:
         return d / v + 0.5 * ramp, g
 
     def evaluate(self, X: np.ndarray, derivatives: bool = False) -> list[dict]:
-        """For each design point (a row of X): J, its terms, the number of failed members and, with
-        `derivatives`, the gradient dJ/dx."""
+        """For each design point (a row of X): J, its terms (sample averages before their weights), the
+        number of failed members and, with `derivatives`, the gradient dJ/dx and each term's gradient."""
         X = np.atleast_2d(np.asarray(X, dtype=np.float64))
         k, nd = X.shape
         res = self._scan(X, derivatives)
@@ -559,7 +571,7 @@ class _Problem:
                     f"{dict(zip(self.paths, X[i].tolist(), strict=True))}: "
                     f"{ScanStatus(int(np.asarray(res.status).reshape(k, self.n)[i, 0])).message}"
                 )
-            terms, grad = {}, np.zeros(nd)
+            terms, grads, grad = {}, {}, np.zeros(nd)
             sel = ok[i]
 
             def avg(key, i=i, sel=sel):
@@ -569,7 +581,8 @@ class _Problem:
             for name, w in self.weights.items():
                 terms[name] = float(avg(name))
                 if derivatives:
-                    grad += w * avg(f"d_{name}")[:nd]
+                    grads[name] = avg(f"d_{name}")[:nd]
+                    grad += w * grads[name]
             for h in self.penalised:
                 name = h.observable_name
                 v = np.asarray(res.data[name]).reshape(k, self.n)[i][sel]
@@ -580,10 +593,11 @@ class _Problem:
                 if derivatives:
                     dv = np.asarray(res.data[f"d_{name}"]).reshape(k, self.n, -1)[i][sel][:, :nd]
                     sig = 0.5 * (1.0 + np.tanh(0.5 * z))  # d softplus / dz, without overflow
-                    grad += self.penalty * np.mean((sig * sign / wd)[:, None] * dv, axis=0)
+                    grads[f"penalty:{h.name}"] = np.mean((sig * sign / wd)[:, None] * dv, axis=0)
+                    grad += self.penalty * grads[f"penalty:{h.name}"]
             th, tg = self._hoist_value(X[i])
             if self.hoist_time[0] != 0:
-                terms[HOIST_TIME] = th
+                terms[HOIST_TIME], grads[HOIST_TIME] = th, tg
                 grad += self.hoist_time[0] * tg
             value = sum(w * terms[nm] for nm, w in self.weights.items())
             value += sum(self.penalty * terms[f"penalty:{h.name}"] for h in self.penalised)
@@ -594,16 +608,21 @@ class _Problem:
                     value=float(value),
                     terms=terms,
                     grad=grad if derivatives else None,
+                    term_grads=grads,
                     n_failed=int(self.n - n_ok[i]),
                 )
             )
         return out
 
 
-def _minimise(problem: _Problem, x0: np.ndarray, max_iterations: int, tol: float, report) -> dict:
-    """L-BFGS-B on u = (x - lo) / (hi - lo) in [0, 1]^d with J / |J(x0)|: the best evaluation, the
-    start's, the history and the optimiser's verdict."""
+def _minimise(
+    problem: _Problem, x0: np.ndarray, max_iterations: int, tol: float, report, starts: int = 1, seed: int = 0
+) -> dict:
+    """L-BFGS-B on u = (x - lo) / (hi - lo) in [0, 1]^d with J / |J(x0)|, from x0 or (with `starts` > 1)
+    from the best of x0 and `starts` - 1 scrambled Sobol points of the box (J without derivatives, one
+    scan): the best evaluation, the start's, the history and the optimiser's verdict."""
     from scipy.optimize import minimize
+    from scipy.stats import qmc
 
     lo, span = problem.lo, problem.hi - problem.lo
     history: list[dict] = []
@@ -619,7 +638,24 @@ def _minimise(problem: _Problem, x0: np.ndarray, max_iterations: int, tol: float
         return cache[key]
 
     u0 = (x0 - lo) / span
-    first = at(u0)
+    screened: list[dict] = []
+    if starts > 1:
+        with warnings.catch_warnings():  # "balance properties ... power of 2": any number of starts is fine
+            warnings.simplefilter("ignore", UserWarning)
+            rng = np.random.default_rng(seed)
+            try:  # scipy >= 1.15 names the generator `rng`
+                sobol = qmc.Sobol(len(u0), scramble=True, rng=rng)
+            except TypeError:  # scipy 1.13, 1.14: `seed`
+                sobol = qmc.Sobol(len(u0), scramble=True, seed=rng)  # pyright: ignore[reportCallIssue]
+            U = np.vstack([u0, sobol.random(starts - 1)])
+        screened = problem.evaluate(lo + U * span)
+        ok = [e["value"] if e["n_failed"] == 0 else math.inf for e in screened]
+        first = screened[0]
+        u_start = U[int(np.argmin(ok))] if np.isfinite(min(ok)) else u0
+        at(u_start)
+    else:
+        first = at(u0)
+        u_start = u0
     scale = abs(first["value"]) if first["value"] != 0 else 1.0
 
     def fun(u):
@@ -638,7 +674,7 @@ def _minimise(problem: _Problem, x0: np.ndarray, max_iterations: int, tol: float
 
     res = minimize(
         fun,
-        u0,
+        u_start,
         jac=True,
         method="L-BFGS-B",
         bounds=[(0.0, 1.0)] * len(u0),
@@ -652,6 +688,9 @@ def _minimise(problem: _Problem, x0: np.ndarray, max_iterations: int, tol: float
     return dict(
         best=best,
         start=first,
+        screened=[
+            {"design": e["x"].tolist(), "value": e["value"], "n_failed": e["n_failed"]} for e in screened
+        ],
         history=history,
         iterations=int(res.nit),
         evaluations=len(history),
@@ -703,7 +742,8 @@ class OptimisedLift:
     - `iterations`, `evaluations`: L-BFGS-B iterations and evaluations of J with its gradient (one scan
       of `samples` members each); `solves`: members solved in all, the check included.
     - `converged`, `message`: the optimiser's verdict.
-    - `history`: one dict per evaluation (design, value, n_failed), in order.
+    - `history`: one dict per evaluation (design, value, n_failed), in order; `screened`: the same for the
+      starting points screened (without derivatives) when `starts` > 1.
     - `limits`: `Hazard` -> the largest acceptable probability; `check`: the `LiftRisk` of the final check
       (design points: 0 the start, 1 the optimum) or None without limits; `limit_table()` reads it.
     - `scenario`: the base scenario with the optimum's design values.
@@ -722,6 +762,7 @@ class OptimisedLift:
         start_terms,
         gradient,
         n_failed,
+        screened,
         iterations,
         evaluations,
         samples,
@@ -745,6 +786,7 @@ class OptimisedLift:
         self.terms, self.start_terms = dict(terms), dict(start_terms)
         self.gradient = {p: float(v) for p, v in zip(self.paths, gradient, strict=True)}
         self.n_failed = int(n_failed)
+        self.screened = list(screened)
         self.iterations, self.evaluations = int(iterations), int(evaluations)
         self.samples, self.seed = int(samples), int(seed)
         self.converged, self.message = bool(converged), str(message)
@@ -759,9 +801,9 @@ class OptimisedLift:
 
     @property
     def solves(self) -> int:
-        """Members solved in all: `evaluations` x `samples`, plus the check's."""
+        """Members solved in all: (`evaluations` + screened starts) x `samples`, plus the check's."""
         extra = 0 if self.check is None else int(np.prod(self.check.shape)) * self.check.samples
-        return self.evaluations * self.samples + extra
+        return (self.evaluations + len(self.screened)) * self.samples + extra
 
     def limit_table(self) -> dict[str, dict[str, float | bool]]:
         """Hazard name -> p, lower, upper (the interval at the check's confidence) at the optimum and
@@ -790,9 +832,10 @@ class OptimisedLift:
 
     def summary(self) -> str:
         """A text report: the design, J and its terms at the start and the optimum, the limits."""
+        screen = f"{len(self.screened)} starts screened, " if self.screened else ""
         lines = [
-            f"optimise_lift: {self.iterations} iterations, {self.evaluations} evaluations of {self.samples} "
-            f"members, {self.solves} solves in all ({self.wall_s:.1f} s); {self.message}"
+            f"optimise_lift: {screen}{self.iterations} iterations, {self.evaluations} evaluations of "
+            f"{self.samples} members, {self.solves} solves in all ({self.wall_s:.1f} s); {self.message}"
         ]
         for p in self.paths:
             lo, hi = self.bounds[p]
