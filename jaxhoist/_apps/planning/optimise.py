@@ -28,6 +28,12 @@ from .uncertain import check_uncertain, sample
 #: The objective's pseudo-observable: the time [s] the hoist takes to reel in `hoist_distance` metres.
 HOIST_TIME = "hoist_time"
 
+#: The optimiser's variables span [0, BOX] per design path (its tolerances are in these units).
+BOX = 1.0
+
+#: The value (above the start's J / |J(x0)|) of a trial design at which a member's solve failed.
+FAILED = 1e3
+
 #: Observables an objective refuses: counts and event times (possibly inf) whose derivative is zero or
 #: undefined almost everywhere; they belong in `hazard_limits`.
 NOT_SMOOTH = frozenset(
@@ -85,8 +91,10 @@ def optimise_lift(
     The optimiser is L-BFGS-B (`scipy.optimize.minimize`), a quasi-Newton method with simple bounds, on
     the design scaled to the unit box, u = (x - low) / (high - low) in [0, 1]: the bounds are kept exactly
     (the steps are projected onto the box), and a design at a bound is reached and reported there. J is
-    divided by |J(x0)| so that `tolerance` is relative. Iterations are driven from the host; the compiled
-    scan carries no host callback. The design with the lowest J seen is returned.
+    divided by |J(x0)| so that `tolerance` is relative. A trial design at which a member's solve fails gets
+    a value far above the start's, so that the line search steps back. Iterations are driven from the
+    host; the compiled scan carries no host callback. The design with the lowest J seen (every member
+    solved) is returned.
 
     At the end, if `hazard_limits` are given, `lift_risk` estimates each hazard's probability at the start
     and at the optimum on a FRESH sample (`check_samples` members in `check_replicates` scrambles from
@@ -565,12 +573,20 @@ class _Problem:
         n_ok = ok.sum(axis=1)
         out = []
         for i in range(k):
-            if n_ok[i] == 0:
-                raise RuntimeError(
-                    f"every one of the {self.n} members failed at the design "
-                    f"{dict(zip(self.paths, X[i].tolist(), strict=True))}: "
-                    f"{ScanStatus(int(np.asarray(res.status).reshape(k, self.n)[i, 0])).message}"
+            if n_ok[i] == 0:  # no average to take: the optimiser rejects such a trial design
+                code = int(np.asarray(res.status).reshape(k, self.n)[i, 0])
+                out.append(
+                    dict(
+                        x=X[i].copy(),
+                        value=math.nan,
+                        terms={},
+                        grad=np.zeros(nd) if derivatives else None,
+                        term_grads={},
+                        n_failed=self.n,
+                        reason=ScanStatus(code).message,
+                    )
                 )
+                continue
             terms, grads, grad = {}, {}, np.zeros(nd)
             sel = ok[i]
 
@@ -618,18 +634,18 @@ class _Problem:
 def _minimise(
     problem: _Problem, x0: np.ndarray, max_iterations: int, tol: float, report, starts: int = 1, seed: int = 0
 ) -> dict:
-    """L-BFGS-B on u = (x - lo) / (hi - lo) in [0, 1]^d with J / |J(x0)|, from x0 or (with `starts` > 1)
+    """L-BFGS-B on u = BOX (x - lo) / (hi - lo) in [0, BOX]^d with J / |J(x0)|, from x0 or (with `starts` > 1)
     from the best of x0 and `starts` - 1 scrambled Sobol points of the box (J without derivatives, one
     scan): the best evaluation, the start's, the history and the optimiser's verdict."""
     from scipy.optimize import minimize
     from scipy.stats import qmc
 
-    lo, span = problem.lo, problem.hi - problem.lo
+    lo, span = problem.lo, (problem.hi - problem.lo) / BOX
     history: list[dict] = []
     cache: dict[bytes, dict] = {}
 
     def at(u):
-        u = np.clip(np.asarray(u, dtype=np.float64), 0.0, 1.0)
+        u = np.clip(np.asarray(u, dtype=np.float64), 0.0, BOX)
         key = u.tobytes()
         if key not in cache:
             ev = problem.evaluate(lo + u * span, derivatives=True)[0]
@@ -647,7 +663,7 @@ def _minimise(
                 sobol = qmc.Sobol(len(u0), scramble=True, rng=rng)
             except TypeError:  # scipy 1.13, 1.14: `seed`
                 sobol = qmc.Sobol(len(u0), scramble=True, seed=rng)  # pyright: ignore[reportCallIssue]
-            U = np.vstack([u0, sobol.random(starts - 1)])
+            U = np.vstack([u0, BOX * sobol.random(starts - 1)])
         screened = problem.evaluate(lo + U * span)
         ok = [e["value"] if e["n_failed"] == 0 else math.inf for e in screened]
         first = screened[0]
@@ -656,10 +672,19 @@ def _minimise(
     else:
         first = at(u0)
         u_start = u0
+    if first["n_failed"] == problem.n:
+        raise RuntimeError(
+            f"every one of the {problem.n} members failed at the start "
+            f"{dict(zip(problem.paths, first['x'].tolist(), strict=True))}: {first['reason']}"
+        )
     scale = abs(first["value"]) if first["value"] != 0 else 1.0
 
     def fun(u):
         ev = at(u)
+        if ev["n_failed"] and not np.array_equal(ev["x"], first["x"]):
+            # a member failed at this trial design: a value far above the start's, so that the line search
+            # steps back (an average over the other members would be over another sample)
+            return abs(first["value"] / scale) + FAILED, np.zeros_like(u)
         return ev["value"] / scale, ev["grad"] * span / scale
 
     iterations = 0
@@ -677,13 +702,13 @@ def _minimise(
         u_start,
         jac=True,
         method="L-BFGS-B",
-        bounds=[(0.0, 1.0)] * len(u0),
+        bounds=[(0.0, BOX)] * len(u0),
         callback=callback,
         options={"maxiter": max_iterations, "ftol": tol, "gtol": tol, "maxfun": 4 * max_iterations + 10},
     )
     best = min(cache.values(), key=lambda e: e["value"] if e["n_failed"] == 0 else math.inf)
-    if best["n_failed"]:  # every evaluation had failures: the lowest J regardless
-        best = min(cache.values(), key=lambda e: e["value"])
+    if best["n_failed"]:  # failures wherever the optimiser went: the start
+        best = cache[np.clip(u_start, 0.0, BOX).tobytes()]
     msg = res.message if isinstance(res.message, str) else res.message.decode()
     return dict(
         best=best,
