@@ -15,6 +15,8 @@ import jax
 
 jax.config.update("jax_enable_x64", True)  # tests/conftest.py also does this
 
+import json  # noqa: E402
+import re  # noqa: E402
 from unittest import mock  # noqa: E402
 
 import numpy as np  # noqa: E402
@@ -219,3 +221,95 @@ def test_bad_inputs_fail_before_compiling(over, field):
     ):
         jh.optimise_lift(drag_box(), UNCERTAIN, objective, bounds, **kw)
     assert "\n" not in str(info.value)
+
+
+BOX_TOML = """
+name = "drag-box"
+t1 = 3.0
+[load]
+size = [2.0, 2.0, 0.5]
+mass = 1000.0
+[foundation]
+stiffness = 1.5e7
+damping = 2.0e5
+friction_coefficient = 0.3
+[foundation.friction]
+law = "regularised-coulomb"
+regularisation_velocity = 1e-3
+[rope]
+stiffness = 3e4
+damping = 3e3
+attachment = [1.0, 1.0, 0.5]
+[hoist]
+law = "constant-speed"
+speed = 0.3
+[boom]
+tip_position = [1.6, 1.0, 8.5]
+tip_mass = 500.0
+stiffness = 5.0e6
+damping = 5.0e3
+"""
+CLI_ARGS = [
+    "--uncertain",
+    "foundation.friction_coefficient=uniform(0.2,0.4)",
+    "--uncertain",
+    "load.mass_centre[0]=normal(1.0,0.05)",
+    "--bound",
+    "boom.tip_position[0]=1.0:1.6",
+    "--bound",
+    "hoist.speed=0.2:0.5",
+    "--objective",
+    f"max_rope_tension={1.0 / 9810.0!r}",
+    "--objective",
+    "max_tilt",
+    "--objective",
+    "hoist_time=0.1",
+    "--hoist-distance",
+    "1.0",
+    "--limit",
+    "slide=0.25:0.5",
+    "--limit",
+    "tilt=20deg:0.5",
+]
+
+
+@pytest.mark.parametrize(
+    ("extra", "field"),
+    [
+        (["--bound", "hoist.speed=0.5"], "--bound 'hoist.speed=0.5': expected PATH=LOW:HIGH"),
+        (["--bound", "hoist.speed=0.5:0.2"], "low must be < high"),
+        (["--objective", "impacts"], "'impacts' is a count"),
+        (["--limit", "slide=0.25"], "--limit 'slide=0.25': expected HAZARD:P"),
+        (["--limit", "slide=0.25:2"], r"must be a probability in \[0, 1\]"),
+    ],
+)
+def test_cli_bad_input_exits_2_before_compiling(tmp_path, capsys, extra, field):
+    from jaxhoist._apps import cli
+
+    toml = tmp_path / "box.toml"
+    toml.write_text(BOX_TOML)
+    with mock.patch.object(opt_mod, "scan", _trap), mock.patch.object(risk_mod, "scan", _trap):
+        assert cli.main(["optimise-lift", str(toml), *CLI_ARGS, *extra, "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err
+    assert re.search(field, err), err
+
+
+def test_cli_gives_the_library_result(tmp_path, capsys, optimised):
+    """The command with the settings of `optimised` prints its report and writes optimise.json with the
+    same optimum (the same scans: the same design to 1e-9)."""
+    from jaxhoist._apps import cli
+
+    toml = tmp_path / "box.toml"
+    toml.write_text(BOX_TOML)
+    out = tmp_path / "out"
+    args = ["optimise-lift", str(toml), *CLI_ARGS, "--samples", str(SAMPLES), "--n-save", "301"]
+    args += ["--check-samples", "32", "--check-replicates", "4", "--lanes", "8", "--chunk-size", "64"]
+    rc = cli.main([*args, "--quiet", "--out", str(out)])
+    assert rc == (0 if optimised.limits_hold else 1)
+    printed = capsys.readouterr().out
+    assert "hazard limits" in printed and "boom.tip_position[0] [m]" in printed
+    summary = json.loads((out / "optimise.json").read_text())
+    for p in (TIP, SPEED):
+        assert summary["design"][p] == pytest.approx(optimised.design[p], rel=1e-9)
+    assert summary["evaluations"] == optimised.evaluations
+    assert set(summary["limits"]) == {"slide", "tilt"}

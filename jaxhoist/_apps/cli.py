@@ -37,6 +37,7 @@ EXTENSIONS = {
     "bifurcation": "jaxhoist._apps.bifurcation_cli",
     "identify": "jaxhoist._apps.identify_cli",
     "risk": "jaxhoist._apps.risk_cli",
+    "optimise-lift": "jaxhoist._apps.planning.optimise_cli",
 }
 
 
