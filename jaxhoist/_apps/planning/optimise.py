@@ -100,9 +100,9 @@ def optimise_lift(
     and at the optimum on a FRESH sample (`check_samples` members in `check_replicates` scrambles from
     `check_seed`), with its interval; a limit holds when the upper end of the interval is at most the
     limit. The probabilities themselves (indicators, not smooth) never enter J; `penalty` > 0 adds a smooth
-    stand-in for them: for each limited hazard on a smooth scalar observable v with threshold c, the sample
-    average of softplus((v - c) / w) = log(1 + exp((v - c) / w)), w = `penalty_width` |c| (the sign
-    flipped for `above=False`), times `penalty`.
+    stand-in for them: for each limited hazard on a smooth built-in scalar observable v with threshold c,
+    the sample average of softplus((v - c) / w) = log(1 + exp((v - c) / w)), w = `penalty_width` |c| (the
+    sign flipped for `above=False`), times `penalty`.
 
     **Arguments**
     - `scenario`: the base `Scenario` (its values of the non-design, non-uncertain leaves are used).

@@ -161,6 +161,7 @@ def run_cli(args) -> int:
         progress=not args.quiet,
     )
     print(res.summary())
+    out.mkdir(parents=True, exist_ok=True)
     path = out / "optimise.json"
     path.write_text(json.dumps(summary_json(res), indent=1))
     print(f"wrote         {path}")
