@@ -175,6 +175,24 @@ def test_limits_are_checked_on_a_fresh_sample(problem, optimised):
     assert "hazard limits" in text and TIP in text
 
 
+def test_screened_starts(optimised):
+    """`starts=4`: J is screened (without derivatives) at the start and 3 Sobol points of the box, L-BFGS-B
+    starts at the best of them, and the solves are counted: (screened + evaluations) x samples + the
+    check's; the result is no worse than the best screened point nor than the run from x0 alone (both end
+    in the one basin within these bounds)."""
+    r = jh.optimise_lift(drag_box(), UNCERTAIN, OBJECTIVE, BOUNDS, starts=4, **KW)
+    assert len(r.screened) == 4
+    assert r.screened[0]["design"] == [r.start[TIP], r.start[SPEED]]
+    best = min(r.screened, key=lambda e: e["value"])
+    assert r.history[0]["design"] == best["design"]
+    assert r.value <= best["value"]
+    assert r.value <= optimised.value + 1e-4 * abs(optimised.value)
+    for e in r.screened:
+        for k, (lo, hi) in enumerate(BOUNDS.values()):
+            assert lo <= e["design"][k] <= hi
+    assert r.solves == (4 + r.evaluations) * SAMPLES + 2 * 32
+
+
 def _trap(*args, **kwargs):
     raise AssertionError("scan was called: the bad input was not caught before compiling")
 
