@@ -26,10 +26,12 @@ from ._apps.planning import Hazard as Hazard
 from ._apps.planning import LiftRisk as LiftRisk
 from ._apps.planning import LogNormal as LogNormal
 from ._apps.planning import Normal as Normal
+from ._apps.planning import OptimisedLift as OptimisedLift
 from ._apps.planning import TruncatedNormal as TruncatedNormal
 from ._apps.planning import Uniform as Uniform
 from ._apps.planning import lift_risk as lift_risk
 from ._apps.planning import no_liftoff as no_liftoff
+from ._apps.planning import optimise_lift as optimise_lift
 from ._apps.planning import overload as overload
 from ._apps.planning import slide as slide
 from ._apps.planning import strike as strike

@@ -37,6 +37,7 @@ EXTENSIONS = {
     "bifurcation": "jaxhoist._apps.cli.bifurcation",
     "identify": "jaxhoist._apps.cli.identify",
     "risk": "jaxhoist._apps.cli.risk",
+    "optimise-lift": "jaxhoist._apps.cli.optimise",
 }
 
 

@@ -49,7 +49,7 @@ _DISTRIBUTIONS = {
 _CALL = re.compile(r"^\s*([A-Za-z_]+)\s*\(([^()]*)\)\s*$")
 
 
-def _split(item: str, flag: str) -> tuple[str, str]:
+def split_item(item: str, flag: str) -> tuple[str, str]:
     path, eq, rest = item.partition("=")
     if not eq or not path.strip() or not rest.strip():
         raise ScenarioError(f"{flag} {item!r}: expected PATH=SPEC")
@@ -195,7 +195,7 @@ def _design(items: list[str]):
         return None
     axes = {}
     for item in items:
-        path, spec = _split(item, "--design")
+        path, spec = split_item(item, "--design")
         axes[path] = parse_values(spec, "--design")
     return Sweep(*next(iter(axes.items()))) if len(axes) == 1 else Grid(axes)
 
@@ -213,7 +213,7 @@ def run_cli(args) -> int:
     )
     uncertain = {}
     for item in args.uncertain:
-        path, spec = _split(item, "--uncertain")
+        path, spec = split_item(item, "--uncertain")
         uncertain[path] = parse_distribution(spec)
     hazards = [parse_hazard(h) for h in args.hazard]
     design = _design(args.design)

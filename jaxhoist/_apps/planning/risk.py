@@ -106,7 +106,7 @@ def lift_risk(
     dists = check_uncertain(uncertain)
     for p in dists:
         check_path(scenario, p)
-    hz = _check_hazards(hazards)
+    hz = check_hazards(hazards)
     des = _check_design(scenario, design, dists)
     samples, replicates, seed = _check_counts(samples, replicates, seed)
     qs = _check_levels(quantiles, confidence, max_failed)
@@ -117,7 +117,7 @@ def lift_risk(
                 f"Hazard {h.name!r}: no lift-off by {h.threshold} s cannot be seen in a solve that ends at "
                 f"t1 = {t1} s"
             )
-    obs = _observables(hz, observables)
+    obs = hazard_observables(hz, observables)
 
     draws = sample(dists, samples, replicates, seed)  # path -> (R, m)
     if des is None:
@@ -150,7 +150,7 @@ def lift_risk(
 # ------------------------------------------------------------------------------------------ checks
 
 
-def _check_hazards(hazards) -> tuple[Hazard, ...]:
+def check_hazards(hazards) -> tuple[Hazard, ...]:
     if isinstance(hazards, Hazard):
         hazards = (hazards,)
     if isinstance(hazards, str) or not isinstance(hazards, Sequence):
@@ -218,7 +218,7 @@ def _check_levels(quantiles, confidence, max_failed) -> np.ndarray:
     return qs
 
 
-def _observables(hazards, extra) -> dict[str, Any]:
+def hazard_observables(hazards, extra) -> dict[str, Any]:
     """Observable name -> observable (a name or an `Observable`) for the scan: the hazards' and `extra`."""
     out: dict[str, Any] = {}
     items = [(h.observable_name, h.observable, f"Hazard {h.name!r}") for h in hazards]
