@@ -5,6 +5,7 @@ reference programs are each compiled once and shared."""
 
 from __future__ import annotations
 
+import copy
 import json
 
 import numpy as np
@@ -103,10 +104,10 @@ def test_loose_scan_is_flagged(scenario, references):
 
 
 def test_failed_members_are_not_chosen(checked):
-    class Stub:
-        ok = np.array([True, False, True, False, True])
-
-    assert set(acc.choose(Stub(), jh.AccuracyCheck(members=16))) == {0, 2, 4}  # pyright: ignore[reportArgumentType]
+    failed = copy.copy(checked)
+    failed.status = np.where(np.arange(len(MU)) % 2 == 0, 0, int(jh.SolveStatus.MAX_STEPS))
+    assert set(acc.choose(failed, jh.AccuracyCheck(members=16))) == {0, 2, 4, 6}
+    assert set(acc.choose(failed, jh.AccuracyCheck(members=3))) < {0, 2, 4, 6}
     assert acc.choose(checked, CHECK).tolist() == acc.choose(checked, CHECK).tolist()
 
 

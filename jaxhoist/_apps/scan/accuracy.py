@@ -88,7 +88,8 @@ def resolve(accuracy: object, n_members: int) -> AccuracyCheck | None:
 
 
 def reference_options(check: AccuracyCheck, options: SolverOptions) -> SolverOptions:
-    """The reference's `SolverOptions`: `check.options`, or the default solver 1000x tighter than `options`."""
+    """The reference's `SolverOptions`: `check.options`, or the default solver 1000x tighter than
+    `options`."""
     if check.options is not None:
         return check.options
     rtol, atol = REFERENCE_RTOL, REFERENCE_ATOL
@@ -155,7 +156,9 @@ def check_accuracy(
     if idx.size == 0:
         return report
     values = {p: np.asarray(result.values(p)).ravel()[idx] for p in result.params}
-    ref = run_scan(scenario, Points(values), Times(ts=np.asarray(ts)), observables=observables, options=ref_opts)
+    ref = run_scan(
+        scenario, Points(values), Times(ts=np.asarray(ts)), observables=observables, options=ref_opts
+    )
     ref_ok = ref.ok.ravel()
     report["reference_failed"] = int(np.sum(~ref_ok))
     over_any = np.zeros(idx.size, dtype=bool)

@@ -85,7 +85,17 @@ from .sweep import AbstractSweep, Grid, Points, Sweep, as_sweep
 #: The number of saved times of `scan` when `Times.n` is None.
 DEFAULT_N = 201
 
-__all__ = ["AccuracyCheck", "BatchOptions", "Grid", "Points", "Progress", "ScanResult", "ScanStatus", "Sweep", "scan"]
+__all__ = [
+    "AccuracyCheck",
+    "BatchOptions",
+    "Grid",
+    "Points",
+    "Progress",
+    "ScanResult",
+    "ScanStatus",
+    "Sweep",
+    "scan",
+]
 
 
 def scan(
