@@ -76,10 +76,19 @@ def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=(__doc__ or "").splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="1 seed x 6 scenarios over 2 s")
     ap.add_argument("--seeds", type=int, default=3, help="number of seeds (full mode)")
+    ap.add_argument("--first-seed", type=int, default=0, help="the first seed (full mode)")
     ap.add_argument("--n", type=int, default=48, help="scenarios per seed (full mode)")
     ap.add_argument("--t1", type=float, default=8.0, help="horizon [s] (full mode)")
     args = ap.parse_args(argv)
-    seeds, n, t1 = ((0,), 6, 2.0) if args.quick else (tuple(range(args.seeds)), args.n, args.t1)
+    seeds, n, t1 = (
+        ((0,), 6, 2.0)
+        if args.quick
+        else (
+            tuple(range(args.first_seed, args.first_seed + args.seeds)),
+            args.n,
+            args.t1,
+        )
+    )
     base = jh.load_scenario("paper-4.2")
     times = jh.Times(t1, n=201)
     check = jh.AccuracyCheck(members=16, length_target=TOLERANCE)
