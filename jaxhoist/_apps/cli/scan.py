@@ -14,6 +14,7 @@ from ..._errors import ScenarioError
 from ..._io.validate import parse_values
 from ..._numerics.options import SolverOptions
 from ..._numerics.times import Times
+from ..scan.accuracy import AccuracyCheck, summary
 from ..scan.layout import BatchOptions
 from ..scan.run import scan
 from ..scan.sweep import as_sweep
@@ -115,6 +116,21 @@ def configure_parser(subparsers) -> None:
         help="write into a non-empty --out that `jaxhoist scan` did not write (only the files scan writes "
         "are replaced); without it, such a folder is refused",
     )
+    acc = p.add_mutually_exclusive_group()
+    acc.add_argument(
+        "--no-accuracy-check",
+        action="store_true",
+        help="do not re-solve a random subset of members at a 1000x tighter tolerance (by default done for "
+        "scans of 1024 members or more)",
+    )
+    acc.add_argument(
+        "--accuracy-members",
+        type=int,
+        default=None,
+        metavar="N",
+        help="re-solve N random healthy members at a 1000x tighter tolerance and report the differences "
+        "(forces the check on below 1024 members; default 16, from 1024 members)",
+    )
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument(
         "--no-plots",
@@ -136,6 +152,7 @@ def run_cli(args) -> int:
         load_scenario(args.scenario, allow_implausible=args.allow_implausible), args.set
     )
     params = {p: parse_values(v, "--values") for p, v in zip(args.param, args.values, strict=True)}
+    accuracy = _accuracy(args)  # a bad --accuracy-members is refused before the folder is made
     out = Path(args.out) if args.out else default_out(args.scenario, "scan-")
     prepare_out_dir(out, "scan", overwrite=args.overwrite)
     if args.fixed_step is None:
@@ -164,6 +181,7 @@ def run_cli(args) -> int:
             out_dir=out,
             resume=resume,
             progress=not args.quiet,
+            accuracy=accuracy,
         ),
         out,
         not args.no_resume,
@@ -182,6 +200,8 @@ def run_cli(args) -> int:
         f"wall time     compile {t['compile']:.3g} s, solve {t['compute']:.3g} s "
         f"({1e3 * t['compute'] / max(1, t['members_computed']):.3g} ms per member), total {t['total']:.3g} s"
     )
+    if res.accuracy is not None:
+        print(f"accuracy      {summary(res.accuracy, _flag)}")
     pngs = []
     if not args.no_plots:
         from ..plots.scan import plot_skips, save_scan_plots
@@ -194,6 +214,20 @@ def run_cli(args) -> int:
         + (f", {len(pngs)} PNGs (scan_<observable>.png)" if pngs else "")
     )
     return 0 if n_fail == 0 else 1
+
+
+def _accuracy(args) -> AccuracyCheck | bool | None:
+    """The `accuracy` argument of `scan`: off, N members, or automatic."""
+    if args.no_accuracy_check:
+        return False
+    if args.accuracy_members is not None:
+        return AccuracyCheck(members=args.accuracy_members)
+    return None
+
+
+def _flag(name: str, value: float) -> str:
+    """The command-line option of a suggestion: rtol -> --rtol 5e-05, dt0 -> --fixed-step 0.00025."""
+    return f"--fixed-step {value:.3g}" if name == "dt0" else f"--{name} {value:.0e}"
 
 
 def _check_before_writing(scenario, args) -> None:

@@ -27,7 +27,8 @@ class ScanResult:
     - `num_accepted_steps`, `num_rejected_steps`: solver steps per member.
     - `ts`, `histories`: saved times [s] and name -> array of shape `shape + (n_t, ...)` if requested.
     - `units`: name -> SI unit for every parameter, observable and history; `descriptions` likewise.
-    - `attrs`: JSON-able metadata (scenario, t1, solver options, lanes, devices, timings).
+    - `attrs`: JSON-able metadata (scenario, t1, solver options, lanes, devices, timings, the accuracy
+      report `accuracy`).
     """
 
     def __init__(
@@ -93,6 +94,16 @@ class ScanResult:
     @property
     def size(self) -> int:
         return int(np.prod(self.shape))
+
+    @property
+    def accuracy(self) -> dict[str, Any] | None:
+        """The scan's report of its own accuracy (`AccuracyCheck`), or None where it was not checked: the
+        members re-solved at a tighter tolerance (`members`, flat `indices`), the `reference` options, and per
+        observable (`observables[name]`) the `median` and `max` difference ([m] for lengths, relative for the
+        others), the members `over_target` and the `target`; in all `over_target` and `suggest` (the option
+        that gives more accuracy, where members are over the target). Also in `scan.json` under
+        `attrs.accuracy`."""
+        return self.attrs.get("accuracy")
 
     def reason(self, i) -> str:
         """Why member i (flat index, or an index tuple for a grid) failed ("ok" if it did not)."""
