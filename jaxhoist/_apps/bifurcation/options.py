@@ -113,7 +113,7 @@ def default_solver_options() -> SolverOptions:
     """The locator's solver settings: `diffrax.Tsit5()` with rtol 1e-6, atol 1e-8 (its default tolerances).
     Not the Rosenbrock-W solver of `simulate` and `scan`: a locator needs the observable to well below its
     `tol` and a slope per Newton step, and on the paper's §4.3 change (paper-4.3, ϑ(t1) = 15° in μ over
-    25 s, `experiments/locator_solver.py`) W at its rtol 1e-3 put μ* 6e-6 off (Tsit5: 1.4e-7) in 1.9x
+    25 s, a script since removed) W at its rtol 1e-3 put μ* 6e-6 off (Tsit5: 1.4e-7) in 1.9x
     Tsit5's time, at rtol 1e-4 1.1e-6 off in 4.2x: its error-controlled sensitivities
     (`_numerics/sensitivity.py`) cost more than Tsit5's differentiated steps over these spans. With the
     ∂f/∂t term (2026-11-27) W at its default rtol 5e-4 was 6.6e-6 off and at rtol 1e-4 5.9e-7 off in 0.7x
