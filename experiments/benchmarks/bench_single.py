@@ -1,9 +1,10 @@
 """Single-trajectory cost of a preset: compile time, run time after compilation, steps; optionally
 scipy's solve_ivp on the same (jitted) vector field in the same process, as a baseline ratio.
 
-    python experiments/bench_single.py --scenario paper-4.2            # jaxhoist only
-    python experiments/bench_single.py --scenario paper-4.2 --scipy    # + scipy LSODA and RK45 baseline
-    python experiments/bench_single.py --quick                          # 5 s horizon
+    python experiments/benchmarks/bench_single.py --scenario paper-4.2            # jaxhoist only
+    # + scipy LSODA and RK45 baseline
+    python experiments/benchmarks/bench_single.py --scenario paper-4.2 --scipy
+    python experiments/benchmarks/bench_single.py --quick                          # 5 s horizon
 """
 
 import argparse

@@ -1,9 +1,11 @@
 """Cost of the elastic model's vector field and of one fixed step, per trajectory, in a vmapped batch.
 
-    python experiments/bench_vector_field.py --out out/bench-vf            # B = 256 lanes
-    python experiments/bench_vector_field.py --out out/bench-vf --quick    # fewer repeats, shorter loops
-    python experiments/bench_vector_field.py --out out/bench-vf --lanes 1024 --baseline-rev a4b17fd
-    python experiments/bench_vector_field.py --out out/bench-vf --profile  # + the costliest XLA kernels
+    python experiments/benchmarks/bench_vector_field.py --out out/bench-vf            # B = 256 lanes
+    # fewer repeats, shorter loops
+    python experiments/benchmarks/bench_vector_field.py --out out/bench-vf --quick
+    python experiments/benchmarks/bench_vector_field.py --out out/bench-vf --lanes 1024 --baseline-rev a4b17fd
+    # + the costliest XLA kernels
+    python experiments/benchmarks/bench_vector_field.py --out out/bench-vf --profile
 
 Measured in one process, on one CPU device, after compilation (best of several repeats, since other work
 may share the CPU):
@@ -94,7 +96,7 @@ def load_baseline(rev: str):
     import importlib
     import subprocess
 
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]  # the repository root
     tmp = Path(tempfile.mkdtemp(prefix="jaxhoist-base-"))
     tar = subprocess.run(
         ["git", "-C", str(root), "archive", rev, "jaxhoist"], check=True, capture_output=True

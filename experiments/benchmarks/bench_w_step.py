@@ -2,9 +2,11 @@
 linearisation with its factorisation and one solve, and a full Rosenbrock-W (ROS34PW2) step, each as a
 `fori_loop` of `--steps` steps of 1 ms over `--lanes` members of paper-4.2 (μ spread over [0.1, 0.6]).
 
-    python experiments/bench_w_step.py --lanes 256
-    python experiments/bench_w_step.py --lanes 64 --kinds f,w
-    python experiments/bench_w_step.py --lanes 16,256 --kinds lin,w --baseline c315662 --rounds 7
+    python experiments/benchmarks/bench_w_step.py --lanes 256
+    python experiments/benchmarks/bench_w_step.py --lanes 64 --kinds f,w
+    python experiments/benchmarks/bench_w_step.py --lanes 16,256 --kinds lin,w --baseline c315662 --rounds 7
+    # smoke check: 8 lanes, 20 steps
+    python experiments/benchmarks/bench_w_step.py --quick --out out/bench-w-step
 
 `--baseline REV` also times `lin` and `w` with `jaxhoist/_physics/linearise.py` and
 `jaxhoist/_numerics/rosenbrock.py` as they were at git revision REV (read with `git show`, everything else as
@@ -12,13 +14,15 @@ checked out), in the same process: every kind is compiled first,
 then timed once per round in `--rounds` rounds (the order reversed every other round, so that a load change
 on the shared machine hits both alike), and the best round counts. The ratio printed is baseline / current.
 
-Prints compile time and µs per step per trajectory, one device.
+Prints compile time and µs per step per trajectory, one device; with `--out DIR`, also
+`DIR/bench_w_step.json`.
 """
 
 from __future__ import annotations
 
 import argparse
 import importlib.util
+import json
 import subprocess
 import sys
 import time
@@ -44,7 +48,7 @@ H = 1e-3
 def _module_at(rev: str, path: str, package: str):
     """The module `path` as it was at git revision `rev`, imported as a sibling module in `package` (so its
     relative imports resolve to the current package)."""
-    root = Path(__file__).resolve().parents[1]
+    root = Path(__file__).resolve().parents[2]  # the repository root
     src = subprocess.run(
         ["git", "show", f"{rev}:{path}"], cwd=root, check=True, capture_output=True, text=True
     ).stdout
@@ -107,7 +111,12 @@ def main(argv=None):
     p.add_argument("--kinds", default="f,bosh3,lin,w", help="what to time (default f,bosh3,lin,w)")
     p.add_argument("--baseline", default=None, help="git revision of linearise.py to time lin and w against")
     p.add_argument("--rounds", type=int, default=3, help="timed rounds (default 3)")
+    p.add_argument("--out", default=None, help="folder for bench_w_step.json (optional)")
+    p.add_argument("--quick", action="store_true", help="smoke check: 8 lanes, 20 steps, 1 round")
     args = p.parse_args(argv)
+    if args.quick:
+        args.lanes, args.steps, args.rounds = "8", 20, 1
+    records = []
     sc = jh.load_scenario("paper-4.2")
     base = baseline(args.baseline) if args.baseline else None
 
@@ -139,6 +148,11 @@ def main(argv=None):
             if "@" in k:
                 line += f"  (baseline / current: {best[k] / best[k.split('@')[0]]:.2f}x)"
             print(line, flush=True)
+            records.append(dict(kind=k, lanes=lanes, compile_s=compile_s[k], us_per_step_per_trajectory=us))
+    if args.out is not None:
+        Path(args.out).mkdir(parents=True, exist_ok=True)
+        rec = dict(vars(args), rows=records)
+        (Path(args.out) / "bench_w_step.json").write_text(json.dumps(rec, indent=1))
 
 
 if __name__ == "__main__":

@@ -1,9 +1,11 @@
 """The default scan on whatever device JAX finds (issue 10, point 5: "run the benchmark on a GPU too, 4096
 and 65 536 members, with the device named"), and the check of its results on this machine afterwards.
 
-    python experiments/benchmark_accelerator.py --out DIR                      # on the GPU machine
-    python experiments/benchmark_accelerator.py --out DIR --runs 4096,4096@256,65536
-    python experiments/benchmark_accelerator.py --check DIR                    # afterwards, on a CPU
+    python experiments/benchmarks/benchmark_accelerator.py --out DIR                      # on the GPU machine
+    python experiments/benchmarks/benchmark_accelerator.py --out DIR --runs 4096,4096@256,65536
+    python experiments/benchmarks/benchmark_accelerator.py --check DIR  # afterwards, on a CPU
+    # smoke check: 16 members, 2 s, checked
+    python experiments/benchmarks/benchmark_accelerator.py --out DIR --quick
 
 Each run is the **default call** of `jaxhoist.scan` on paper-4.2 as shipped (ε = 1e-3 m/s, Rosenbrock-W,
 rtol 1e-3, atol 1e-5, the default group width for the device: `apps.scan_layout.adaptive_lanes`), μ evenly
@@ -271,8 +273,16 @@ def main(argv=None) -> None:
     p.add_argument("--devices", type=int, default=None, help="host CPU devices (default: one per core)")
     p.add_argument("--budget", type=float, default=float("inf"), help="start no run after this many s")
     p.add_argument("--ref-n", type=int, default=512, help="members checked against the reference (--check)")
+    p.add_argument("--quick", action="store_true", help="smoke check: 16 members, 2 s, 4 checked")
     args = p.parse_args(argv)
-    if args.check:
+    if args.quick:
+        if not args.out:
+            p.error("--quick needs --out DIR")
+        args.runs, args.t1, args.ref_n = "16", 2.0, 4
+        bench(args)
+        args.check = args.out
+        check(args)
+    elif args.check:
         check(args)
     elif args.out:
         bench(args)

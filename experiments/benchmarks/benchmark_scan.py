@@ -4,8 +4,8 @@ Radau and RK45 on the same jitted vector field; a plain `jax.vmap` of `diffrax.d
 PIDController(1e-6, 1e-8))`), the cost at ε = 1e-4, forward-mode sensitivities against the plain scan, peak
 memory.
 
-    python experiments/benchmark_scan.py --out out/bench-scan            # 4096 μ, 25 s, every CPU core
-    python experiments/benchmark_scan.py --out out/bench-scan --quick    # 64 μ, 3 s: a smoke run
+    python experiments/benchmarks/benchmark_scan.py --out out/bench-scan  # 4096 μ, 25 s, every CPU core
+    python experiments/benchmarks/benchmark_scan.py --out out/bench-scan --quick    # 64 μ, 3 s: a smoke run
 
 What it runs (all in one process, so every ratio is against a baseline measured under the same load):
 
@@ -52,7 +52,6 @@ jax.config.update("jax_enable_x64", True)
 
 import diffrax  # noqa: E402
 import numpy as np  # noqa: E402
-from benchmark_accelerator import tsit5_final  # noqa: E402  (the same plain Tsit5 solve as on the GPU)
 from jax.flatten_util import ravel_pytree  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
@@ -61,6 +60,29 @@ from jaxhoist import initial_state, scan, vector_field  # noqa: E402
 MU = "foundation.friction_coefficient"
 EPS = "foundation.friction.regularisation_velocity"
 OBS = ["final_position", "final_euler"]
+
+
+def tsit5_final(sc, mu, t1: float, controller, max_steps: int = 1_000_000):
+    """(final mass-centre position [m], accepted steps, success) of one Tsit5 solve at μ (the same plain
+    solve as `benchmark_accelerator.py`'s)."""
+    s = jh.set_param(sc, MU, mu)
+    y0, c = initial_state(s)
+    sol = diffrax.diffeqsolve(
+        diffrax.ODETerm(vector_field),
+        diffrax.Tsit5(),
+        0.0,
+        t1,
+        None,
+        y0,
+        (s, c),
+        stepsize_controller=controller,
+        max_steps=max_steps,
+        saveat=diffrax.SaveAt(t1=True),
+        throw=False,
+    )
+    assert sol.stats is not None and sol.ys is not None
+    ok = (sol.result == diffrax.RESULTS.successful) & jax.numpy.all(jax.numpy.isfinite(sol.ys.position[-1]))
+    return sol.ys.position[-1], sol.stats["num_accepted_steps"], ok
 
 
 def peak_rss_mb() -> float:

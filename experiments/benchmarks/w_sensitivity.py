@@ -8,7 +8,9 @@ below 1e-6 m). With `--discrete`, the same for the derivative of the steps thems
 forward mode: `tangent_weight=None` is not an option, so it differentiates a Tsit5 scan at rtol 1e-6,
 the earlier default of `scan(derivatives=True)`).
 
-    python experiments/w_sensitivity.py --out out/w-sensitivity --n 64 --t1 25 --ref 8 --weights 0.01,0.1,1
+    python experiments/benchmarks/w_sensitivity.py --out out/w-sensitivity --n 64 --t1 25 --ref 8 \\
+        --weights 0.01,0.1,1
+    python experiments/benchmarks/w_sensitivity.py --out out/w-sensitivity --quick   # smoke check
 """
 
 from __future__ import annotations
@@ -46,7 +48,10 @@ def main(argv=None) -> int:
     p.add_argument("--ref", type=int, default=8, help="members checked against central differences")
     p.add_argument("--weights", default="0.01,0.1,1")
     p.add_argument("--discrete", action="store_true", help="also the earlier Tsit5 forward mode")
+    p.add_argument("--quick", action="store_true", help="smoke check: 4 members, 1 s, weight 0.1")
     args = p.parse_args(argv)
+    if args.quick:
+        args.n, args.t1, args.ref, args.weights = 4, 1.0, 2, "0.1"
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sc = jh.load_scenario("paper-4.2")

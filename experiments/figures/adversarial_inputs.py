@@ -10,12 +10,13 @@ prints, per class of input, how many cases ended in
 - `valid ok` / `valid refused`: inputs that are fine (a UTF-8 BOM, a mutation that leaves a valid file);
   a mutated file that still loads counts as `valid ok`.
 
-    PYTHONPATH=$PWD python experiments/adversarial_inputs.py            # about 20-40 s on one core
-    PYTHONPATH=$PWD python experiments/adversarial_inputs.py --quick    # fewer mutated files
-    PYTHONPATH=/path/to/old/checkout python experiments/adversarial_inputs.py   # the "before" figures
+    PYTHONPATH=$PWD python experiments/figures/adversarial_inputs.py            # about 20-40 s on one core
+    PYTHONPATH=$PWD python experiments/figures/adversarial_inputs.py --quick    # fewer mutated files
+    PYTHONPATH=/path/to/old/checkout python experiments/figures/adversarial_inputs.py   # the "before" figures
 
-It only uses public entry points (`load_scenario`, `Scenario.replace`, `simulate`, `cli.main`,
-`read_measurement`), so it runs unchanged on older checkouts.
+Its cases go through public entry points (`load_scenario`, `Scenario.replace`, `simulate`, the command
+line's `main`, `read_measurement`); the traps replace internal compile and solve functions (`_install_traps`,
+internal on purpose).
 """
 
 from __future__ import annotations
@@ -299,8 +300,7 @@ def api_cases(paper42):
 
 
 def csv_cases(tmp: Path):
-    # the module path, not jaxhoist.read_measurement: older checkouts (the "before" figures) lack the latter
-    from jaxhoist._io.measurement import read_measurement
+    read_measurement = jh.read_measurement
 
     good = "t [s],position_x [m]\n0.0,1.0\n0.1,1.5\n0.2,2.0\n"
     items = [

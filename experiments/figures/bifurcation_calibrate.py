@@ -18,7 +18,8 @@ indicator. With η_C = 3.18 m, ζ_C = 0.83 m and the corner fixture of paper-4.2
 4. μ* at ε = 1e-2, 1e-4 m/s and with the bristle law (δ = 1 mm), from brackets found on 5e-4 grids;
 5. classifies the located change (`classify_change`): a steep ramp, and its 10-90 % width.
 
-    python experiments/bifurcation_calibrate.py --out out/bif-calibrate      # ~15 min on 2 shared cores
+    python experiments/figures/bifurcation_calibrate.py --out out/bif-calibrate  # ~15 min on 2 shared cores
+    python experiments/figures/bifurcation_calibrate.py --out out/bif-calibrate --quick  # mu* only, coarse
 
 Writes `calibration.json` and resumes from it (steps already there are not redone); prints every located
 value.
@@ -41,7 +42,6 @@ import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist import get_param, set_param  # noqa: E402
-from jaxhoist._apps.bifurcation.classify import json_safe  # noqa: E402  (internal: the JSON writer of the CLI's records)
 
 MU = "foundation.friction_coefficient"
 XI = "load.mass_centre[0]"
@@ -50,6 +50,19 @@ OBS = "final_theta"
 LEVEL = float(np.radians(15.0))
 KW = dict(times=jh.Times(25.0, n=2501), level=LEVEL)
 MU_PAPER = 0.3635
+
+
+def json_safe(x):
+    """Plain JSON values: tuples to lists, numpy scalars to floats, ±inf/NaN to strings."""
+    if isinstance(x, dict):
+        return {k: json_safe(v) for k, v in x.items()}
+    if isinstance(x, list | tuple):
+        return [json_safe(v) for v in x]
+    if isinstance(x, np.generic):
+        x = x.item()
+    if isinstance(x, float) and not np.isfinite(x):
+        return str(x)
+    return x
 
 
 def _row(b):
@@ -135,9 +148,16 @@ def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True)
     p.add_argument("--tol", type=float, default=1e-6)
+    p.add_argument(
+        "--quick", action="store_true", help="smoke check: only mu* at the preset, tol 1e-3, 251 saved times"
+    )
     p.add_argument("--skip", default="", help="comma-separated steps to skip: fit,trace,slopes,eps,classify")
     args = p.parse_args(argv)
     skip = set(filter(None, args.skip.split(",")))
+    if args.quick:  # one locate on a coarse tolerance and grid (the full run's code path, one compile)
+        KW["times"] = jh.Times(25.0, n=251)
+        args.tol = max(args.tol, 1e-3)
+        skip |= {"trace", "slopes", "eps", "classify"}
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rec: dict = {"mu_paper": MU_PAPER, "observable": OBS}
@@ -151,9 +171,10 @@ def main(argv=None) -> int:
         (out / "calibration.json").write_text(json.dumps(json_safe(rec), indent=1))
 
     if "fit" not in skip and "mu_star" not in rec:  # 1. ξ_C* at μ = 0.3635, then μ* at the preset
-        b = jh.locate_bifurcation(set_param(sc, MU, MU_PAPER), XI, OBS, (1.15, 1.17), search=search, **KW)
-        print("xi_C* at mu = 0.3635:", b.summary(), flush=True)
-        rec["xi_fit"] = _row(b)
+        if not args.quick:
+            b = jh.locate_bifurcation(set_param(sc, MU, MU_PAPER), XI, OBS, (1.15, 1.17), search=search, **KW)
+            print("xi_C* at mu = 0.3635:", b.summary(), flush=True)
+            rec["xi_fit"] = _row(b)
         b = jh.locate_bifurcation(sc, MU, OBS, (0.362, 0.365), search=search, **KW)
         print("mu* at paper-4.3:", b.summary(), flush=True)
         rec["mu_star"] = _row(b)

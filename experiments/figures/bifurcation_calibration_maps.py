@@ -19,7 +19,8 @@ the ϑ(t1) = 15° contour and paper-4.3's point, (c) the largest final-state ste
 `random` combination (a step is max(|Δx|, |Δy| in 0.1 m, |Δφ|, |Δϑ|, |Δψ| in degrees)).
 
     XLA_FLAGS=--xla_force_host_platform_device_count=16 JAX_PLATFORMS=cpu \\
-        python experiments/bifurcation_calibration_maps.py --out out/cal-maps        # 16 cores: ~6 min
+        python experiments/figures/bifurcation_calibration_maps.py --out out/cal-maps  # 16 cores: ~6 min
+        python experiments/figures/bifurcation_calibration_maps.py --out out/cal-maps --quick  # smoke check
 
 Measured on 16 CPU host devices: corners 194 s, xi-ramp 30 s, xi-theta 20 s, random 83 s; on this project's
 2 shared cores expect ~10x that.
@@ -78,7 +79,7 @@ def step_size(res, n_mu):
     return s
 
 
-def run(which, out, base):
+def run(which, out, base, quick=False):
     if which == "corners":
         mus = np.linspace(0.30, 0.45, 61)
         rows = list(
@@ -106,8 +107,13 @@ def run(which, out, base):
         sc = set_param(set_param(base, f"{C}[1]", 3.18), f"{C}[2]", 0.83)
         return jh.scan(
             sc,
-            jh.Grid({MU: np.linspace(0.345, 0.38, 71), f"{C}[0]": np.linspace(1.05, 1.30, 26)}),
-            TIMES,
+            jh.Grid(
+                {
+                    MU: np.linspace(0.345, 0.38, 4 if quick else 71),
+                    f"{C}[0]": np.linspace(1.05, 1.30, 3 if quick else 26),
+                }
+            ),
+            jh.Times(2.0, n=21) if quick else TIMES,
             out_dir=out / which,
             **KW,
         )
@@ -190,13 +196,16 @@ def main(argv=None) -> int:
         help="name=path.npz,...: read a map saved by ScanResult.save "
         "instead of scanning (e.g. one run elsewhere)",
     )
+    p.add_argument("--quick", action="store_true", help="smoke check: xi-theta, 4 x 3 members, 2 s")
     args = p.parse_args(argv)
+    if args.quick:
+        args.maps = "xi-theta"
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     base = jh.load_scenario("paper-4.2")
     loaded = dict(kv.split("=", 1) for kv in args.load.split(",") if kv)
     names = [w for w in args.maps.split(",") if w]
-    res = {w: ScanResult.load(loaded[w]) if w in loaded else run(w, out, base) for w in names}
+    res = {w: ScanResult.load(loaded[w]) if w in loaded else run(w, out, base, args.quick) for w in names}
     if "corners" in res:
         s = step_size(res["corners"], 61)
         mus = np.linspace(0.30, 0.45, 61)

@@ -9,7 +9,8 @@ Each located value is taken with a bracket of ± 1e-6 around its rounded value (
 9.8e-7 wide) and classified from 83 solves over ± 5e-3 (paper-4.2) or 51 over ± 6e-3 (paper-4.3), 25 s,
 saves every 10 ms.
 
-    python experiments/bifurcation_classify.py --out out/bif-classify       # ~3-5 min on 2 shared cores
+    python experiments/figures/bifurcation_classify.py --out out/bif-classify  # ~3-5 min on 2 shared cores
+    python experiments/figures/bifurcation_classify.py --out out/bif-classify --quick   # smoke check
 
 Writes `classify.json`; prints one line per change.
 """
@@ -37,19 +38,22 @@ CASES = [
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True)
+    p.add_argument("--quick", action="store_true", help="smoke check: the first case, 9 samples over 2 s")
     args = p.parse_args(argv)
+    cases = CASES[:1] if args.quick else CASES
+    times = jh.Times(2.0, n=201) if args.quick else jh.Times(25.0, n=2501)
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     rows = []
-    for preset, mu, obs, half, n in CASES:
+    for preset, mu, obs, half, n in cases:
         c = jh.classify_change(
             jh.load_scenario(preset),
             param=MU,
             bracket=(mu - 1e-6, mu + 1e-6),
             observable=obs,
             half_window=half,
-            n_window=n,
-            times=jh.Times(25.0, n=2501),
+            n_window=9 if args.quick else n,
+            times=times,
         )
         print(f"{preset}: {c.summary()}", flush=True)
         rows.append({"preset": preset, **c.to_dict()})

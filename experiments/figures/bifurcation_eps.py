@@ -32,9 +32,10 @@ forward-mode slopes.
 6. an accuracy check at the preset ε = 1e-3: rtol 1e-10 and twice as many saved times;
 7. PNGs: μ* against ε with the fit, the limit and the bristle values; f_E/k against t across μ*.
 
-    python experiments/bifurcation_eps.py --out out/bifurcation-eps            # ~10 min on 2 shared cores
-    python experiments/bifurcation_eps.py --out out/bifurcation-eps --quick    # 3 ε, 1 δ, no checks
-    python experiments/bifurcation_eps.py --out out/bifurcation-eps --refit    # fits + plot from the JSON
+    python experiments/figures/bifurcation_eps.py --out out/bifurcation-eps  # ~10 min on 2 shared cores
+    python experiments/figures/bifurcation_eps.py --out out/bifurcation-eps --quick    # 3 ε, 1 δ, no checks
+    # fits + plot from the JSON
+    python experiments/figures/bifurcation_eps.py --out out/bifurcation-eps --refit
 
 Writes DIR/bifurcation_eps.json (every number) and DIR/mu_star_vs_eps.png, DIR/contact_E_across_mu_star.png.
 """

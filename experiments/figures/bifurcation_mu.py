@@ -13,8 +13,8 @@
    located jumps with the highest scores (`--detail`);
 5. continue the highest-scoring jump along the hoist speed v_l (μ*(v_l), by continuation).
 
-    python experiments/bifurcation_mu.py --out out/bifurcation-mu            # full: 4000 μ over 25 s
-    python experiments/bifurcation_mu.py --out out/bifurcation-mu --quick    # 48 μ over 4 s, tol 1e-4
+    python experiments/figures/bifurcation_mu.py --out out/bifurcation-mu            # full: 4000 μ over 25 s
+    python experiments/figures/bifurcation_mu.py --out out/bifurcation-mu --quick    # 48 μ over 4 s, tol 1e-4
 
 Writes DIR/bifurcation_mu.json (jumps, located μ*, solves used vs a uniform grid, timings; rewritten after
 every stage, so an interrupted run leaves what it had) and PNGs. The scan resumes from its chunks if the

@@ -1,8 +1,8 @@
 """Analogue of Fig. 3 of Grabski & Strzałko (2003), §2.3: the container pulled along the rigid ground by a
 rope fixed at its corner (preset `paper-2.3`), with the rigid-ground model (`simulate_rigid`).
 
-    python experiments/fig03_sliding.py --out out/fig03            # 20 s (the preset's t1)
-    python experiments/fig03_sliding.py --out out/fig03 --quick    # 3 s (smoke check)
+    python experiments/figures/fig03_sliding.py --out out/fig03            # 20 s (the preset's t1)
+    python experiments/figures/fig03_sliding.py --out out/fig03 --quick    # 3 s (smoke check)
 
 Writes into --out:
 - `fig03_sliding.png`: X_C, Y_C, ψ (the paper's plotted quantities) and the ground reaction N, friction

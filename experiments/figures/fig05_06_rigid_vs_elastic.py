@@ -2,8 +2,8 @@
 (preset `paper-4.1`), computed with both models: the rigid body on the rigid ground (`simulate_rigid`, §2)
 and the rigid body on the elastic foundation (`jaxhoist.simulate`, §3).
 
-    python experiments/fig05_06_rigid_vs_elastic.py --out out/fig05_06            # 70 s (the preset's t1)
-    python experiments/fig05_06_rigid_vs_elastic.py --out out/fig05_06 --quick    # 5 s (smoke check)
+    python experiments/figures/fig05_06_rigid_vs_elastic.py --out out/fig05_06  # 70 s (the preset's t1)
+    python experiments/figures/fig05_06_rigid_vs_elastic.py --out out/fig05_06 --quick    # 5 s (smoke check)
 
 Writes into --out:
 - `fig05_mass_centre.png`: x_C and z_C of both models vs t (Fig. 5), plus y_C and ψ;

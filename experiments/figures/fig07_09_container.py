@@ -1,8 +1,9 @@
 """Analogues of Figs 7-9 of Grabski & Strzałko (2003), §4.2: the eccentrically loaded container on the elastic
 foundation, dragged, tipped and lifted by an oblique rope (preset `paper-4.2`).
 
-    python experiments/fig07_09_container.py --out out/fig07_09           # 25 s, 1001 saved times
-    python experiments/fig07_09_container.py --out out/fig07_09 --quick   # 6 s, 121 saved times (smoke check)
+    python experiments/figures/fig07_09_container.py --out out/fig07_09           # 25 s, 1001 saved times
+    # 6 s, 121 saved times (smoke check)
+    python experiments/figures/fig07_09_container.py --out out/fig07_09 --quick
 
 Writes into --out:
 - `fig07_motion.png`: mass-centre coordinates x, y, z and Euler angles φ, ψ, ϑ vs t (Fig. 7);
@@ -29,12 +30,18 @@ import numpy as np  # noqa: E402
 
 import jaxhoist  # noqa: E402
 from jaxhoist import plots  # noqa: E402
-from jaxhoist._io.results import (  # noqa: E402  (internal: the CLI's result-file helpers)
-    corner_detach_times,
-    liftoff_time,
-    save_trajectory,
-    trajectory_arrays,
-)
+
+
+def corner_detach_times(ts, normal_forces) -> list[float | None]:
+    """Per corner D, E, F, H: the first saved time [s] with N_i = 0, or None."""
+    off = np.asarray(normal_forces) <= 0.0
+    return [float(ts[np.argmax(off[:, i])]) if off[:, i].any() else None for i in range(off.shape[-1])]
+
+
+def liftoff_time(ts, normal_forces) -> float | None:
+    """The first saved time [s] at which every corner's normal force N_i is zero, or None."""
+    off = np.all(np.asarray(normal_forces) <= 0.0, axis=-1)
+    return float(ts[np.argmax(off)]) if off.any() else None
 
 
 def main(argv=None) -> int:
@@ -54,7 +61,14 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     traj = jax.block_until_ready(jaxhoist.simulate(scenario, jaxhoist.Times(t1, n=n_save), throw=False))
     t_second = time.perf_counter() - t0
-    d = trajectory_arrays(traj)
+    stem = jaxhoist.save_trajectory(
+        out / "trajectory",
+        traj,
+        scenario,
+        command=[sys.executable, *sys.argv],
+        options={"solver": "Tsit5", "rtol": 1e-6, "atol": 1e-8, "t1": t1, "n_save": n_save},
+    )[0]
+    d = jaxhoist.load_trajectory(stem)  # every output as a numpy array, the form the plots take
     status = jaxhoist.SolveStatus(int(d["status"]))
     print(
         f"paper-4.2, t1 = {t1:g} s, {n_save} saved times: status {status.name.lower()}, "
@@ -70,13 +84,6 @@ def main(argv=None) -> int:
     )
     print(f"max |energy residual| {np.max(np.abs(d['energy_residual'])):.3g} J")
 
-    save_trajectory(
-        out / "trajectory",
-        traj,
-        scenario,
-        command=[sys.executable, *sys.argv],
-        options={"solver": "Tsit5", "rtol": 1e-6, "atol": 1e-8, "t1": t1, "n_save": n_save},
-    )
     figs = {
         "fig07_motion.png": plots.plot_motion(
             d, title="Fig. 7 analogue: motion of the lifted container (paper-4.2)"

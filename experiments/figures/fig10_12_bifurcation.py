@@ -12,7 +12,8 @@ Each panel marks every history's last contact (the real lift-off) with a dot. In
 it, over ~4e-3 in μ) next to a jump of the lift-off time: the histories agree until the load leaves the
 ground (~19-20 s) and separate after it (docs/bifurcation.md, "Calibrating to the paper's μ*").
 
-    python experiments/fig10_12_bifurcation.py --out docs/img       # ~1 min
+    python experiments/figures/fig10_12_bifurcation.py --out docs/img       # ~1 min
+    python experiments/figures/fig10_12_bifurcation.py --out out/fig10_12 --quick   # smoke check: 3 s
 
 Prints, for every μ, the first all-off time, the last contact and the final state.
 """
@@ -74,7 +75,10 @@ def main(argv=None) -> int:
     p.add_argument("--t1", type=float, default=25.0)
     p.add_argument("--n-save", type=int, default=2501)
     p.add_argument("--dpi", type=int, default=90)
+    p.add_argument("--quick", action="store_true", help="smoke check: 3 s, 151 saved times")
     args = p.parse_args(argv)
+    if args.quick:
+        args.t1, args.n_save = 3.0, 151
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sc = jh.load_scenario("paper-4.3")

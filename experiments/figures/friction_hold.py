@@ -1,6 +1,6 @@
 """A load held by a steady pull below μN: drift and solver steps for both friction laws.
 
-    python experiments/friction_hold.py --out out/friction_hold [--quick]
+    python experiments/figures/friction_hold.py --out out/friction_hold [--quick]
 
 A uniform 37.5 t box is pulled horizontally through a rope at mid-height of its η = 0 face; a ramped hoist
 takes in 66 mm of rope and stops at t ≈ 1.8 s, leaving a pull of about 0.5 μmg for the rest of the run.
@@ -40,7 +40,7 @@ def main(argv=None):
     t1 = 6.0 if args.quick else 10.0
     ts = np.linspace(0.0, t1, int(t1 * 20) + 1)
     lines = [
-        f"Hold of a 37.5 t box at T ~ 0.5 mu m g, t1 = {t1} s (`python experiments/friction_hold.py"
+        f"Hold of a 37.5 t box at T ~ 0.5 mu m g, t1 = {t1} s (`python experiments/figures/friction_hold.py"
         f"{' --quick' if args.quick else ''}`)",
         "",
         "| law | drift of C, window [2.5,3] s -> [t1-0.5,t1] s [mm] | predicted creep [mm] | accepted steps |"

@@ -5,8 +5,8 @@ is the ε -> 0 limit). For each law we report accepted/rejected steps, wall time
 ratio to the ε = 1e-2 run of the same process), and the mass-centre distance from the reference at
 t = 5 s and at the end.
 
-    python experiments/friction_laws.py --out out/friction            # full (25 s horizon)
-    python experiments/friction_laws.py --out out/friction --quick    # 5 s horizon, fewer laws
+    python experiments/figures/friction_laws.py --out out/friction            # full (25 s horizon)
+    python experiments/figures/friction_laws.py --out out/friction --quick    # 5 s horizon, fewer laws
 """
 
 import argparse

@@ -15,10 +15,11 @@ Printed and saved as markdown (DIR/identify_paper42.md): truth, start, estimate,
 apart); a check of each fit's Jacobian against central differences of the data's accurate solve at the
 estimate; and, with several solvers, every fit's estimate against the first one's in units of its SE.
 
-    python experiments/identify_paper42.py --out out/identify --quick   # 3 s horizon, identify's default
-    python experiments/identify_paper42.py --out out/identify --quick --no-scipy \\
+    # 3 s horizon, identify's default
+    python experiments/figures/identify_paper42.py --out out/identify --quick
+    python experiments/figures/identify_paper42.py --out out/identify --quick --no-scipy \\
         --solver tsit5 --solver rosenbrock-w --solver rosenbrock-w@1e-4
-    python experiments/identify_paper42.py --out out/identify           # the full 25 s horizon
+    python experiments/figures/identify_paper42.py --out out/identify           # the full 25 s horizon
 """
 
 import argparse

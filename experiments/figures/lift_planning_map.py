@@ -3,9 +3,10 @@ and the friction coefficient μ, which motion the resting load starts first as t
 sliding, tipping about an edge, tipping about a corner, or a clean lift — and at which pull; a sample of
 the map is confirmed by simulating both models (the rigid one of §2 and the elastic one of §3).
 
-    python experiments/lift_planning_map.py --out out/lift_map                 # 4 μ x 91 x 72 directions
-    python experiments/lift_planning_map.py --out out/lift_map --quick         # coarse grid, 4 checks
-    python experiments/lift_planning_map.py --out out/lift_map_centre --attachment 1.25 3.0 2.5  # B centred
+    python experiments/figures/lift_planning_map.py --out out/lift_map  # 4 μ x 91 x 72 directions
+    python experiments/figures/lift_planning_map.py --out out/lift_map --quick         # coarse grid, 4 checks
+    # B centred
+    python experiments/figures/lift_planning_map.py --out out/lift_map_centre --attachment 1.25 3.0 2.5
 
 The rope direction is B -> A at t = 0: its angle θ from the vertical and its azimuth α in the load's
 base, measured from the edge DE (the body ξ axis) towards DH (η); the boom tip A is placed at the preset's

@@ -2,8 +2,9 @@
 
 **The boundary.** paper-4.2 is pulled at the top corner above D: D and then H leave the ground. Whether
 corner E then also hops off briefly (a fraction of a millimetre, ending in an impact) or stays down until
-the load tips, seconds later, depends on μ and on the hoist speed v_l (`experiments/bifurcation_eps.py`
-locates it along μ at v_l = 0.3 m/s and follows it in ε). The indicator is the built-in observable
+the load tips, seconds later, depends on μ and on the hoist speed v_l
+(`experiments/figures/bifurcation_eps.py` locates it along μ at v_l = 0.3 m/s and follows it in ε). The
+indicator is the built-in observable
 
     g(μ, v_l) = contact_margin[E] = min over t in [0, t1] of f_E(t) / k    [m]
 
@@ -23,8 +24,8 @@ map (it happens at ~0.2 s at v_l = 0.42 m/s and ~0.4 s at 0.2 m/s) and ends long
    must pass through the preset's value of each, within the error that μ*'s bracket implies there;
 5. the picture: g over (μ, v_l) with the grid's zero contour and the traced points.
 
-    python experiments/regime_map.py --out out/regime-map            # ~2-3 min on 2 shared cores
-    python experiments/regime_map.py --out out/regime-map --quick    # 11 x 5 grid
+    python experiments/figures/regime_map.py --out out/regime-map            # ~2-3 min on 2 shared cores
+    python experiments/figures/regime_map.py --out out/regime-map --quick    # 11 x 5 grid
 
 Writes DIR/regime_map.json (every number), DIR/regime_map.npz (the grid), DIR/regime_map.png.
 (The script's earlier version mapped the lift-off time around the 25 s lift-off jump μ* = 0.4721707; that

@@ -1,8 +1,8 @@
 """Convergence of the elastic-foundation model (paper §3, `jaxhoist.simulate`) to the rigid-ground model
 (paper §2, `simulate_rigid`) as the foundation stiffness k grows, with critically damped corner springs.
 
-    python experiments/rigid_convergence.py --out out/rigid_convergence            # full run (t1 = 170 s)
-    python experiments/rigid_convergence.py --out out/rigid_convergence --quick    # 5 s smoke check
+    python experiments/figures/rigid_convergence.py --out out/rigid_convergence  # full run (t1 = 170 s)
+    python experiments/figures/rigid_convergence.py --out out/rigid_convergence --quick    # 5 s smoke check
 
 The full run takes about 15 min on a shared 2-core machine (6 of it the ε = 1e-5 run, 6.8 M steps); the
 results and their discussion are in docs/rigid-model.md, "Convergence of the elastic model to the rigid one".
@@ -327,7 +327,7 @@ def main(argv=None) -> int:
             "phase_log": rig.phase_log().splitlines(),
         },
         "elastic": rows,
-        "command": "python experiments/rigid_convergence.py "
+        "command": "python experiments/figures/rigid_convergence.py "
         + " ".join(sys.argv[1:] if argv is None else argv),
         "versions": {"jax": jax.__version__, "jaxhoist": getattr(jaxhoist, "__version__", "?")},
     }

@@ -1,12 +1,15 @@
 """Sweeps of the rigid-ground model (paper §2, `simulate_rigid`) around its presets: every run must complete
 (issue 15), and its energy balance must close.
 
-    python experiments/rigid_sweep.py --out out/rigid_sweep --quick     # a minute or two: 4 runs
-    python experiments/rigid_sweep.py --out out/rigid_sweep             # the full sweep (hours on 2 cores)
-    python experiments/rigid_sweep.py --out out/rigid_sweep --plot-only # figures from what is done so far
-    python experiments/rigid_sweep.py --out out/one --one paper-2.3,elastic,0.30,17  # one run, its record
-    python experiments/rigid_sweep.py --out out/rigid_elastic --elastic # rigid vs elastic, k = 1.5e9
-    python experiments/rigid_sweep.py --out out/rigid_chatter --elastic-chatter  # ... where cycles were
+    python experiments/figures/rigid_sweep.py --out out/rigid_sweep --quick     # a minute or two: 4 runs
+    python experiments/figures/rigid_sweep.py --out out/rigid_sweep  # the full sweep (hours on 2 cores)
+    # figures from what is done so far
+    python experiments/figures/rigid_sweep.py --out out/rigid_sweep --plot-only
+    # one run, its record
+    python experiments/figures/rigid_sweep.py --out out/one --one paper-2.3,elastic,0.30,17
+    python experiments/figures/rigid_sweep.py --out out/rigid_elastic --elastic # rigid vs elastic, k = 1.5e9
+    # ... where cycles were
+    python experiments/figures/rigid_sweep.py --out out/rigid_chatter --elastic-chatter
 
 Full sweep: μ = 0.10, 0.105, ..., 0.50 (81 values) on `paper-2.3` and `paper-4.1`, each with the elastic rope
 (2.14) and the inextensible rope (2.15), to the preset's t1 (20 s and 70 s); plus, at the preset's μ, the
