@@ -54,17 +54,17 @@ def _trap(*args, **kwargs):
 
 def _install_traps():
     # internal on purpose: traps the compile/solve entry points, to see what validation lets through
-    import jaxhoist._apps.scan.run as scan_mod
-    import jaxhoist._numerics.solve as solve_mod
-    from jaxhoist._apps.cli import bifurcation as bifurcation_cli
-    from jaxhoist._apps.cli import simulate as simulate_cli
+    import jaxhoist._apps.scan.run as scan_mod  # internal: trapped
+    import jaxhoist._numerics.solve as solve_mod  # internal: trapped
+    from jaxhoist._apps.cli import bifurcation as bifurcation_cli  # internal: trapped
+    from jaxhoist._apps.cli import simulate as simulate_cli  # internal: trapped
 
     simulate_cli._compiled_solve = _trap
     solve_mod._solve_jit = _trap
     scan_mod._fingerprint = _trap  # scan(): called after every host-side check, before compiling
     for name in ("scan", "locate_bifurcation", "trace_boundary"):
         setattr(bifurcation_cli, name, _trap)
-    import jaxhoist._numerics.rigid.solve as rigid
+    import jaxhoist._numerics.rigid.solve as rigid  # internal: trapped
 
     rigid.simulate_rigid = _trap
 
@@ -89,7 +89,7 @@ def run_py(fn) -> str:
 
 
 def run_cli(argv) -> str:
-    from jaxhoist._apps.cli import app as cli
+    from jaxhoist._apps.cli import app as cli  # internal: the command line's main, run in-process
 
     err = io.StringIO()
     with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
@@ -270,7 +270,7 @@ def api_cases(paper42):
                 sc, jh.Times(0.05, n=3), options=jh.SolverOptions(max_steps=10), throw=False
             ).position[-1]
 
-        import jaxhoist._numerics.solve as solve_mod
+        import jaxhoist._numerics.solve as solve_mod  # internal: its trap undone, tracing only
 
         saved = solve_mod._solve_jit
         solve_mod._solve_jit = solve_mod.eqx.filter_jit(solve_mod.solve)  # tracing only: fails before solving
