@@ -5,7 +5,7 @@ PIDController(1e-6, 1e-8))`), the cost at ε = 1e-4, forward-mode sensitivities 
 memory.
 
     python experiments/benchmarks/benchmark_scan.py --out out/bench-scan  # 4096 μ, 25 s, every CPU core
-    python experiments/benchmarks/benchmark_scan.py --out out/bench-scan --quick    # 64 μ, 3 s: a smoke run
+    python experiments/benchmarks/benchmark_scan.py --out out/bench-scan --quick  # 16 μ, 1 s, a smoke run
 
 What it runs (all in one process, so every ratio is against a baseline measured under the same load):
 
@@ -145,36 +145,39 @@ def plain_vmap_tsit5(sc, mus, t1):
 def main(argv=None):
     p = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--quick", action="store_true", help="64 μ over 3 s, small reference: a smoke run")
-    p.add_argument("--n", type=int, default=None, help="number of μ in [0.1, 0.6] (default 4096; quick 64)")
-    p.add_argument("--t1", type=float, default=None, help="horizon [s] (default 25, paper-4.2's; quick 3)")
+    p.add_argument("--quick", action="store_true", help="smoke run: 16 μ over 1 s, 2 checked, no baselines")
+    p.add_argument("--n", type=int, default=None, help="number of μ in [0.1, 0.6] (default 4096; quick 16)")
+    p.add_argument("--t1", type=float, default=None, help="horizon [s] (default 25, paper-4.2's; quick 1)")
     p.add_argument("--devices", type=int, default=None, help="host CPU devices (default: one per core)")
     p.add_argument(
-        "--ref-n", type=int, default=None, help="members checked against the reference (512; quick 8)"
+        "--ref-n", type=int, default=None, help="members checked against the reference (512; quick 2)"
     )
     p.add_argument("--ref-rtol", type=float, default=1e-10, help="rtol of the adaptive Tsit5 reference")
-    p.add_argument("--scipy-n", type=int, default=None, help="members for scipy (default 3; quick 1)")
+    p.add_argument("--scipy-n", type=int, default=None, help="members for scipy (default 3; quick 0)")
     p.add_argument("--scipy-methods", default="LSODA,Radau,RK45", help="solve_ivp methods")
     p.add_argument("--scipy-rtol", default="1e-6", help="scipy tolerances (comma-separated; atol = rtol/100)")
     p.add_argument(
-        "--vmap-n", type=int, default=None, help="members of the plain vmap baseline (64; quick 8)"
+        "--vmap-n", type=int, default=None, help="members of the plain vmap baseline (64; quick 0)"
     )
     p.add_argument(
-        "--eps-n", type=int, default=None, help="members of the ε = 1e-4 row (256; quick 8; 0: none)"
+        "--eps-n", type=int, default=None, help="members of the ε = 1e-4 row (256; quick 0; 0: none)"
     )
-    p.add_argument("--deriv-n", type=int, default=None, help="members for the sensitivities (default: all)")
+    p.add_argument("--deriv-n", type=int, default=None, help="sensitivity members (all; quick 0)")
     p.add_argument("--no-expert-row", action="store_true", help="skip the ε = 1e-2 fixed-step Bosh3 row")
     args = p.parse_args(argv)
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
-    n = args.n or (64 if args.quick else 4096)
-    t1 = args.t1 or (3.0 if args.quick else 25.0)
-    ref_n = min(n, args.ref_n if args.ref_n is not None else (8 if args.quick else 512))
-    scipy_n = args.scipy_n if args.scipy_n is not None else (1 if args.quick else 3)
-    vmap_n = min(n, args.vmap_n if args.vmap_n is not None else (8 if args.quick else 64))
-    eps_n = min(n, args.eps_n if args.eps_n is not None else (8 if args.quick else 256))
-    deriv_n = min(n, args.deriv_n if args.deriv_n is not None else n)
+    q = args.quick  # a smoke run: the scan and its check only (the baselines compile programs of their own)
+    n = args.n or (16 if q else 4096)
+    t1 = args.t1 or (1.0 if q else 25.0)
+    ref_n = min(n, args.ref_n if args.ref_n is not None else (2 if q else 512))
+    scipy_n = args.scipy_n if args.scipy_n is not None else (0 if q else 3)
+    vmap_n = min(n, args.vmap_n if args.vmap_n is not None else (0 if q else 64))
+    eps_n = min(n, args.eps_n if args.eps_n is not None else (0 if q else 256))
+    deriv_n = min(n, args.deriv_n if args.deriv_n is not None else (0 if q else n))
+    if q:
+        args.no_expert_row = True
     sc = jh.load_scenario("paper-4.2")  # as shipped: ε = 1e-3 m/s
     mus = np.linspace(0.1, 0.6, n)
     obs = dict(observables=OBS)
