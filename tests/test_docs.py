@@ -86,7 +86,9 @@ res = jh.identify(
 print(res.summary())
 """,
     # The full runs take minutes to hours: their --quick lines.
-    "rigid-convergence": "python experiments/figures/rigid_convergence.py --out out/rigid_convergence --quick\n",
+    "rigid-convergence": (
+        "python experiments/figures/rigid_convergence.py --out out/rigid_convergence --quick\n"
+    ),
     "rigid-sweep": "python experiments/figures/rigid_sweep.py --out out/rigid_sweep --quick\n",
 }
 

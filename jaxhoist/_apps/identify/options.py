@@ -77,7 +77,8 @@ def fit_solver_options(options: SolverOptions | None) -> SolverOptions:
 
     The state and its parameter sensitivities are integrated as one system under one step-size control
     (`core._sensitivity_solve`); with `jaxhoist.RosenbrockW` its W serves every block, factorised
-    once per step. It became the default on 2026-11-27: on paper-4.2 (`python experiments/figures/identify_paper42.py
+    once per step. It became the default on 2026-11-27: on paper-4.2
+    (`python experiments/figures/identify_paper42.py
     --no-scipy --solver tsit5 --solver rosenbrock-w`, μ, k, h, c_l, b_l from 5 mm / 1 % noise) the 25 s fit
     took 20.0 s + 24.3 s compile against Tsit5's (rtol 1e-6, the default until then) 74.9 s + 15.8 s, the
     estimates within 0.018 standard errors of Tsit5's; with 10x stiffer friction W was faster still (Tsit5

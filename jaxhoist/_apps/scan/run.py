@@ -128,7 +128,8 @@ def scan(
       with a last axis over the parameters [unit of the observable per unit of the parameter]. Through the
       default Rosenbrock-W solver they are solved as their own error-controlled ODE beside the state
       (`numerics/sensitivity.py`): 8.9x the plain scan's time for one parameter on paper-4.2 over 25 s
-      (`experiments/benchmarks/w_sensitivity.py`, docs/performance.md); with fixed steps the steps are differentiated.
+      (`experiments/benchmarks/w_sensitivity.py`, docs/performance.md); with fixed steps the steps are
+      differentiated.
     - `batch`: `BatchOptions` (lanes, chunk size, memory cap [B], devices, sort order, wait for other
       processes [s]); default `BatchOptions()`.
     - `out_dir`: write each finished chunk there (`chunk_#####.npz` + `manifest.json`) and the final
