@@ -120,8 +120,10 @@ jaxhoist risk drag-box.toml --uncertain "foundation.friction_coefficient=uniform
     --samples 16 --t1 3 --n-save 151 --out out/risk
 """,
     # The full runs take minutes to hours: their --quick lines.
-    "rigid-convergence": "python experiments/rigid_convergence.py --out out/rigid_convergence --quick\n",
-    "rigid-sweep": "python experiments/rigid_sweep.py --out out/rigid_sweep --quick\n",
+    "rigid-convergence": (
+        "python experiments/figures/rigid_convergence.py --out out/rigid_convergence --quick\n"
+    ),
+    "rigid-sweep": "python experiments/figures/rigid_sweep.py --out out/rigid_sweep --quick\n",
 }
 
 

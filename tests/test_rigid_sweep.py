@@ -3,8 +3,8 @@
 impact resolved by the documented fallback (recorded in the phase log), and the energy balance closed.
 
 The full sweep (μ = 0.10-0.50, both presets, both ropes, v_l and the rope point varied) is
-`experiments/rigid_sweep.py`; these are its fast subset. Every run saves `N_SAVE` times of the same preset,
-so the compiled phase solve is shared.
+`experiments/figures/rigid_sweep.py`; these are its fast subset. Every run saves `N_SAVE` times of the same
+preset, so the compiled phase solve is shared.
 """
 
 from pathlib import Path

@@ -471,7 +471,8 @@ def test_stiff_member_solves(paper42):
 def test_sensitivity_solve_uses_the_exact_friction_slope():
     """The forward-mode sensitivity solve takes W with the exact friction slope (`linearise_exact_slope`):
     with the band-entry slope its error estimate let d x_C(25 s)/dμ at μ = 0.6 go 15 % off central
-    differences instead of 1.9 % (`experiments/w_sensitivity.py`). A custom linearisation is kept as given."""
+    differences instead of 1.9 % (`experiments/benchmarks/w_sensitivity.py`). A custom linearisation is
+    kept as given."""
     from jaxhoist._numerics.sensitivity import augmented_solver
 
     def own(t, y, args):

@@ -19,7 +19,7 @@ diagonal) and γ_i = Σ_j γ_ij. Time enters through the hoist law: the rope's r
 hoist speed, so ∂f/∂t is the stiff rope's force rate c_l v_l (4.2e6 N/s on paper-4.2) acting on the boom tip
 and the load. A W-method may leave ∂f/∂t out (it is the time column of the autonomous system's W); the ramp in
 the rope's stretch then enters each step only through the explicit stage values, and the boom tip's
-velocity error set the step (98 % of the error norm, `experiments/w_error_budget.py`). By default
+velocity error set the step (98 % of the error norm, a script since removed). By default
 (`RosenbrockW(time_derivative=True)`) the stages carry γ_i h ∂f/∂t (one forward-mode derivative in t per
 step, at the step's start, held fixed like W). On a stiff spring pulled at a constant rate with a W 30 %
 off its Jacobian that more than halves the error of a long step (tests/test_rosenbrock.py), and on

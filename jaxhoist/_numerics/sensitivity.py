@@ -20,7 +20,7 @@ s too: a step is accepted when max(‖e_y‖, w ‖e_s‖) ≤ 1 in the controll
 atol). The weight w = `RosenbrockW.tangent_weight` (default 0.1) lets a sensitivity carry 1/w times the
 relative local error of the state; w = 1 controls both alike. Measured on paper-4.2, 25 s, default
 tolerances, against central differences (h = 1e-4) of Tsit5 solves at rtol 1e-10 (`python
-experiments/w_sensitivity.py`): see docs/performance.md.
+experiments/benchmarks/w_sensitivity.py`): see docs/performance.md.
 
 `solve_forward` wraps the solve in `jax.custom_jvp`, so `jax.jvp`, `jax.jacfwd` and everything built on
 them (`scan(derivatives=True)`, `locate_bifurcation`) get these sensitivities. The values under

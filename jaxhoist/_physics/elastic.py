@@ -160,7 +160,7 @@ def snapshot(t: Scalar, y: State, scenario: Scenario, c: Constants) -> Snapshot:
 def _sum_corners(x: Float[Array, "4 ..."]) -> Float[Array, "..."]:
     """Σ over the four corners, written out: in a vmapped scan XLA fuses these additions with their
     neighbours, where `jnp.sum(x, axis=0)` is a separate reduction kernel per evaluation (5-14 % of a
-    fixed step, `experiments/bench_vector_field.py`; docs/performance.md)."""
+    fixed step, `experiments/benchmarks/bench_vector_field.py`; docs/performance.md)."""
     return x[0] + x[1] + x[2] + x[3]
 
 

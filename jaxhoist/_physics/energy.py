@@ -67,9 +67,9 @@ def balance_residual(e0: Energy, e1: Energy, y1: State, y0: State) -> Scalar:
 BALANCE_BOUND = 0.05
 """The a-posteriori energy check: a solve whose `relative_balance_residual` exceeds this bound gets the
 status `SolveStatus.ENERGY_BALANCE`. Healthy solves stay well below it (measured with
-`experiments/energy_bound.py`: the default Rosenbrock-W solver at most 3.5e-4 on the presets and 2.8e-3 on
-48 random plausible scenarios around paper-4.2; at rtol 1e-2 at most 7.3e-3 on the presets; Tsit5 below
-1e-7); a broken solve that "succeeds" with a rope that carries no load opens the balance by 0.91
+`experiments/figures/energy_bound.py`: the default Rosenbrock-W solver at most 3.5e-4 on the presets and
+2.8e-3 on 48 random plausible scenarios around paper-4.2; at rtol 1e-2 at most 7.3e-3 on the presets;
+Tsit5 below 1e-7); a broken solve that "succeeds" with a rope that carries no load opens the balance by 0.91
 (paper-4.2 with rope.stiffness = 1e16 N/m, the default solver)."""
 
 BALANCE_FLOOR = 1e-9

@@ -263,7 +263,7 @@ def band_entry_slope(
     ε = 1e-3 1.35 cm off instead of 0.11 cm). A W-method keeps its order for any W, and W is not
     differentiated (`rosenbrock.w_step`), so this changes only which steps are accepted.
 
-    Measured with `experiments/w_band.py` (paper-4.2 over 25 s, μ evenly in [0.1, 0.6], 201 saved times,
+    Measured with a script since removed (paper-4.2 over 25 s, μ evenly in [0.1, 0.6], 201 saved times,
     default tolerances; errors: final mass centre against Tsit5 at rtol 1e-9), without -> with (k = 2):
 
     - ε = 1e-4, 16 members: steps 191 635 -> 76 721 (max 32 123 -> 7 058, rejected 31 % -> 11 %), worst
@@ -354,7 +354,7 @@ def linearise(
     # Turning the body at fixed V turns the corner velocities too: δu_i = R (δθ x (ω x ρ_i)) = G^ω_i δθ,
     # G^ω_i = -R [ω x ρ_i]x. Through ∂F_i/∂u_i that is a stiffness in δθ of size μN/ε |ω| |ρ| while a corner
     # sticks (~1e8 N/rad on paper-4.2 at μ = 0.55, tipping about one sticking corner); left out, the W step
-    # met it explicitly and took 3x the steps over 25 s there (experiments/w_orientation.py).
+    # met it explicitly and took 3x the steps over 25 s there (a script since removed).
     turn = -R[None] @ _skew(jnp.cross(omega, c.corners_rel))
     CG = _mm(C, G)
     # K_i G_i: K_i has only its z column k_i; C_i G^ω_i = [0, C_i turn_i]
@@ -401,5 +401,5 @@ def linearise_exact_slope(t: Scalar, y: State, args: tuple[Scenario, Constants])
     fooled the error estimate of the sensitivities: d(final mass centre)/dμ over 64 μ of paper-4.2, 25 s,
     against central differences of Tsit5 at rtol 1e-10 on 8 of them, was up to 15 % off with it (at
     μ = 0.6) and 1.9 % without, at about the same cost (12.2x and 10.2x the plain scan; `python
-    experiments/w_sensitivity.py --n 64 --t1 25 --ref 8 --weights 0.1`)."""
+    experiments/benchmarks/w_sensitivity.py --n 64 --t1 25 --ref 8 --weights 0.1`)."""
     return linearise(t, y, args, band_entry=False)

@@ -26,7 +26,7 @@ from jaxhoist._numerics.rigid.solve import simulate_rigid  # noqa: E402
 
 OUT = Path(__file__).parent / "rigid_edge_state.npz"
 T_FROM = 46.0  # [s]
-T1 = 70.0  # [s]: the preset's t1, as in experiments/rigid_sweep.py
+T1 = 70.0  # [s]: the preset's t1, as in experiments/figures/rigid_sweep.py
 
 
 def scenario() -> jh.Scenario:

@@ -114,7 +114,7 @@ def default_solver_options() -> SolverOptions:
     Not the Rosenbrock-W solver of `simulate` and `scan`: a locator needs the observable to well below its
     `tol` and a slope per Newton step; at its default tolerances W puts μ* further off than Tsit5 and its
     first call compiles for about twice as long (docs/bifurcation-studies.md, "Why Tsit5 for the locator",
-    `experiments/locator_solver.py`)."""
+    A script since removed)."""
     return SolverOptions(solver=diffrax.Tsit5())
 
 

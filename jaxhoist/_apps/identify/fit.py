@@ -169,7 +169,7 @@ def residual_function(
     its `weights` are read). A failed solve gives non-finite residuals. `options` defaults to `identify`'s
     (the Rosenbrock-W solver at rtol 5e-4): its residuals carry that tolerance, too noisy for finite
     differences with small steps; for those pass a tight solve, e.g. `SolverOptions(diffrax.Tsit5(),
-    rtol=1e-8, atol=1e-10)` (`experiments/identify_paper42.py` does).
+    rtol=1e-8, atol=1e-10)` (`experiments/figures/identify_paper42.py` does).
 
     **Returns** `(fn, theta0)`: `fn(theta) -> r` (n_residuals,) and the start θ0.
     """

@@ -93,8 +93,7 @@ def adaptive_lanes(n: int, accelerator: bool = False) -> int:
     Why: a vmapped step costs far less per member in a wide group (the per-kernel cost of the small
     per-member systems is shared), but a group takes as many steps as its slowest member. In a dense scan,
     where a group's members are close neighbours, they take about the same steps, so wide groups win; in a
-    sparse one they do not. `python experiments/w_lanes.py --out out/w-lanes-dense --grid 4096 --windows
-    0.2,0.4,0.55 --n 256 --lanes 16,64,128,256` (paper-4.2, 25 s, windows of a 4096-member μ-scan, one
+    sparse one they do not. A script since removed (paper-4.2, 25 s, windows of a 4096-member μ-scan, one
     device): 92 / 45 / 40 / 38 ms per trajectory for 16 / 64 / 128 / 256 lanes, lock-step efficiency
     0.98-0.95, the same results; 64 members spread over μ = 0.1-0.6 instead: 16 and 32 lanes 1.0x, 64 lanes
     1.25x (efficiency 0.39). Member count stands in for density: a bigger scan of a fixed range is denser.

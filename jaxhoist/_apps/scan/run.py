@@ -134,14 +134,15 @@ def scan(
       Runge-Kutta solver (e.g. `diffrax.Bosh3()`) run the lean loop of `numerics.fixed_step` (same numbers
       as diffrax's `ConstantStepSize` to round-off when the saved times are multiples of `dt0`; other
       solvers use diffrax's); every member takes the same steps. Check the accuracy against an adaptive
-      solve (`experiments/benchmark_scan.py` does; see docs/performance.md).
+      solve (`experiments/benchmarks/benchmark_scan.py` does; see docs/performance.md).
     - `histories`: `Trajectory` fields to keep at every saved time, e.g. `("position", "euler")`.
     - `derivatives`: also compute forward-mode sensitivities of every observable with respect to the swept
       parameters (`jax.jacfwd`, through `diffrax.ForwardMode` or the fixed-step loop), stored as `d_<name>`
       with a last axis over the parameters [unit of the observable per unit of the parameter]. Through the
       default Rosenbrock-W solver they are solved as their own error-controlled ODE beside the state
       (`numerics/sensitivity.py`): 8.9x the plain scan's time for one parameter on paper-4.2 over 25 s
-      (`experiments/w_sensitivity.py`, docs/performance.md); with fixed steps the steps are differentiated.
+      (`experiments/benchmarks/w_sensitivity.py`, docs/performance.md); with fixed steps the steps are
+      differentiated.
     - `batch`: `BatchOptions` (lanes, chunk size, memory cap [B], devices, sort order, wait for other
       processes [s]); default `BatchOptions()`.
     - `out_dir`: write each finished chunk there (`chunk_#####.npz` + `manifest.json`) and the final
