@@ -131,3 +131,21 @@ def add_allow_implausible(parser) -> None:
         help="accept scenario values outside their plausible ranges (a typo like rope.stiffness=1e16 is "
         "refused without it); the solve's own checks, e.g. the energy balance, still apply",
     )
+
+
+def add_sampled_scan_options(parser) -> None:
+    """The options that `risk` and `optimise-lift` share: the horizon and saved times, the solver and its
+    tolerances, the scan layout, `--set` and `--allow-implausible`."""
+    p = parser
+    p.add_argument("--t1", type=float, default=None, help="end time [s] (default: the scenario's t1)")
+    p.add_argument("--n-save", type=int, default=201, help="saved times (the observables are read on them)")
+    p.add_argument("--rtol", type=float, default=None)
+    p.add_argument("--atol", type=float, default=None)
+    p.add_argument("--max-steps", type=int, default=200_000)
+    p.add_argument("--solver", choices=sorted(CLI_SOLVERS), default="rosenbrock-w", help="integrator")
+    p.add_argument("--lanes", type=int, default=None, help="members per vmapped lock-step solve")
+    p.add_argument(
+        "--chunk-size", type=int, default=None, help="members per compiled call (default: automatic)"
+    )
+    p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
+    add_allow_implausible(p)

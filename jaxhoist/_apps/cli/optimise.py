@@ -20,7 +20,7 @@ from ..._numerics.options import SolverOptions
 from ..._numerics.times import Times
 from ..planning import OptimisedLift, optimise_lift
 from ..scan import BatchOptions
-from .common import CLI_SOLVERS, add_allow_implausible, claim_out_dir, default_out, prepare_out_dir
+from .common import CLI_SOLVERS, add_sampled_scan_options, claim_out_dir, default_out, prepare_out_dir
 from .risk import parse_distribution, parse_hazard, split_item
 
 
@@ -106,18 +106,7 @@ def configure_parser(subparsers) -> None:
     p.add_argument("--penalty", type=float, default=0.0, help="weight of the softplus penalty of the limits")
     p.add_argument("--check-samples", type=int, default=256, help="members of the fresh sample of the check")
     p.add_argument("--check-replicates", type=int, default=8, help="scrambles of the check's sample")
-    p.add_argument("--t1", type=float, default=None, help="end time [s] (default: the scenario's t1)")
-    p.add_argument("--n-save", type=int, default=201, help="saved times (the observables are read on them)")
-    p.add_argument("--rtol", type=float, default=None)
-    p.add_argument("--atol", type=float, default=None)
-    p.add_argument("--max-steps", type=int, default=200_000)
-    p.add_argument("--solver", choices=sorted(CLI_SOLVERS), default="rosenbrock-w", help="integrator")
-    p.add_argument("--lanes", type=int, default=None, help="members per vmapped lock-step solve")
-    p.add_argument(
-        "--chunk-size", type=int, default=None, help="members per compiled call (default: automatic)"
-    )
-    p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
-    add_allow_implausible(p)
+    add_sampled_scan_options(p)
     p.add_argument(
         "--out",
         default=None,

@@ -37,7 +37,7 @@ from ..planning import (
     tilt,
 )
 from ..scan import BatchOptions, Grid, Sweep
-from .common import CLI_SOLVERS, add_allow_implausible, claim_out_dir, default_out, prepare_out_dir
+from .common import CLI_SOLVERS, add_sampled_scan_options, claim_out_dir, default_out, prepare_out_dir
 
 _DISTRIBUTIONS = {
     "uniform": (Uniform, "uniform(low,high)"),
@@ -161,18 +161,7 @@ def configure_parser(subparsers) -> None:
         default=0.05,
         help="largest share of failed members of a design point that still gives numbers",
     )
-    p.add_argument("--t1", type=float, default=None, help="end time [s] (default: the scenario's t1)")
-    p.add_argument("--n-save", type=int, default=201, help="saved times (the observables are read on them)")
-    p.add_argument("--rtol", type=float, default=None)
-    p.add_argument("--atol", type=float, default=None)
-    p.add_argument("--max-steps", type=int, default=200_000)
-    p.add_argument("--solver", choices=sorted(CLI_SOLVERS), default="rosenbrock-w", help="integrator")
-    p.add_argument("--lanes", type=int, default=None, help="members per vmapped lock-step solve")
-    p.add_argument(
-        "--chunk-size", type=int, default=None, help="members per compiled call (default: automatic)"
-    )
-    p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
-    add_allow_implausible(p)
+    add_sampled_scan_options(p)
     p.add_argument(
         "--out",
         default=None,
