@@ -16,6 +16,7 @@ written into the checkout.
 from __future__ import annotations
 
 import os
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -191,3 +192,52 @@ def test_documented_block_runs(
             f"{page}:{block.lineno} (run {attempt + 1} of {runs}) exited {proc.returncode}\n"
             f"--- code\n{code}--- stdout\n{proc.stdout[-3000:]}\n--- stderr\n{proc.stderr[-3000:]}"
         )
+
+
+def _nav_pages() -> list[Path]:
+    """The pages named in mkdocs.yml's `nav` (read line by line: the test environment has no YAML reader)."""
+    text = (ROOT / "mkdocs.yml").read_text(encoding="utf-8")
+    nav = text[text.index("\nnav:") :]
+    return [ROOT / "docs" / m for m in re.findall(r"^\s*- (?:[^\n]*?: )?(\S+\.(?:md|ipynb))\s*$", nav, re.M)]
+
+
+def test_navigation_reaches_every_public_name_and_command():
+    """A reader finds every public function and class (of `jaxhoist`, `jaxhoist.plots` and
+    `jaxhoist.observables`) in a `:::` directive of a page in the navigation, and every command of the CLI
+    as a `## <command>` section of a navigation page."""
+    import types
+
+    import jaxhoist as jh
+    from jaxhoist._apps.cli.app import build_parser
+
+    pages = _nav_pages()
+    assert ROOT / "docs" / "api" / "scans.md" in pages, pages
+    text = "\n".join(p.read_text(encoding="utf-8") for p in pages if p.suffix == ".md")
+    directives = set(re.findall(r"^:::\s*(\S+)", text, re.M))
+
+    def resolve(dotted: str):
+        obj = jh
+        for part in dotted.split(".")[1:]:
+            obj = getattr(obj, part)
+        return obj
+
+    documented = {id(resolve(d)) for d in directives}
+    missing = [
+        f"jaxhoist.{n}"
+        for n in dir(jh)
+        if not n.startswith("_")
+        and not isinstance(getattr(jh, n), types.ModuleType)  # the two modules: their members below
+        and id(getattr(jh, n)) not in documented
+    ]
+    for mod in (jh.plots, jh.observables):
+        for n in dir(mod):
+            obj = getattr(mod, n)
+            if n.startswith("_") or isinstance(obj, types.ModuleType) or not callable(obj):
+                continue
+            if getattr(obj, "__module__", "").startswith("jaxhoist") and id(obj) not in documented:
+                missing.append(f"{mod.__name__}.{n}")
+    assert not missing, f"public names in no API page of the navigation: {missing}"
+
+    sub = next(a for a in build_parser()._actions if a.__class__.__name__ == "_SubParsersAction")
+    headings = set(re.findall(r"^## (\S+)\s*$", text, re.M))
+    assert set(sub.choices) - headings == set(), f"commands without a section: {set(sub.choices) - headings}"

@@ -7,7 +7,7 @@ second (solve only), in one process, with JAX's own compile-time counters.
     # smoke check: paper-2.3 over 1 s
     python experiments/benchmarks/bench_rigid.py --quick --out out/bench-rigid
 
-The issue's budget for the paper-4.1 lift is 30 s on this 2-core CPU; the machine is shared, so report the
+The budget for the paper-4.1 lift is 30 s on this 2-core CPU; the machine is shared, so report the
 load average (printed) with the numbers.
 """
 

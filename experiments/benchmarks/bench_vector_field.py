@@ -3,7 +3,7 @@
     python experiments/benchmarks/bench_vector_field.py --out out/bench-vf            # B = 256 lanes
     # fewer repeats, shorter loops
     python experiments/benchmarks/bench_vector_field.py --out out/bench-vf --quick
-    python experiments/benchmarks/bench_vector_field.py --out out/bench-vf --lanes 1024 --baseline-rev a4b17fd
+    python experiments/benchmarks/bench_vector_field.py --out out/bench-vf --lanes 1024 --baseline-rev REV
     # + the costliest XLA kernels
     python experiments/benchmarks/bench_vector_field.py --out out/bench-vf --profile
 
@@ -19,8 +19,8 @@ may share the CPU):
 3. with `--profile`: the kernels that take most of a lean step (XLA's CPU thunk trace);
 4. with `--baseline-rev REV`: the loops of (1) and the lean step of (2) with the vector field of that git
    revision, imported in the same process under another package name, and the largest difference of its
-   derivatives and final positions from today's. a4b17fd is the written-out variant (3x3 products and short
-   sums spelled out, no `dot`/`reduce` per lane, optimisation barriers) that docs/performance.md discusses.
+   derivatives and final positions from the current one's (e.g. a revision with the written-out variant: 3x3
+   products and short sums spelled out, no `dot`/`reduce` per lane, optimisation barriers).
 
 Writes DIR/bench_vector_field.json.
 """

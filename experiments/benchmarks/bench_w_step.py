@@ -4,7 +4,7 @@ linearisation with its factorisation and one solve, and a full Rosenbrock-W (ROS
 
     python experiments/benchmarks/bench_w_step.py --lanes 256
     python experiments/benchmarks/bench_w_step.py --lanes 64 --kinds f,w
-    python experiments/benchmarks/bench_w_step.py --lanes 16,256 --kinds lin,w --baseline c315662 --rounds 7
+    python experiments/benchmarks/bench_w_step.py --lanes 16,256 --kinds lin,w --baseline REV --rounds 7
     # smoke check: 8 lanes, 20 steps
     python experiments/benchmarks/bench_w_step.py --quick --out out/bench-w-step
 

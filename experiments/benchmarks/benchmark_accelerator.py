@@ -1,5 +1,5 @@
-"""The default scan on whatever device JAX finds (issue 10, point 5: "run the benchmark on a GPU too, 4096
-and 65 536 members, with the device named"), and the check of its results on this machine afterwards.
+"""The default scan on whatever device JAX finds (4096 and 65 536 members, with the
+device named), and the check of its results on this machine afterwards.
 
     python experiments/benchmarks/benchmark_accelerator.py --out DIR                      # on the GPU machine
     python experiments/benchmarks/benchmark_accelerator.py --out DIR --runs 4096,4096@256,65536
@@ -12,7 +12,7 @@ rtol 1e-3, atol 1e-5, the default group width for the device: `apps.scan_layout.
 spaced in [0.1, 0.6], 25 s, observables final position and Euler angles. A run is named by its member count,
 optionally with `@LANES` (that group width instead of the default), `:eps=V` (another regularisation
 velocity [m/s]) or `:deriv` (forward sensitivities, `derivatives=True`): `4096`, `4096@256`,
-`4096:eps=1e-4`, `4096:deriv`; `:tsit5` is not a scan but the baseline of issue 10, a plain
+`4096:eps=1e-4`, `4096:deriv`; `:tsit5` is not a scan but the baseline, a plain
 `jax.jit(jax.vmap(diffrax.diffeqsolve(Tsit5, PIDController(1e-6, 1e-8))))` over the members in one lock
 step. Runs go in the order given; once `--budget` seconds have passed, the rest are skipped (the device
 machine is lent by the minute). Per run: compile and compute time, ms per trajectory, steps (median,

@@ -1,4 +1,4 @@
-"""Cost of a large μ-scan of paper-4.2 with the DEFAULT call (issue 10's targets): wall time per trajectory
+"""Cost of a large μ-scan of paper-4.2 with the DEFAULT call: wall time per trajectory
 after compilation, accuracy against a tight adaptive solve, baselines in the same process (scipy LSODA,
 Radau and RK45 on the same jitted vector field; a plain `jax.vmap` of `diffrax.diffeqsolve(Tsit5,
 PIDController(1e-6, 1e-8))`), the cost at ε = 1e-4, forward-mode sensitivities against the plain scan, peak
@@ -23,7 +23,7 @@ What it runs (all in one process, so every ratio is against a baseline measured 
 4. **plain vmap**: `jax.jit(jax.vmap(diffeqsolve(Tsit5, PIDController(1e-6, 1e-8))))` over --vmap-n members
    (all lanes in one lock step, no sorting, no sharding): its time per trajectory over the scan's;
 5. **ε = 1e-4**: the default scan of --eps-n members at ε = 1e-4 m/s against the same members at the preset's
-   1e-3 (issue 10: at most 2x);
+   1e-3 (the target: at most 2x);
 6. **forward sensitivities**: `scan(..., derivatives=True)` over the whole scan (or --deriv-n members);
 7. **the earlier expert row** (`--expert-row`, on by default): ε = 1e-2 m/s (changes the physics), Bosh3 at
    a fixed 1.5 ms step, 256 lanes: the previous README figure, for comparison only.

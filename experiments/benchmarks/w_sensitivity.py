@@ -1,8 +1,8 @@
-"""Forward-mode sensitivities through the Rosenbrock-W solver (issue 10, point 4): cost and accuracy.
+"""Forward-mode sensitivities through the Rosenbrock-W solver: cost and accuracy.
 
 For each tangent weight w (`RosenbrockW(tangent_weight=w)`, `jaxhoist/_numerics/sensitivity.py`), a
 `scan(derivatives=True)` of paper-4.2 over N μ in [0.1, 0.6] to T s, against the plain scan of the same
-members in the same process (the time ratio the issue asks to be <= 2), and d(final mass-centre position)/dμ
+members in the same process (the target: a time ratio <= 2), and d(final mass-centre position)/dμ
 of REF members against central differences (h = 1e-4) of Tsit5 solves at rtol 1e-10 (their error is
 below 1e-6 m). With `--discrete`, the same for the derivative of the steps themselves (the earlier
 forward mode: `tangent_weight=None` is not an option, so it differentiates a Tsit5 scan at rtol 1e-6,

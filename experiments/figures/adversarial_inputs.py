@@ -1,4 +1,4 @@
-"""Adversarial inputs (issue 14 points 4-5, issue 12 point 5): how each class of bad input ends.
+"""Adversarial inputs: how each class of bad input ends.
 
 Runs every case in-process with the compile and solve steps replaced by traps (nothing is solved), and
 prints, per class of input, how many cases ended in

@@ -1,5 +1,5 @@
-"""Sweeps of the rigid-ground model (paper §2, `simulate_rigid`) around its presets: every run must complete
-(issue 15), and its energy balance must close.
+"""Sweeps of the rigid-ground model (paper §2, `simulate_rigid`) around its presets: every run must complete,
+and its energy balance must close.
 
     python experiments/figures/rigid_sweep.py --out out/rigid_sweep --quick     # a minute or two: 4 runs
     python experiments/figures/rigid_sweep.py --out out/rigid_sweep  # the full sweep (hours on 2 cores)
@@ -20,11 +20,11 @@ Each finished run is appended to `runs.jsonl` at once (a restarted sweep skips t
 completed or the error, the number of phases (records) and of phase solves, how many contact choices and
 impacts needed a resolution step beyond consistency (`PhaseRecord.choice`, impact notes; see
 docs/rigid-model.md, "Resolution"), the largest |energy residual| [J], the hoist work and the impact losses
-[J], and the wall time [s]. A run "closes" as today when max |residual| <= 1e-6 x the hoist work (the
-tolerance of `tests/test_rigid.py`) or <= 2.5e-3 x the impact losses (the preset paper-2.3 before issue 15:
-0.027 J against 11 J of impact losses; the residual of the rigid model grows with the number of impacts in
-a rocking train, not with the solver tolerance). Figures: `rigid_sweep.png` (completion, phase counts and
-the energy residual over its tolerance, over μ, per preset and rope).
+[J], and the wall time [s]. A run "closes" when max |residual| <= 1e-6 x the hoist work (the
+tolerance of `tests/test_rigid.py`) or <= 2.5e-3 x the impact losses (a rocking train of impacts on
+paper-2.3 leaves about that: 0.027 J against 11 J of impact losses; the residual of the rigid model grows with
+the number of impacts in a rocking train, not with the solver tolerance). Figures: `rigid_sweep.png`
+(completion, phase counts and the energy residual over its tolerance, over μ, per preset and rope).
 
 `--elastic`: the elastic model at k = 1.5e9 N/m per corner (critically damped, h = sqrt(k m)), ε = 1e-4 m/s,
 p_0 = 1e-6 m (the stiffest row of the convergence table in docs/rigid-model.md) against the rigid model on
@@ -66,7 +66,7 @@ CLOSE = 1e-6  # a run closes when max |energy residual| <= CLOSE x hoist work (t
 COMMIT = subprocess.run(
     ["git", "rev-parse", "--short", "HEAD"], capture_output=True, text=True, cwd=Path(__file__).parent
 ).stdout.strip()
-CLOSE_IMPACT = 2.5e-3  # ... or <= CLOSE_IMPACT x impact losses (paper-2.3 before issue 15: 0.027 J / 11 J)
+CLOSE_IMPACT = 2.5e-3  # ... or <= CLOSE_IMPACT x impact losses (paper-2.3's rocking train: 0.027 J / 11 J)
 
 
 def _model(rope: str) -> jaxhoist.RigidGround:
@@ -309,7 +309,7 @@ def resolved_phases(tr) -> list[int]:
     return out
 
 
-#: (preset, μ, t1 [s]) of the sustained cycles of issue 15 that the persistent-contact rule and the compliant
+#: (preset, μ, t1 [s]) of the sustained cycles that the persistent-contact rule and the compliant
 #: phase pass (docs/rigid-model.md, "Sustained cycles"): stalls at 16.13 s, F-H chatter from 10.8 s, chatter
 #: at 15.7 s (each used to end the run).
 CHATTER_CASES = (("paper-2.3", 0.30, 17.0), ("paper-2.3", 0.32, 12.4), ("paper-4.1", 0.38, 20.0))
