@@ -83,6 +83,7 @@ from ._physics.params import Boom as Boom
 from ._physics.params import BristleFriction as BristleFriction
 from ._physics.params import ConstantSpeedHoist as ConstantSpeedHoist
 from ._physics.params import Foundation as Foundation
+from ._physics.params import KnotHoist as KnotHoist
 from ._physics.params import Load as Load
 from ._physics.params import ProfileHoist as ProfileHoist
 from ._physics.params import RampedHoist as RampedHoist

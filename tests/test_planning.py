@@ -563,3 +563,28 @@ def test_cli_writes_the_map(tmp_path, capsys):
         and (out / "risk_slide.png").is_file()
         and (out / "risk_tilt.png").is_file()
     )
+
+
+def test_xarray_dataset_holds_the_map(shifted):
+    """`LiftRisk.to_xarray()`: every probability, interval bound, replicate estimate and quantile equals the
+    result's own, on the design dimension with the tip positions as coordinate (units kept), and the
+    dataset's replicate mean is the probability."""
+    pytest.importorskip("xarray")
+    r = shifted[0.2]
+    ds = r.to_xarray()
+    assert ds.sizes["design"] == 3 and ds.sizes["replicate"] == r.replicates
+    np.testing.assert_array_equal(ds[TIP].values, [-1.0, 3.0, 4.0])
+    assert ds[TIP].attrs["units"] == "m"
+    for h in HAZARDS:
+        np.testing.assert_array_equal(ds[f"p_{h.name}"].values, r.probability(h))
+        lo, hi = r.interval(h)
+        np.testing.assert_array_equal(ds[f"p_{h.name}_lower"].values, lo)
+        np.testing.assert_array_equal(ds[f"p_{h.name}_upper"].values, hi)
+        reps = ds[f"p_{h.name}_replicates"]
+        assert reps.dims == ("design", "replicate")
+        np.testing.assert_allclose(reps.mean("replicate").values, r.probability(h), rtol=1e-12, atol=1e-15)
+    q = ds["q_ground_slide"]
+    assert q.dims == ("design", "quantile") and q.attrs["units"] == "m"
+    np.testing.assert_array_equal(q.sel(quantile=0.5).values, r.quantile("ground_slide", 0.5))
+    np.testing.assert_array_equal(ds["n_failed"].values, r.n_failed)
+    assert ds.attrs["samples"] == r.samples

@@ -13,6 +13,7 @@ A scenario file (see `presets/paper-4.2.toml` for a commented one):
                            | "bristle" (deflection, breakaway_ratio, relaxation_time)
     [rope]        stiffness, damping, attachment, slack
     [hoist]       law = "constant-speed" (speed) | "ramped" (speed, ramp_time, travel)
+                  | "knots" (times, speeds, max_speed, travel)
     [boom]        tip_position, tip_mass, stiffness, damping
 """
 
@@ -31,7 +32,8 @@ from .._physics.checks import OPT_IN
 from .._physics.paths import get_leaf
 from .validate import brief, parse_list, parse_number, read_text
 
-# field -> (unit, required, kind) where kind is "float", "vec3", "mat33", "str" or "float|vec3".
+# field -> (unit, required, kind) where kind is "float", "vec3", "list" (of floats), "mat33", "str" or
+# "float|vec3".
 _REQ, _OPT = True, False
 SCHEMA: dict[str, dict[str, tuple[str, bool, str]]] = {
     "": {
@@ -77,6 +79,13 @@ SCHEMA: dict[str, dict[str, tuple[str, bool, str]]] = {
         "ramp_time": ("s", _OPT, "float"),
         "travel": ("m", _OPT, "float"),
     },
+    "hoist:knots": {
+        "law": ("-", _REQ, "str"),
+        "times": ("s", _REQ, "list"),
+        "speeds": ("m/s", _REQ, "list"),
+        "max_speed": ("m/s", _OPT, "float"),
+        "travel": ("m", _OPT, "float"),
+    },
     "boom": {
         "tip_position": ("m", _REQ, "vec3"),
         "tip_mass": ("kg", _REQ, "float"),
@@ -85,7 +94,7 @@ SCHEMA: dict[str, dict[str, tuple[str, bool, str]]] = {
     },
 }
 FRICTION_LAWS = ("bristle", "regularised-coulomb")
-HOIST_LAWS = ("constant-speed", "ramped")
+HOIST_LAWS = ("constant-speed", "ramped", "knots")
 PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2", "paper-4.3")
 
 
@@ -164,6 +173,10 @@ class _Reader:
         if kind in ("vec3", "float|vec3"):
             if not isinstance(value, list) or len(value) != 3:
                 raise self.error(table, f"{name} must be a list of 3 numbers [{unit}], got {brief(value)}")
+            return [num(v) for v in value]
+        if kind == "list":
+            if not isinstance(value, list) or not value:
+                raise self.error(table, f"{name} must be a list of numbers [{unit}], got {brief(value)}")
             return [num(v) for v in value]
         if kind == "mat33":
             if not (
@@ -270,7 +283,9 @@ def scenario_from_dict(data: dict, source: str = "<dict>", *, allow_implausible:
         hlaw = _law(r, data["hoist"], "hoist", HOIST_LAWS, "constant-speed")
         hs = r.table(data["hoist"], "hoist", f"hoist:{hlaw}")
         hs.pop("law", None)
-        hoist = P.ConstantSpeedHoist(**hs) if hlaw == "constant-speed" else P.RampedHoist(**hs)
+        hoist = {"constant-speed": P.ConstantSpeedHoist, "ramped": P.RampedHoist, "knots": P.KnotHoist}[hlaw](
+            **hs
+        )
         bm = r.table(data["boom"], "boom")
         boom = P.Boom(bm["tip_position"], bm["tip_mass"], bm["stiffness"], bm.get("damping", 0.0))
         t1 = top.get("t1", 10.0)

@@ -26,6 +26,7 @@ from .friction import BristleFriction as BristleFriction
 from .friction import RegularisedCoulomb as RegularisedCoulomb
 from .hoist import AbstractHoistLaw as AbstractHoistLaw
 from .hoist import ConstantSpeedHoist as ConstantSpeedHoist
+from .hoist import KnotHoist as KnotHoist
 from .hoist import ProfileHoist as ProfileHoist
 from .hoist import RampedHoist as RampedHoist
 from .paths import replace_leaves, unit

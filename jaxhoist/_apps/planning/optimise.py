@@ -112,12 +112,14 @@ def optimise_lift(
       observable]: built-in scalar observables such as `"max_rope_tension"` [N], `"ground_slide"` [m],
       `"swing_amplitude"` [m], `"max_tilt"` [rad], one component `"contact_margin[D]"`, and
       `"hoist_time"` [s], the time the hoist takes to reel in `hoist_distance` metres at the design's
-      speed (d / v_l for a constant-speed hoist, d / v_l + T_ramp / 2 for a `RampedHoist`), which weighs
-      speed against the outcomes that grow with it. Counts and event times (`impacts`, `liftoff_time`,
+      speed (d / v_l for a constant-speed hoist, d / v_l + T_ramp / 2 for a `RampedHoist`, the root of
+      s(T) = d for a `KnotHoist`, with its gradient dT/dv_k = -(∂s/∂v_k)(T) / v(T)), which weighs speed
+      against the outcomes that grow with it. Counts and event times (`impacts`, `liftoff_time`,
       ...) are refused: they are not smooth in the design (use them in `hazard_limits`).
     - `design_bounds`: design path -> (low, high) in the field's SI unit, e.g.
       `{"boom.tip_position[0]": (1.0, 3.0), "hoist.speed": (0.1, 0.4)}`; any float leaf that is not
-      uncertain (`"hoist.ramp_time"` of a `RampedHoist`, the rope's attachment, ...).
+      uncertain (`"hoist.ramp_time"` of a `RampedHoist`, a knot speed `"hoist.speeds[1]"` of a
+      `KnotHoist`, the rope's attachment, ...).
     - `hazard_limits`: `Hazard` -> the largest acceptable probability in [0, 1], checked at the end.
     - `samples`: members of the fixed sample (a power of 2 keeps the Sobol points balanced; default 64).
     - `seed`: the seed of that sample.
@@ -432,11 +434,50 @@ def _check_hoist_time(scenario, t_weight, distance) -> float:
     if not d > 0:
         raise ScenarioError(f"hoist_distance must be > 0 [m], got {d:g}")
     law = type(scenario.hoist).__name__
-    if law not in ("ConstantSpeedHoist", "RampedHoist"):
+    if law not in ("ConstantSpeedHoist", "RampedHoist", "KnotHoist"):
         raise ScenarioError(
-            f"objective {HOIST_TIME!r} needs a ConstantSpeedHoist or a RampedHoist, the scenario has {law}"
+            f"objective {HOIST_TIME!r} needs a ConstantSpeedHoist, a RampedHoist or a KnotHoist, the "
+            f"scenario has {law}"
+        )
+    if law == "KnotHoist" and not math.isfinite(reel_time(scenario.hoist, d)):
+        raise ScenarioError(
+            f"objective {HOIST_TIME!r}: the scenario's hoist profile never reels in hoist_distance = {d:g} m "
+            f"(its last knot speed is 0 or its travel is shorter)"
         )
     return d
+
+
+def _shortening(hoist, t):
+    import equinox as eqx
+
+    global _shortening_jit
+    if _shortening_jit is None:
+        _shortening_jit = eqx.filter_jit(lambda h, t: h.shortening(t))
+    return _shortening_jit(hoist, t)
+
+
+_shortening_jit = None
+
+
+def reel_time(hoist, distance: float) -> float:
+    """The time T [s] at which a hoist law has reeled in `distance` [m], s(T) = d (s is non-decreasing):
+    bisection to round-off, on the host; inf if the hoist never gets there."""
+
+    def s(t):
+        return float(_shortening(hoist, np.float64(t)))
+
+    hi = 1.0
+    while s(hi) < distance:
+        hi *= 2.0
+        if hi > 1e7:
+            return math.inf
+    lo = 0.0
+    for _ in range(200):
+        mid = 0.5 * (lo + hi)
+        if mid in (lo, hi):
+            break
+        lo, hi = (mid, hi) if s(mid) < distance else (lo, mid)
+    return hi
 
 
 def _check_limits(hazard_limits) -> dict[Hazard, float]:
@@ -552,6 +593,8 @@ class _Problem:
         if w == 0:
             return 0.0, g
         sc = self.scenario
+        if type(sc.hoist).__name__ == "KnotHoist":
+            return self._knot_time(x, d)
         v = float(np.asarray(sc.hoist.speed))
         if "hoist.speed" in self.paths:
             v = float(x[self.paths.index("hoist.speed")])
@@ -563,6 +606,29 @@ class _Problem:
                 ramp = float(x[self.paths.index("hoist.ramp_time")])
                 g[self.paths.index("hoist.ramp_time")] = 0.5
         return d / v + 0.5 * ramp, g
+
+    def _knot_time(self, x: np.ndarray, d: float) -> tuple[float, np.ndarray]:
+        """T_hoist [s] of a `KnotHoist` at design x, s(T) = d, and its gradient by the implicit function
+        theorem, dT/dθ = -(∂s/∂θ)(T) / v(T), for the design paths in `hoist.` (0 for the others)."""
+        import jax
+        import jax.numpy as jnp
+
+        sc = self.scenario
+        for p, v in zip(self.paths, x, strict=True):
+            sc = set_param(sc, p, v)
+        T = reel_time(sc.hoist, d)
+        g = np.zeros(len(self.paths))
+        if not math.isfinite(T):
+            return math.inf, g
+        tT = jnp.asarray(T, dtype=jnp.float64)
+        rate = float(sc.hoist.rate(tT))
+        for j, p in enumerate(self.paths):
+            if p.startswith("hoist."):
+                ds = jax.grad(lambda v, p=p: set_param(sc, p, v).hoist.shortening(tT))(
+                    np.float64(x[j])
+                )
+                g[j] = -float(ds) / rate if rate > 0 else math.nan
+        return T, g
 
     def evaluate(self, X: np.ndarray, derivatives: bool = False) -> list[dict]:
         """For each design point (a row of X): J, its terms (sample averages before their weights), the
@@ -682,7 +748,7 @@ def _minimise(
 
     def fun(u):
         ev = at(u)
-        if ev["n_failed"] and not np.array_equal(ev["x"], first["x"]):
+        if (ev["n_failed"] or not math.isfinite(ev["value"])) and not np.array_equal(ev["x"], first["x"]):
             # a member failed at this trial design: a value far above the start's, so that the line search
             # steps back (an average over the other members would be over another sample)
             return abs(first["value"] / scale) + FAILED, np.zeros_like(u)

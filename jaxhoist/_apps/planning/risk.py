@@ -18,6 +18,7 @@ from ..._numerics.times import TimesLike, as_times
 from ..._physics.params import Scenario
 from ..._physics.paths import check_path, param_unit
 from ..scan import BatchOptions, Grid, Points, ScanResult, Sweep, scan
+from ..scan.sweep import validate_members
 from .hazards import Hazard
 from .uncertain import check_uncertain, sample
 
@@ -181,6 +182,12 @@ def _check_design(scenario, design, dists) -> Sweep | Grid | Points | None:
         check_path(scenario, p)
         if p in dists:
             raise ScenarioError(f"design: {p!r} is also an uncertain input; a path is one or the other")
+    rows = design.members()
+    bad = validate_members(scenario, design.params, rows)
+    if bad:  # a design point the scenario refuses (a negative knot speed, a tip below the ground, ...)
+        i = min(bad)
+        at = ", ".join(f"{p} = {v:g}" for p, v in zip(design.params, rows[i], strict=True))
+        raise ScenarioError(f"design point {at}: {bad[i]}")
     return design
 
 
