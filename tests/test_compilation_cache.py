@@ -3,6 +3,7 @@ second process that loads instead of compiling and returns the same bits, a dama
 than trusted, `--no-cache`, and the cache folder's location and size bound. Every test uses a folder under
 `tmp_path`, never the user's cache."""
 
+import hashlib
 import json
 import os
 import re
@@ -19,6 +20,7 @@ import pytest
 import jaxhoist as jh
 from jaxhoist._numerics import batch
 from jaxhoist._numerics import persistent_cache as pc
+from jaxhoist._numerics import stored_programs as sp
 from jaxhoist._numerics.observables import get as get_observable
 from jaxhoist._numerics.solve import _solve_jit, as_float64_leaves
 
@@ -159,11 +161,13 @@ def test_second_process_loads_the_program_and_returns_the_same_bits(tmp_path):
         np.testing.assert_array_equal(a[k], c[k], err_msg=k)
 
 
-def _cli(tmp_path: Path, out: str, *extra: str, cache: str) -> subprocess.CompletedProcess:
+def _cli(
+    tmp_path: Path, out: str, *extra: str, cache: str, quiet: bool = True
+) -> subprocess.CompletedProcess:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu", pc.ENV_VAR: cache}
     args = ["simulate", "paper-4.2", "--out", str(tmp_path / out), "--t1", "0.2", "--n-save", "5"]
     proc = subprocess.run(
-        [sys.executable, "-m", "jaxhoist", *args, "--no-plots", "--quiet", *extra],
+        [sys.executable, "-m", "jaxhoist", *args, "--no-plots", *(["--quiet"] if quiet else []), *extra],
         env=env,
         capture_output=True,
         text=True,
@@ -178,8 +182,122 @@ def test_cli_no_cache_writes_nothing_and_the_default_writes_the_cache(tmp_path):
     cache = tmp_path / "cache"
     _cli(tmp_path, "a", "--no-cache", cache=str(cache))
     assert not cache.exists()
-    _cli(tmp_path, "b", cache=str(cache))
-    assert any(p.name.startswith("jit_solve-") for p in _entries(cache))
+    first = _cli(tmp_path, "b", cache=str(cache), quiet=False)
+    assert "compiling" in first.stderr and "loading the compiled program" not in first.stderr
+    stored = _entries(cache / sp.SUBFOLDER)
+    assert [p.name.split("-")[0] for p in stored] == ["solve"]
+
+    # the same command again loads the stored program (no tracing, no compiling) and writes the same bits
+    second = _cli(tmp_path, "c", cache=str(cache), quiet=False)
+    assert "loading the compiled program" in second.stderr and "compiling" not in second.stderr
+    a, b = np.load(tmp_path / "b" / "trajectory.npz"), np.load(tmp_path / "c" / "trajectory.npz")
+    for k in a.files:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)
+
+
+# ------------------------------------------------------------------------------------ stored programs
+
+_STORED_SCRIPT = r"""
+import sys
+from pathlib import Path
+import jax, jax.numpy as jnp, numpy as np
+jax.config.update("jax_enable_x64", True)
+from jaxhoist._numerics import stored_programs as sp
+
+def f(d, k):  # a linear solve: its LAPACK kernel must work in a process that lowered nothing
+    return {"x": jnp.linalg.solve(d["m"], d["v"]) * k, "c": jnp.cumsum(jnp.sin(d["v"]))}
+
+scale = float(sys.argv[3])
+args = ({"m": jnp.eye(3) * 2.0 + 0.1 * scale, "v": jnp.arange(3.0) + scale}, 3.0)
+program, loaded = sp.load_or_compile(Path(sys.argv[1]), "test-f", f, args)
+np.savez(sys.argv[2], **{k: np.asarray(v) for k, v in program(*args).items()})
+print("loaded" if loaded else "compiled")
+"""
+
+
+def _run_stored(folder: Path, out: Path, scale: str = "1.0") -> tuple[str, str]:
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
+    proc = subprocess.run(
+        [sys.executable, "-c", _STORED_SCRIPT, str(folder), str(out), scale],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return proc.stdout.strip().splitlines()[-1], proc.stderr
+
+
+def test_a_stored_program_is_loaded_by_another_process_with_the_same_bits(tmp_path):
+    folder = tmp_path / "cache"
+    assert _run_stored(folder, tmp_path / "a.npz")[0] == "compiled"
+    [path] = _entries(folder / sp.SUBFOLDER)
+    assert _run_stored(folder, tmp_path / "b.npz")[0] == "loaded"
+    assert _run_stored(folder, tmp_path / "c.npz", "2.0")[0] == "loaded"  # other values: the same program
+    a, b, c = (np.load(tmp_path / f"{x}.npz") for x in "abc")
+    for k in a.files:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k)  # bit for bit
+        assert not np.array_equal(a[k], c[k])
+
+    # a damaged file is detected (its digest), not run: compiled again, and the file is replaced
+    data = bytearray(path.read_bytes())
+    data[len(data) // 2] ^= 0xFF
+    path.write_bytes(bytes(data))
+    how, err = _run_stored(folder, tmp_path / "d.npz")
+    assert how == "compiled" and "not used" in err
+    d = np.load(tmp_path / "d.npz")
+    for k in a.files:
+        np.testing.assert_array_equal(a[k], d[k], err_msg=k)
+    raw, head = path.read_bytes(), len(sp._MAGIC)
+    assert hashlib.sha256(raw[head + 32 :]).digest() == raw[head : head + 32]  # rewritten whole
+
+
+def _stored_args(scale: float = 1.0):
+    return ({"m": jnp.eye(3) * 2.0 + 0.1 * scale, "v": jnp.arange(3.0) + scale}, 3.0)
+
+
+def _f(d, k):
+    return {"x": d["m"] @ d["v"] * k}
+
+
+def test_a_stale_or_foreign_stored_program_is_compiled_again(tmp_path, monkeypatch):
+    args = _stored_args()
+    program, loaded = sp.load_or_compile(tmp_path, "test-g", _f, args)
+    assert not loaded
+    key = sp.program_key("test-g", args)
+    assert key is not None
+    path = sp.program_path(tmp_path, "test-g", key)
+    assert path.is_file() and sp.load(tmp_path, "test-g", args) is not None
+
+    # a file at the right place that was written for another key (intact digest): refused
+    other = sp.program_path(tmp_path, "test-g", key.replace("program test-g", "program test-h"))
+    sp._store(other, key.replace("program test-g", "program test-h"), program.executable, program.out_def)
+    os.replace(other, path)
+    with pytest.warns(UserWarning, match="another key"):
+        assert sp.load(tmp_path, "test-g", args) is None
+
+    # another jaxhoist source (or JAX version, static value, shape): another key, so nothing stored applies
+    monkeypatch.setattr(sp, "_SOURCE_DIGEST", ["0" * 64])
+    assert sp.program_key("test-g", args) != key
+    assert sp.program_key("test-g", (args[0], 4.0)) != sp.program_key("test-g", args)
+    assert sp.program_key("test-g", ({"m": jnp.eye(4), "v": jnp.ones(4)}, 3.0)) != sp.program_key(
+        "test-g", args
+    )
+
+
+class _Elsewhere:  # a class from outside the packages the key covers (its code may change unseen)
+    def __repr__(self):
+        return "Elsewhere()"
+
+
+def test_programs_with_uncovered_static_parts_are_not_stored(tmp_path):
+    x = {"v": jnp.ones(3)}
+    assert sp.program_key("p", (x, lambda v: v)) is None  # no stable name
+    assert sp.program_key("p", (x, _Elsewhere())) is None  # code the key does not cover
+    assert sp.program_key("p", (x, np.sin, "a", 1.5, (2, None))) is not None
+    program, loaded = sp.load_or_compile(tmp_path, "p", lambda d, s: d["v"] * 2.0, (x, _Elsewhere()))
+    assert not loaded and not (tmp_path / sp.SUBFOLDER).exists()
+    np.testing.assert_array_equal(program(x, _Elsewhere()), 2.0 * np.ones(3))
 
 
 # ------------------------------------------------------------------------------------ folder and bound

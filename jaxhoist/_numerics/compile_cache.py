@@ -30,11 +30,18 @@ def is_cached(kind: str, key: Hashable) -> bool:
 def compiled(kind: str, key: Hashable, lower: Callable[[], Any]) -> tuple[Any, float]:
     """The executable cached under `(kind, key)`, else `lower().compile()` stored there. **Returns**
     `(executable, seconds spent compiling now)` (0.0 on a hit)."""
+    return remember(kind, key, lambda: lower().compile())
+
+
+def remember(kind: str, key: Hashable, make: Callable[[], Any]) -> tuple[Any, float]:
+    """The executable cached under `(kind, key)`, else `make()` stored there (for executables made another
+    way than `lower().compile()`, e.g. loaded by `stored_programs`). **Returns** `(executable, seconds spent
+    making it now)` (0.0 on a hit)."""
     full = (kind, key)
     if full in _CACHE:
         return _CACHE[full], 0.0
     t0 = time.perf_counter()
-    _CACHE[full] = exe = lower().compile()
+    _CACHE[full] = exe = make()
     return exe, time.perf_counter() - t0
 
 

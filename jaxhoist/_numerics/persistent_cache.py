@@ -46,7 +46,18 @@ def default_cache_dir() -> Path | None:
 
 
 def _entries(folder: Path) -> list[Path]:
-    return [p for p in folder.iterdir() if p.is_file() and p.name.endswith("-cache")]
+    """The cache's entries: JAX's (`*-cache` files in `folder`) and the stored programs' (the same names in
+    its `programs` subfolder, `stored_programs`)."""
+    found = [p for p in folder.iterdir() if p.is_file() and p.name.endswith("-cache")]
+    programs = folder / "programs"
+    if programs.is_dir():
+        found += [p for p in programs.iterdir() if p.is_file() and p.name.endswith("-cache")]
+    return found
+
+
+def enabled_folder() -> Path | None:
+    """The folder `enable_compilation_cache` switched on in this process, or None."""
+    return _ENABLED[0]
 
 
 def prune(folder: Path, max_bytes: int) -> int:
@@ -80,7 +91,9 @@ def enable_compilation_cache(path: str | os.PathLike | None = None, *, max_bytes
     """Switch on JAX's persistent compilation cache for this process, so that compiled programs are stored
     on disk and later processes load them instead of compiling: for `simulate`, about 10 s of XLA
     compilation on a 2-core machine become a load of about a second (each process still traces the program
-    into JAX's form, which the cache does not store). Call it once, before the first compilation.
+    into JAX's form, which the cache does not store; the command line's `simulate` also stores its program
+    whole in the folder's `programs` subfolder, `stored_programs`, and skips the tracing as well). Call it
+    once, before the first compilation.
 
     Sets JAX's `jax_compilation_cache_dir` to the folder and `jax_persistent_cache_min_compile_time_secs` to
     0 (every program is stored, the small ones too), and keeps the folder below `max_bytes` by deleting the

@@ -32,20 +32,35 @@ def _cache_key(scenario, ts, options):
     return (*structure_key(scenario, ts), options)
 
 
-def _compiled_solve(scenario, ts, options):
+def _compiled_solve(scenario, ts, options, progress):
     """The solve core `numerics.solve.solve`, compiled ahead of time (so compile and solve are timed apart)
-    and cached per structure/shape/options, so repeated `main()` calls in one process compile once."""
+    and cached per structure/shape/options, so repeated `main()` calls in one process compile once. With
+    the persistent compilation cache on, the compiled program is also stored whole in the cache folder
+    (`stored_programs`), and a later run loads it without tracing or lowering it."""
     import equinox as eqx
 
-    from ..._numerics.compile_cache import compiled
+    from ..._numerics import compile_cache, stored_programs
+    from ..._numerics.persistent_cache import enabled_folder
     from ..._numerics.solve import solve
 
-    fn, _ = compiled(
-        "cli-simulate",
-        _cache_key(scenario, ts, options),
-        lambda: eqx.filter_jit(solve).lower(scenario, ts, options),
-    )
-    return fn
+    key = _cache_key(scenario, ts, options)
+    if compile_cache.is_cached("cli-simulate", key):
+        with progress("compiling (cached in this process)"):
+            return compile_cache.remember("cli-simulate", key, lambda: None)[0]
+    folder = enabled_folder()
+    args = (scenario, ts, options)
+    if folder is None:
+        with progress("compiling"):
+            return compile_cache.compiled("cli-simulate", key, lambda: eqx.filter_jit(solve).lower(*args))[0]
+    program = None
+    stored_key = stored_programs.program_key("solve", args)
+    if stored_key is not None and stored_programs.program_path(folder, "solve", stored_key).exists():
+        with progress("loading the compiled program"):
+            program = stored_programs.load(folder, "solve", args)
+    if program is None:
+        with progress("compiling"):
+            program = stored_programs.compile_and_store(folder, "solve", solve, args)
+    return compile_cache.remember("cli-simulate", key, lambda: program)[0]
 
 
 def _fmt_vec(v) -> str:
@@ -259,12 +274,8 @@ def _solve_elastic(args, scenario, ts, options, progress):
     cache is on) and solve, drawn as a bar; (trajectory, solve time [s])."""
     import jax
 
-    from ..._numerics.compile_cache import is_cached
-
     scenario = scenario.unlabelled()  # one compiled program for any scenario's labels
-    cached = is_cached("cli-simulate", _cache_key(scenario, ts, options))
-    with progress("compiling (cached in this process)" if cached else "compiling"):
-        solve_fn = _compiled_solve(scenario, ts, options)
+    solve_fn = _compiled_solve(scenario, ts, options, progress)
     with (
         progress("solving", bar=True),
         tqdm_bar(

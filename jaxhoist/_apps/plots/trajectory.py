@@ -30,11 +30,33 @@ CORNERS = ("D", "E", "F", "H")
 CORNER_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red")
 
 
-def new_figure(nrows=1, ncols=1, *, figsize=(7.0, 5.0), sharex=True, **kw):
+# Fixed margins [inch] of the plots of one lift: room for a suptitle, tick labels of up to six characters and
+# an axis label on the left and below, and (`top_titles`) a title above each column's first axes.
+_LEFT, _RIGHT, _BOTTOM, _TOP, _TOP_TITLES, _GAP_V, _GAP_H = 0.8, 0.2, 0.5, 0.45, 0.7, 0.15, 0.95
+
+
+def new_figure(nrows=1, ncols=1, *, figsize=(7.0, 5.0), sharex=True, fixed=False, top_titles=False, **kw):
+    """A figure and its `nrows` x `ncols` axes (a 2-D array). By default matplotlib's constrained layout
+    places them; with `fixed`, fixed margins do (`_LEFT` etc., in inches), which skips the layout engine's
+    measuring of every label (about a third of the drawing time): for figures whose labels are known to
+    fit, such as the plots of one lift. `top_titles` leaves room for a title above each column."""
     from matplotlib.figure import Figure
 
-    fig = Figure(figsize=figsize, layout="constrained")
+    fig = Figure(figsize=figsize, layout=None if fixed else "constrained")
     axes = fig.subplots(nrows, ncols, sharex=sharex, squeeze=False, **kw)
+    if fixed:
+        w, h = figsize
+        top = _TOP_TITLES if top_titles else _TOP
+        cell_h = (h - _BOTTOM - top - _GAP_V * (nrows - 1)) / nrows
+        cell_w = (w - _LEFT - _RIGHT - _GAP_H * (ncols - 1)) / ncols
+        fig.subplots_adjust(
+            left=_LEFT / w,
+            right=1.0 - _RIGHT / w,
+            bottom=_BOTTOM / h,
+            top=1.0 - top / h,
+            hspace=_GAP_V / cell_h,
+            wspace=_GAP_H / cell_w,
+        )
     return fig, axes
 
 
@@ -52,7 +74,7 @@ def plot_mass_centre(data, *, title: str | None = None) -> Figure:
     """Coordinates x, y, z [m] of the mass centre C in world axes vs time [s]; a dashed line marks lift-off
     (the first saved time with every N_i = 0)."""
     d = as_arrays(data)
-    fig, axes = new_figure(3, 1, figsize=(7.0, 6.0))
+    fig, axes = new_figure(3, 1, figsize=(7.0, 6.0), fixed=True)
     for i, (ax, name) in enumerate(zip(axes[:, 0], ("x", "y", "z"), strict=True)):
         ax.plot(d["ts"], d["position"][:, i], color="k", lw=1.2)
         ax.set_ylabel(f"{name}_C [m]")
@@ -69,7 +91,7 @@ def plot_euler(data, *, title: str | None = None) -> Figure:
     """Euler angles φ (roll about ξ), ψ (yaw about Z), ϑ (pitch) [deg] vs time [s];
     R = R_Z(ψ) R_Y(ϑ) R_X(φ)."""
     d = as_arrays(data)
-    fig, axes = new_figure(3, 1, figsize=(7.0, 6.0))
+    fig, axes = new_figure(3, 1, figsize=(7.0, 6.0), fixed=True)
     deg = np.degrees(d["euler"])
     for i, (ax, name) in enumerate(zip(axes[:, 0], ("φ", "ψ", "ϑ"), strict=True)):
         ax.plot(d["ts"], deg[:, i], color="k", lw=1.2)
@@ -85,7 +107,7 @@ def plot_motion(data, *, title: str | None = None) -> Figure:
     """Mass-centre coordinates x, y, z [m] (left) and Euler angles φ, ψ, ϑ [deg] (right) vs time [s]
     (the paper's Fig. 7 kind)."""
     d = as_arrays(data)
-    fig, axes = new_figure(3, 2, figsize=(10.0, 6.5))
+    fig, axes = new_figure(3, 2, figsize=(10.0, 6.5), fixed=True, top_titles=True)
     deg = np.degrees(d["euler"])
     for i in range(3):
         ax = axes[i, 0]
@@ -110,7 +132,7 @@ def plot_motion(data, *, title: str | None = None) -> Figure:
 def plot_forces(data, *, title: str | None = None) -> Figure:
     """Rope tension S [kN] and ground reaction R = ΣN_i [kN] vs time [s] (the paper's Fig. 6 kind)."""
     d = as_arrays(data)
-    fig, axes = new_figure(2, 1, figsize=(7.0, 5.0))
+    fig, axes = new_figure(2, 1, figsize=(7.0, 5.0), fixed=True)
     axes[0, 0].plot(d["ts"], d["rope_tension"] / 1e3, color="k", lw=1.2)
     axes[0, 0].set_ylabel("rope tension S [kN]")
     axes[1, 0].plot(d["ts"], d["ground_reaction"] / 1e3, color="k", lw=1.2)
@@ -127,7 +149,7 @@ def plot_corner_forces(data, *, title: str | None = None) -> Figure:
     """For each corner D, E, F, H: normal force N_i [kN] and friction-force magnitude |T_i| [kN] vs time [s]
     (the paper's Fig. 8 kind; a corner off the ground shows N_i = |T_i| = 0)."""
     d = as_arrays(data)
-    fig, axes = new_figure(4, 1, figsize=(7.0, 7.5), sharey=True)
+    fig, axes = new_figure(4, 1, figsize=(7.0, 7.5), sharey=True, fixed=True)
     t = d["ts"]
     n = d["normal_forces"] / 1e3
     f = np.linalg.norm(d["friction_forces"], axis=-1) / 1e3
@@ -151,7 +173,7 @@ def plot_corner_tracks(data, *, n_arrows: int = 40, n_outlines: int = 6, title: 
     D-E-F-H at `n_outlines` equally spaced times from t = 0 to lift-off (or the end), labelled with the time
     at corner D; dots mark the start."""
     d = as_arrays(data)
-    fig, axes = new_figure(1, 1, figsize=(7.0, 7.0), sharex=False)
+    fig, axes = new_figure(1, 1, figsize=(7.0, 7.0), sharex=False, fixed=True)
     ax = axes[0, 0]
     c, t, n = d["corners"], d["ts"], d["normal_forces"]
     span = float(np.ptp(c[..., :2].reshape(-1, 2), axis=0).max()) or 1.0
@@ -226,7 +248,7 @@ def plot_energy(data, *, title: str | None = None) -> Figure:
     hoist work minus the damping and friction losses (top), and their difference, the residual (bottom), which
     measures the solver error."""
     d = as_arrays(data)
-    fig, axes = new_figure(2, 1, figsize=(7.0, 5.5))
+    fig, axes = new_figure(2, 1, figsize=(7.0, 5.5), fixed=True)
     t = d["ts"]
     mech = d["energy_mechanical"] - d["energy_mechanical"][0]
     supplied = d["hoist_work"] - d["damping_loss"] - d["friction_work"]
