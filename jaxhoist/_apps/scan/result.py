@@ -98,11 +98,12 @@ class ScanResult:
     @property
     def accuracy(self) -> dict[str, Any] | None:
         """The scan's report of its own accuracy (`AccuracyCheck`), or None where it was not checked: the
-        members re-solved at a tighter tolerance (`members`, flat `indices`), the `reference` options, and per
-        observable (`observables[name]`) the `median` and `max` difference ([m] for lengths, relative for the
-        others), the members `over_target` and the `target`; in all `over_target` and `suggest` (the option
-        that gives more accuracy, where members are over the target). Also in `scan.json` under
-        `attrs.accuracy`."""
+        members re-solved at a tighter tolerance (`members`, flat `indices`; `chosen`: those with the most
+        solver steps, those drawn at random, those re-solved in further rounds), the `reference` options, and
+        per observable (`observables[name]`) and kept history (`histories[name]`) the `median` and `max`
+        difference ([m] for lengths, relative for the others), the members `over_target` and the `target`; in
+        all `over_target` and `suggest` (the option that gives more accuracy, where members are over the
+        target). Also in `scan.json` under `attrs.accuracy`."""
         return self.attrs.get("accuracy")
 
     def reason(self, i) -> str:
