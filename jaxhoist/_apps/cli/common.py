@@ -166,8 +166,10 @@ def add_out_options(
     )
 
 
-def add_uncertain_inputs(parser) -> None:
-    """The `SCENARIO` argument and the `--uncertain PATH=DIST` option of `risk` and `optimise-lift`."""
+def add_sampled_scan_command(subparsers, name: str, help: str, description: str):
+    """Add the subcommand `name` of a scan over sampled uncertain inputs (`risk`, `optimise-lift`) with its
+    `SCENARIO` argument and `--uncertain PATH=DIST` option. **Returns** its parser."""
+    parser = subparsers.add_parser(name, help=help, description=description)
     parser.add_argument("scenario", metavar="SCENARIO", help="preset name (e.g. paper-4.2) or TOML file")
     parser.add_argument(
         "--uncertain",
@@ -178,20 +180,23 @@ def add_uncertain_inputs(parser) -> None:
         "truncnormal(mean,std,low,high), lognormal(median,sigma), fixed(value) or a number, e.g. "
         "foundation.friction_coefficient=uniform(0.2,0.4)",
     )
+    return parser
 
 
-def sampled_scan_inputs(args, command: str, prefix: str) -> tuple:
-    """Switch on float64 and read what `add_uncertain_inputs`, `add_sampled_scan_options` and
+def sampled_scan_inputs(args, command: str, prefix: str, passed=()) -> tuple:
+    """Switch on float64 and read what `add_sampled_scan_command`, `add_sampled_scan_options` and
     `add_out_options` parsed, apart from `--uncertain`; check the output folder (`prepare_out_dir`).
 
     **Arguments**
     - `args`: the parsed command line.
     - `command`: the subcommand, as its folder's marker names it.
     - `prefix`: the prefix of the default output folder (see `default_out`).
+    - `passed`: the names of further options that are keywords of the same name of the library call.
 
     **Returns** `(scenario, out, keywords)`: the scenario with `--set` applied, the output folder, and the
-    keywords `lift_risk` and `optimise_lift` share: `times` (the saved `Times`), `options` (the
-    `SolverOptions`), `batch` (the scan's `BatchOptions`) and `progress` (off with `--quiet`).
+    keywords of the library call (`lift_risk`, `optimise_lift`): `times` (the saved `Times`), `options`
+    (the `SolverOptions`), `batch` (the scan's `BatchOptions`), `progress` (off with `--quiet`) and those
+    named in `passed`.
 
     **Raises** `ScenarioError` naming the field of a bad scenario, override, option or output folder.
     """
@@ -210,11 +215,10 @@ def sampled_scan_inputs(args, command: str, prefix: str) -> tuple:
         CLI_SOLVERS[args.solver](), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps
     )
     batch = BatchOptions(lanes=args.lanes, chunk_size=args.chunk_size)
-    return (
-        scenario,
-        out,
-        dict(times=Times(args.t1, n=args.n_save), options=options, batch=batch, progress=not args.quiet),
+    keywords = dict(
+        times=Times(args.t1, n=args.n_save), options=options, batch=batch, progress=not args.quiet
     )
+    return scenario, out, {**keywords, **{name: getattr(args, name) for name in passed}}
 
 
 def add_sampled_scan_options(parser) -> None:

@@ -16,8 +16,8 @@ from ..._errors import ScenarioError
 from ..planning import OptimisedLift, optimise_lift
 from .common import (
     add_out_options,
+    add_sampled_scan_command,
     add_sampled_scan_options,
-    add_uncertain_inputs,
     claim_out_dir,
     sampled_scan_inputs,
 )
@@ -59,14 +59,14 @@ def parse_limit(item: str):
 def configure_parser(subparsers) -> None:
     """Add `jaxhoist optimise-lift SCENARIO --uncertain PATH=DIST ... --bound PATH=LOW:HIGH ...
     --objective NAME[=WEIGHT] ... [--limit HAZARD:P ...]`."""
-    p = subparsers.add_parser(
+    p = add_sampled_scan_command(
+        subparsers,
         "optimise-lift",
-        help="the design within bounds that minimises an expected outcome of a lift with uncertain inputs",
-        description="Minimise a weighted sum of expected smooth outcomes over a fixed sample of the "
-        "uncertain inputs by L-BFGS-B on the forward sensitivities, then check the hazard limits on a "
-        "fresh sample (docs/lift-planning.md).",
+        "the design within bounds that minimises an expected outcome of a lift with uncertain inputs",
+        "Minimise a weighted sum of expected smooth outcomes over a fixed sample of the uncertain inputs by "
+        "L-BFGS-B on the forward sensitivities, then check the hazard limits on a fresh sample "
+        "(docs/lift-planning.md).",
     )
-    add_uncertain_inputs(p)
     p.add_argument(
         "--bound",
         action="append",
@@ -106,28 +106,26 @@ def configure_parser(subparsers) -> None:
     p.set_defaults(func=run_cli)
 
 
+#: The options of `jaxhoist optimise-lift` that are keywords of the same name of `optimise_lift`.
+_PASSED = (
+    "samples",
+    "seed",
+    "hoist_distance",
+    "penalty",
+    "starts",
+    "max_iterations",
+    "check_samples",
+    "check_replicates",
+)
+
+
 def run_cli(args) -> int:
-    scenario, out, keywords = sampled_scan_inputs(args, "optimise-lift", "optimise-")
+    scenario, out, keywords = sampled_scan_inputs(args, "optimise-lift", "optimise-", _PASSED)
     uncertain = parse_uncertain(args.uncertain)
     bounds = dict(parse_bound(b) for b in args.bound)
     objective = dict(parse_objective(o) for o in args.objective)
     limits = dict(parse_limit(x) for x in args.limit)
-    res = optimise_lift(
-        scenario,
-        uncertain,
-        objective,
-        bounds,
-        hazard_limits=limits or None,
-        samples=args.samples,
-        seed=args.seed,
-        hoist_distance=args.hoist_distance,
-        penalty=args.penalty,
-        starts=args.starts,
-        max_iterations=args.max_iterations,
-        check_samples=args.check_samples,
-        check_replicates=args.check_replicates,
-        **keywords,
-    )
+    res = optimise_lift(scenario, uncertain, objective, bounds, hazard_limits=limits or None, **keywords)
     print(res.summary())
     claim_out_dir(out, "optimise-lift", ["optimise.json"])
     path = out / "optimise.json"

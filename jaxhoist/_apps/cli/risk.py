@@ -36,8 +36,8 @@ from ..planning import (
 from ..scan import Grid, Sweep
 from .common import (
     add_out_options,
+    add_sampled_scan_command,
     add_sampled_scan_options,
-    add_uncertain_inputs,
     claim_out_dir,
     sampled_scan_inputs,
 )
@@ -121,14 +121,14 @@ def parse_hazard(text: str, flag: str = "--hazard") -> Hazard:
 
 def configure_parser(subparsers) -> None:
     """Add `jaxhoist risk SCENARIO --uncertain PATH=DIST ... --hazard SPEC ... [--design PATH=VALUES ...]`."""
-    p = subparsers.add_parser(
+    p = add_sampled_scan_command(
+        subparsers,
         "risk",
-        help="hazard probabilities of a lift with uncertain inputs, over a grid of designs",
-        description="Sample the uncertain inputs (randomised quasi-Monte Carlo), solve every design point "
-        "with every sample as one scan, and print and save the probability of each hazard with its "
-        "confidence interval (docs/lift-planning.md).",
+        "hazard probabilities of a lift with uncertain inputs, over a grid of designs",
+        "Sample the uncertain inputs (randomised quasi-Monte Carlo), solve every design point with every "
+        "sample as one scan, and print and save the probability of each hazard with its confidence "
+        "interval (docs/lift-planning.md).",
     )
-    add_uncertain_inputs(p)
     p.add_argument(
         "--hazard",
         action="append",
@@ -178,6 +178,9 @@ def _design(items: list[str]):
     return Sweep(*next(iter(axes.items()))) if len(axes) == 1 else Grid(axes)
 
 
+#: The options of `jaxhoist risk` that are keywords of the same name of `lift_risk`.
+_PASSED = ("samples", "replicates", "seed", "confidence", "max_failed")
+
 #: What `jaxhoist risk` writes into its folder (replaced when it runs there again).
 _RISK_OUTPUTS = ("risk.nc", "risk.json", "risk_*.png")
 
@@ -188,22 +191,11 @@ def parse_uncertain(items: list[str]) -> dict:
 
 
 def run_cli(args) -> int:
-    scenario, out, keywords = sampled_scan_inputs(args, "risk", "risk-")
+    scenario, out, keywords = sampled_scan_inputs(args, "risk", "risk-", _PASSED)
     uncertain = parse_uncertain(args.uncertain)
     hazards = [parse_hazard(h) for h in args.hazard]
     design = _design(args.design)
-    risk = lift_risk(
-        scenario,
-        uncertain,
-        hazards,
-        design,
-        samples=args.samples,
-        replicates=args.replicates,
-        seed=args.seed,
-        confidence=args.confidence,
-        max_failed=args.max_failed,
-        **keywords,
-    )
+    risk = lift_risk(scenario, uncertain, hazards, design, **keywords)
     claim_out_dir(out, "risk", _RISK_OUTPUTS)
     print(f"risk          {scenario.name}: {risk.samples} samples x {int(np.prod(risk.shape))} design points")
     for p, d in risk.uncertain.items():
