@@ -10,6 +10,7 @@ jax.config.update("jax_enable_x64", True)  # tests/conftest.py also does this
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from _inputs import SYMMETRIC_LIFT, symmetric_lift  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist._apps.bifurcation import (  # noqa: E402
@@ -31,23 +32,8 @@ E_MINUS_D = O.detachment_time_difference("E", "D")
 SYM_KW = dict(times=jh.Times(0.2, n=101))
 
 
-def symmetric_lift(xi_c: float = 0.45) -> jh.Scenario:
-    """A 1 m cube of 1000 kg lifted at 0.05 m/s by a vertical rope from the centre of its top face; the
-    mass centre is offset along ξ only, to (ξ_C, 0.5, 0.5) m."""
-    return jh.Scenario(
-        load=jh.Load([1.0, 1.0, 1.0], 1000.0, mass_centre=[xi_c, 0.5, 0.5]),
-        foundation=jh.Foundation(1.5e7, 2.0e5, 0.3, jh.RegularisedCoulomb(1e-3)),
-        rope=jh.Rope(1.5e7, 1.3e4, [0.5, 0.5, 1.0]),
-        hoist=jh.ConstantSpeedHoist(0.05),
-        boom=jh.Boom([0.5, 0.5, 11.0], 500.0, 5.0e6, 5.0e3),
-        name="symmetric-lift",
-        t1=0.2,
-    )
-
-
-@pytest.fixture(scope="module")
-def newton_run():
-    """The Newton locator on the symmetric lift, with every progress report it made."""
+def locate_symmetric(search: SearchOptions):
+    """The locator with `search` on the symmetric lift, with every progress report it made."""
     reports = []
     b = locate_bifurcation(
         symmetric_lift(),
@@ -55,11 +41,17 @@ def newton_run():
         E_MINUS_D,
         (0.46, 0.57),
         level=0.0,
-        search=SearchOptions(tol=1e-6),
+        search=search,
         progress=reports.append,
         **SYM_KW,
     )
     return b, reports
+
+
+@pytest.fixture(scope="module")
+def newton_run():
+    """The Newton locator on the symmetric lift, with every progress report it made."""
+    return locate_symmetric(SearchOptions(tol=1e-6))
 
 
 @pytest.fixture(scope="module")
@@ -110,17 +102,7 @@ def test_corner_order_swaps_at_the_symmetric_mass_centre(newton_result):
 
 
 def test_bisection_finds_the_same_point_with_more_solves(newton_result):
-    reps = []
-    b = locate_bifurcation(
-        symmetric_lift(),
-        XI,
-        E_MINUS_D,
-        (0.46, 0.57),
-        level=0.0,
-        search=SearchOptions(Bisection(), tol=1e-6),
-        progress=reps.append,
-        **SYM_KW,
-    )
+    b, reps = locate_symmetric(SearchOptions(Bisection(), tol=1e-6))
     # every bisection report halves the bracket
     assert [r["kind"] for r in reps] == ["end", "end"] + ["bisect"] * (b.n_solves - 2)
     for r0, r1 in zip(reps[1:], reps[2:], strict=False):
@@ -389,31 +371,6 @@ def test_locator_refuses_a_bracket_without_a_sign_change(capfd):
     assert out.out == "" and out.err == ""
 
 
-SYMMETRIC_TOML = """
-name = "symmetric-lift"
-t1 = 0.2
-[load]
-size = [1.0, 1.0, 1.0]
-mass = 1000.0
-mass_centre = [0.45, 0.5, 0.5]
-[foundation]
-stiffness = 1.5e7
-damping = 2.0e5
-friction_coefficient = 0.3
-[rope]
-stiffness = 1.5e7
-damping = 1.3e4
-attachment = [0.5, 0.5, 1.0]
-[hoist]
-speed = 0.05
-[boom]
-tip_position = [0.5, 0.5, 11.0]
-tip_mass = 500.0
-stiffness = 5.0e6
-damping = 5.0e3
-"""
-
-
 def test_scan_and_bifurcation_commands(tmp_path, capfd):
     """The `scan` and `bifurcation` subcommands on `symmetric_lift` written as a scenario file, with a
     `--set` override: the scan sees E leave first below ξ_C = a/2 and D above it (the sign argument of
@@ -423,8 +380,7 @@ def test_scan_and_bifurcation_commands(tmp_path, capfd):
 
     from jaxhoist._apps.cli.app import main
 
-    path = tmp_path / "sym.toml"
-    path.write_text(SYMMETRIC_TOML)
+    path = SYMMETRIC_LIFT
     out = tmp_path / "scan"
     common = ["--t1", "0.2", "--n-save", "101", "--set", "hoist.speed=0.05"]  # both commands
     rc = main(["scan", str(path), "--param", XI, "--values", "0.45,0.55", "--observable", "first_corner",

@@ -11,6 +11,7 @@ jax.config.update("jax_enable_x64", True)  # tests/conftest.py also does this
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from _inputs import BIFURCATION_MU  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist._apps.bifurcation.classify import classify_change, classify_samples, ramp_width  # noqa: E402
@@ -227,13 +228,7 @@ def test_cli_bifurcation_classify(tmp_path, capsys):
     out = tmp_path / "bif"
     code = cli.main(
         [
-            "bifurcation",
-            "paper-4.2",
-            "--param",
-            "foundation.friction_coefficient",
-            "--bracket",
-            "0.2",
-            "0.4",
+            *BIFURCATION_MU,
             "--observable",
             "final_x",
             "--t1",

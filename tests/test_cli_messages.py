@@ -16,6 +16,7 @@ from importlib import resources  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
+from _inputs import BIFURCATION_MU  # noqa: E402
 
 from jaxhoist._apps import cli  # noqa: E402
 from jaxhoist._apps.cli import bifurcation as bifurcation_cli  # noqa: E402
@@ -163,16 +164,7 @@ def test_identify_and_bifurcation_keep_the_rule(tmp_path, capsys, monkeypatch):
     assert cli.main(["identify", "paper-4.2", str(csv), "--fit", "mu", "--quiet", "--out", str(mine)]) == 2
     assert "--overwrite" in _error(capsys) and (mine / "estimates.json").read_text() == "{}"
     claim_out_dir(mine, "simulate")
-    bif = [
-        "bifurcation",
-        "paper-4.2",
-        "--param",
-        "foundation.friction_coefficient",
-        "--bracket",
-        "0.2",
-        "0.4",
-    ]
-    assert cli.main([*bif, "--quiet", "--out", str(mine)]) == 2
+    assert cli.main([*BIFURCATION_MU, "--quiet", "--out", str(mine)]) == 2
     assert "`jaxhoist simulate`" in _error(capsys)
 
 
@@ -185,10 +177,8 @@ def test_identify_and_bifurcation_keep_the_rule(tmp_path, capsys, monkeypatch):
         (["scan", "paper-4.2", "--param", "foundation.friction_coefficient", "--values", "0.2-0.4"],
          ["start:stop:num", "'0.2-0.4'"]),
         (["simulate", "paper-4.2", "--set", "load.mass_centre=1;2.5;1"], ["x,y,z", "load.mass_centre"]),
-        (["bifurcation", "paper-4.2", "--param", "foundation.friction_coefficient", "--bracket", "0.2", "0.4",
-          "--observable", "contact_margin[G]"], ["D, E, F, H", "--observable"]),
-        (["bifurcation", "paper-4.2", "--param", "foundation.friction_coefficient", "--bracket", "0.2", "0.4",
-          "--observable", "final_pos"], ["did you mean 'final_position'"]),
+        ([*BIFURCATION_MU, "--observable", "contact_margin[G]"], ["D, E, F, H", "--observable"]),
+        ([*BIFURCATION_MU, "--observable", "final_pos"], ["did you mean 'final_position'"]),
         (["scan", "paper-4.2", "--param", "foundation.friction_coefficient", "--values", "0.2:0.3:2",
           "--observable", "final_pos"], ["did you mean 'final_position'"]),
     ],

@@ -19,6 +19,7 @@ import json  # noqa: E402
 import re  # noqa: E402
 from unittest import mock  # noqa: E402
 
+import _inputs  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
@@ -51,15 +52,8 @@ KW = dict(
 
 
 def drag_box() -> jh.Scenario:
-    return jh.Scenario(
-        load=jh.Load([2.0, 2.0, 0.5], 1000.0),
-        foundation=jh.Foundation(1.5e7, 2.0e5, 0.3, jh.RegularisedCoulomb(1e-3)),
-        rope=jh.Rope(3e4, 3e3, [1.0, 1.0, 0.5]),
-        hoist=jh.ConstantSpeedHoist(0.3),
-        boom=jh.Boom([1.6, 1.0, 8.5], 500.0, 5.0e6, 5.0e3),
-        name="drag-box",
-        t1=T1,
-    )
+    """The box of docs/lift-planning.md at the optimiser's start: boom tip at x = 1.6 m, hoist 0.3 m/s."""
+    return _inputs.drag_box(1.6, speed=0.3, t1=T1)
 
 
 def prepare(**over):
@@ -241,33 +235,13 @@ def test_bad_inputs_fail_before_compiling(over, field):
     assert "\n" not in str(info.value)
 
 
-BOX_TOML = """
-name = "drag-box"
-t1 = 3.0
-[load]
-size = [2.0, 2.0, 0.5]
-mass = 1000.0
-[foundation]
-stiffness = 1.5e7
-damping = 2.0e5
-friction_coefficient = 0.3
-[foundation.friction]
-law = "regularised-coulomb"
-regularisation_velocity = 1e-3
-[rope]
-stiffness = 3e4
-damping = 3e3
-attachment = [1.0, 1.0, 0.5]
-[hoist]
-law = "constant-speed"
-speed = 0.3
-[boom]
-tip_position = [1.6, 1.0, 8.5]
-tip_mass = 500.0
-stiffness = 5.0e6
-damping = 5.0e3
-"""
 CLI_ARGS = [
+    "--t1",
+    str(T1),
+    "--set",
+    "hoist.speed=0.3",
+    "--set",
+    "boom.tip_position=1.6,1.0,8.5",
     "--uncertain",
     "foundation.friction_coefficient=uniform(0.2,0.4)",
     "--uncertain",
@@ -304,8 +278,7 @@ CLI_ARGS = [
 def test_cli_bad_input_exits_2_before_compiling(tmp_path, capsys, extra, field):
     from jaxhoist._apps import cli
 
-    toml = tmp_path / "box.toml"
-    toml.write_text(BOX_TOML)
+    toml = _inputs.DRAG_BOX
     with mock.patch.object(opt_mod, "scan", _trap), mock.patch.object(risk_mod, "scan", _trap):
         assert cli.main(["optimise-lift", str(toml), *CLI_ARGS, *extra, "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
@@ -317,8 +290,7 @@ def test_cli_gives_the_library_result(tmp_path, capsys, optimised):
     same optimum (the same scans: the same design to 1e-9)."""
     from jaxhoist._apps import cli
 
-    toml = tmp_path / "box.toml"
-    toml.write_text(BOX_TOML)
+    toml = _inputs.DRAG_BOX
     out = tmp_path / "out"
     args = ["optimise-lift", str(toml), *CLI_ARGS, "--samples", str(SAMPLES), "--n-save", "301"]
     args += ["--check-samples", "32", "--check-replicates", "4", "--lanes", "8", "--chunk-size", "64"]

@@ -18,6 +18,7 @@ import math  # noqa: E402
 import re  # noqa: E402
 from unittest import mock  # noqa: E402
 
+import _inputs  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from scipy import stats  # noqa: E402
@@ -49,15 +50,8 @@ KW = dict(times=TIMES, batch=BATCH)
 
 
 def drag_box(tip_x: float = 4.0) -> jh.Scenario:
-    return jh.Scenario(
-        load=jh.Load([2.0, 2.0, 0.5], 1000.0),
-        foundation=jh.Foundation(1.5e7, 2.0e5, 0.3, jh.RegularisedCoulomb(1e-3)),
-        rope=jh.Rope(3e4, 3e3, [1.0, 1.0, 0.5]),
-        hoist=jh.ConstantSpeedHoist(0.2),
-        boom=jh.Boom([tip_x, 1.0, 8.5], 500.0, 5.0e6, 5.0e3),
-        name="drag-box",
-        t1=T1,
-    )
+    """The box of docs/lift-planning.md with the boom tip at x = `tip_x` [m], on the horizon `T1`."""
+    return _inputs.drag_box(tip_x, t1=T1)
 
 
 def observables_of(hazards) -> dict:
@@ -492,32 +486,6 @@ def test_cli_specs_parse_to_the_library_objects():
             parse_hazard(bad)
 
 
-BOX_TOML = """
-name = "drag-box"
-t1 = 2.5
-[load]
-size = [2.0, 2.0, 0.5]
-mass = 1000.0
-[foundation]
-stiffness = 1.5e7
-damping = 2.0e5
-friction_coefficient = 0.3
-[foundation.friction]
-law = "regularised-coulomb"
-regularisation_velocity = 1e-3
-[rope]
-stiffness = 3e4
-damping = 3e3
-attachment = [1.0, 1.0, 0.5]
-[hoist]
-law = "constant-speed"
-speed = 0.2
-[boom]
-tip_position = [4.0, 1.0, 8.5]
-tip_mass = 500.0
-stiffness = 5.0e6
-damping = 5.0e3
-"""
 CLI_ARGS = ["--uncertain", "foundation.friction_coefficient=uniform(0.2,0.4)", "--hazard", "slide=1.1"]
 
 
@@ -534,8 +502,7 @@ CLI_ARGS = ["--uncertain", "foundation.friction_coefficient=uniform(0.2,0.4)", "
 def test_cli_bad_input_exits_2_before_compiling(tmp_path, capsys, extra, field):
     from jaxhoist._apps import cli
 
-    toml = tmp_path / "box.toml"
-    toml.write_text(BOX_TOML)
+    toml = _inputs.DRAG_BOX
     with mock.patch.object(risk_mod, "scan", _trap):
         code = cli.main(["risk", str(toml), *CLI_ARGS, *extra, "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err
@@ -547,11 +514,11 @@ def test_cli_writes_the_map(tmp_path, capsys):
     aside is likelier than 1 m aside."""
     from jaxhoist._apps import cli
 
-    toml = tmp_path / "box.toml"
-    toml.write_text(BOX_TOML)
+    toml = _inputs.DRAG_BOX
     out = tmp_path / "out"
-    args = ["risk", str(toml), *CLI_ARGS, "--hazard", "tilt=3deg", "--design", "boom.tip_position[0]=2,4"]
-    args += ["--samples", "16", "--replicates", "2", "--n-save", "126", "--quiet", "--out", str(out)]
+    args = ["risk", str(toml), "--t1", str(T1), *CLI_ARGS, "--hazard", "tilt=3deg", "--n-save", "126"]
+    args += ["--design", "boom.tip_position[0]=2,4", "--samples", "16", "--replicates", "2", "--quiet"]
+    args += ["--out", str(out)]
     assert cli.main(args) == 0
     printed = capsys.readouterr().out
     assert "boom.tip_position[0] = 4" in printed and "failed 0/16" in printed

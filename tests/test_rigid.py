@@ -195,10 +195,10 @@ def test_outputs_of_any_size(slide_run):
     assert resid.max() < 1e-6 * float(np.asarray(tr.hoist_work)[-1])
 
 
-def test_tipping_about_an_edge_at_the_statics_threshold():
-    """A tall box with high friction, pulled obliquely upwards from the middle of its top front edge, tips
-    about its front bottom edge DE (F, H lift) when the pull reaches the statics tip threshold."""
-    sc = _scenario(
+def _tall_box(**over):
+    """A tall box (1 x 1 x 2 m, μ = 0.9) pulled obliquely upwards from the middle of its top front edge;
+    `over`: further keywords of `_scenario`."""
+    return _scenario(
         size=(1.0, 1.0, 2.0),
         mu=0.9,
         attachment=(0.5, 0.0, 2.0),
@@ -206,7 +206,14 @@ def test_tipping_about_an_edge_at_the_statics_threshold():
         rope_stiffness=2e5,
         rope_damping=2e4,
         speed=0.05,
+        **over,
     )
+
+
+def test_tipping_about_an_edge_at_the_statics_threshold():
+    """A tall box with high friction, pulled obliquely upwards from the middle of its top front edge, tips
+    about its front bottom edge DE (F, H lift) when the pull reaches the statics tip threshold."""
+    sc = _tall_box()
     tr = simulate_rigid(sc, jh.Times(T1, n=N_SAVE))
     ph = tr.phases
     assert ph[0].rest and ph[0].end == "rest:tip"
@@ -228,16 +235,7 @@ def test_tipping_about_an_edge_at_the_statics_threshold():
 
 def _rocking_box():
     """A tall box (1 x 1 x 2 m, μ = 0.9) whose hoist stops dead just after it starts to tip about DE."""
-    return _scenario(
-        size=(1.0, 1.0, 2.0),
-        mu=0.9,
-        attachment=(0.5, 0.0, 2.0),
-        tip=(0.5, -6.0, 10.0),
-        rope_stiffness=2e5,
-        rope_damping=2e4,
-        speed=0.05,
-        travel=0.018,
-    )
+    return _tall_box(travel=0.018)
 
 
 def test_rocking_impacts_settle_and_the_energy_balance_closes():

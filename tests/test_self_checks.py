@@ -159,34 +159,37 @@ def _scenario_with(paper42, path):
     return next(sc for sc in scs if any(p == path for p, _ in _ranges(sc)))
 
 
+#: Every float parameter but the box geometry's (mass centre, rope point: bounded by the box) and the
+#: bristle's break-away ratio (bounded to [0, 1) by its law).
+RANGED = (
+    "load.size",
+    "load.mass",
+    "foundation.stiffness",
+    "foundation.damping",
+    "foundation.friction_coefficient",
+    "foundation.damping_onset",
+    "foundation.friction.regularisation_velocity",
+    "foundation.friction.deflection",
+    "foundation.friction.relaxation_time",
+    "rope.stiffness",
+    "rope.damping",
+    "rope.slack",
+    "rope.damping_onset",
+    "hoist.speed",
+    "hoist.ramp_time",
+    "hoist.travel",
+    "boom.tip_position",
+    "boom.tip_mass",
+    "boom.stiffness",
+    "boom.damping",
+    "gravity",
+)
+
+
 def test_every_parameter_has_a_plausible_range(paper42):
-    """Every float parameter but the box geometry's (mass centre, rope point: bounded by the box) and
-    the bristle's break-away ratio (bounded to [0, 1) by its law) carries a range with a reason."""
+    """Every parameter of `RANGED`, and no other, carries a range with a reason."""
     seen, *_ = _all_ranges(paper42)
-    expected = {
-        "load.size",
-        "load.mass",
-        "foundation.stiffness",
-        "foundation.damping",
-        "foundation.friction_coefficient",
-        "foundation.damping_onset",
-        "foundation.friction.regularisation_velocity",
-        "foundation.friction.deflection",
-        "foundation.friction.relaxation_time",
-        "rope.stiffness",
-        "rope.damping",
-        "rope.slack",
-        "rope.damping_onset",
-        "hoist.speed",
-        "hoist.ramp_time",
-        "hoist.travel",
-        "boom.tip_position",
-        "boom.tip_mass",
-        "boom.stiffness",
-        "boom.damping",
-        "gravity",
-    }
-    assert set(seen) == expected
+    assert set(seen) == set(RANGED)
     for path, rng in seen.items():
         assert rng.low < rng.high and len(rng.why) > 10, path
 
@@ -201,32 +204,7 @@ def _with_value(sc, path, value):
     return sc.replace(**new)
 
 
-@pytest.mark.parametrize(
-    "path",
-    [
-        "load.size",
-        "load.mass",
-        "foundation.stiffness",
-        "foundation.damping",
-        "foundation.friction_coefficient",
-        "foundation.damping_onset",
-        "foundation.friction.regularisation_velocity",
-        "foundation.friction.deflection",
-        "foundation.friction.relaxation_time",
-        "rope.stiffness",
-        "rope.damping",
-        "rope.slack",
-        "rope.damping_onset",
-        "hoist.speed",
-        "hoist.ramp_time",
-        "hoist.travel",
-        "boom.tip_position",
-        "boom.tip_mass",
-        "boom.stiffness",
-        "boom.damping",
-        "gravity",
-    ],
-)
+@pytest.mark.parametrize("path", RANGED)
 def test_each_range_refuses_outside_and_admits_its_ends(paper42, path):
     """Ten times beyond either end (an order of magnitude: a typo) is refused with one line naming the
     field, the value, the range and the opt-in, before compiling; the ends themselves pass the range

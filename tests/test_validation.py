@@ -12,6 +12,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from _inputs import BIFURCATION_MU
 from hypothesis import assume, given, settings
 from hypothesis import strategies as st
 
@@ -759,16 +760,7 @@ def test_failed_run_summary_prints_no_event_times():
     ],
 )
 def test_cli_bifurcation_bad_arguments_exit_2(monkeypatch, capsys, extra, word):
-    argv = [
-        "bifurcation",
-        "paper-4.2",
-        "--param",
-        "foundation.friction_coefficient",
-        "--bracket",
-        "0.2",
-        "0.4",
-    ]
-    code, err = _cli(monkeypatch, capsys, [*argv, *extra])
+    code, err = _cli(monkeypatch, capsys, [*BIFURCATION_MU, *extra])
     assert code == 2 and word in err, err
 
 

@@ -103,6 +103,15 @@ def _sign_changes(mus, g):
     return [(float(mus[i]), float(mus[i + 1])) for i in idx]
 
 
+def _residuals(res) -> dict:
+    """The residuals of a fit, their largest magnitude and their rms."""
+    return {
+        "residuals": res.tolist(),
+        "max_abs_residual": float(np.max(np.abs(res))),
+        "rms_residual": float(np.sqrt(np.mean(res**2))),
+    }
+
+
 def _fit(eps, mu, deg):
     """Least-squares μ*(ε) = μ0 + a ε (+ b ε²): coefficients, residuals, rms and max residual."""
     eps, mu = np.asarray(eps), np.asarray(mu)
@@ -115,9 +124,7 @@ def _fit(eps, mu, deg):
         "eps_used": eps.tolist(),
         "mu0": float(coef[0]),
         "coefficients": coef.tolist(),
-        "residuals": res.tolist(),
-        "max_abs_residual": float(np.max(np.abs(res))),
-        "rms_residual": float(np.sqrt(np.mean(res**2))),
+        **_residuals(res),
         "dof": dof,
     }
 
@@ -139,9 +146,7 @@ def _fit_power(eps, mu):
         "mu0": float(coef[0]),
         "A": float(coef[1]),
         "p": pw,
-        "residuals": res.tolist(),
-        "max_abs_residual": float(np.max(np.abs(res))),
-        "rms_residual": float(np.sqrt(np.mean(res**2))),
+        **_residuals(res),
         "dof": len(eps) - 3,
     }
 
@@ -157,9 +162,7 @@ def _fit_elog(eps, mu):
         "eps_used": eps.tolist(),
         "mu0": float(coef[0]),
         "coefficients": coef.tolist(),
-        "residuals": res.tolist(),
-        "max_abs_residual": float(np.max(np.abs(res))),
-        "rms_residual": float(np.sqrt(np.mean(res**2))),
+        **_residuals(res),
         "dof": len(eps) - 3,
     }
 

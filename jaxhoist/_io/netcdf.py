@@ -32,6 +32,27 @@ def nc_name(text: str) -> str:
     return s if s and (s[0].isalpha() or s[0] == "_") else "_" + s
 
 
+def nc_variable(name: str, dims, values, attrs: Mapping, nc_dims: dict, coordinates: str = "") -> tuple:
+    """One variable of a layout (`name`, `dims`, `values`, `attrs`) as `write_netcdf` takes it: names
+    netCDF does not allow become '_' (the original kept in the attribute `path`), `coordinates` (if any)
+    becomes the CF attribute of that name, and text labels (a list of str) become an (n, strlen) character
+    array with a dimension `<dim>_strlen` of its own, added to `nc_dims`.
+
+    **Returns** `(name, dims, values, attrs)` in netCDF names.
+    """
+    a = {**attrs, "path": name} if nc_name(name) != name else dict(attrs)
+    if coordinates:
+        a["coordinates"] = coordinates
+    dd = tuple(nc_name(x) for x in dims)
+    if isinstance(values, list):  # text labels -> (n, strlen) characters
+        width = max(1, *(len(x.encode("utf-8")) for x in values))
+        nc_dims[f"{dd[0]}_strlen"] = width
+        chars = np.array([list(x.encode("utf-8").ljust(width, b"\0")) for x in values], dtype=np.uint8)
+        values, dd = chars.view("S1").reshape(len(values), width), (*dd, f"{dd[0]}_strlen")
+        a["_Encoding"] = "utf-8"  # read back as text, not bytes
+    return nc_name(name), dd, np.asarray(values), a
+
+
 def _pad(b: bytes) -> bytes:
     return b + b"\0" * (-len(b) % 4)
 

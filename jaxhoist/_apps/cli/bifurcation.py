@@ -24,7 +24,7 @@ from ..bifurcation.options import SearchOptions, as_method
 from ..bifurcation.result import fmt_located
 from ..bifurcation.trace import trace_boundary
 from ..scan.run import scan
-from .common import add_allow_implausible, claim_out_dir, prepare_out_dir, rerun_scan
+from .common import add_allow_implausible, add_out_options, claim_out_dir, prepare_out_dir, rerun_scan
 
 
 def configure_parser(subparsers) -> None:
@@ -79,17 +79,12 @@ def configure_parser(subparsers) -> None:
     p.add_argument("--max-steps", type=count_arg, default=200_000)
     p.add_argument("--set", action="append", default=[], metavar="PATH=VALUE", help="fixed leaf overrides")
     add_allow_implausible(p)
-    p.add_argument(
-        "--out",
-        default=None,
-        help="folder for bifurcation.json, locator_<k>.png per located value (and, with --scan, the scan "
+    add_out_options(
+        p,
+        "bifurcation",
+        "the files it writes are replaced",
+        out_help="folder for bifurcation.json, locator_<k>.png per located value (and, with --scan, the scan "
         "and scan_<observable>.png with the located values marked)",
-    )
-    p.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="write into a non-empty --out that `jaxhoist bifurcation` did not write (only the files it "
-        "writes are replaced); without it, such a folder is refused",
     )
     p.add_argument("--no-plots", action="store_true", help="write no PNGs")
     p.add_argument(

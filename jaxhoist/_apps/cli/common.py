@@ -133,6 +133,94 @@ def add_allow_implausible(parser) -> None:
     )
 
 
+def add_out_options(
+    parser,
+    command: str,
+    replaced: str,
+    *,
+    writes: str = "",
+    prefix: str = "",
+    out_help: str = "",
+    metavar=None,
+) -> None:
+    """`--out` and `--overwrite` of a command that writes a folder (the rule of `prepare_out_dir`).
+
+    **Arguments**
+    - `command`: the subcommand, as in `{PROG} {command}`.
+    - `replaced`: what `--overwrite` replaces, e.g. `"fit.png is replaced"`.
+    - `writes`: what the folder gets, e.g. `"risk.json"` (in the default help of `--out`).
+    - `prefix`: the prefix of the default folder `out/<prefix><name>` (see `default_out`).
+    - `out_help`: the help of `--out` when not the default one.
+    - `metavar`: the metavar of `--out`.
+    """
+    out_help = out_help or (
+        f"output folder{' for ' + writes if writes else ''} (default out/{prefix}<preset name or scenario "
+        f"file name>); a folder an earlier `{PROG} {command}` wrote is reused, its results replaced"
+    )
+    parser.add_argument("--out", default=None, metavar=metavar, help=out_help)
+    parser.add_argument(
+        "--overwrite",
+        action="store_true",
+        help=f"write into a non-empty --out that `{PROG} {command}` did not write (only {replaced}); without "
+        "it, such a folder is refused",
+    )
+
+
+def add_sampled_scan_command(subparsers, name: str, help: str, description: str):
+    """Add the subcommand `name` of a scan over sampled uncertain inputs (`risk`, `optimise-lift`) with its
+    `SCENARIO` argument and `--uncertain PATH=DIST` option. **Returns** its parser."""
+    parser = subparsers.add_parser(name, help=help, description=description)
+    parser.add_argument("scenario", metavar="SCENARIO", help="preset name (e.g. paper-4.2) or TOML file")
+    parser.add_argument(
+        "--uncertain",
+        action="append",
+        required=True,
+        metavar="PATH=DIST",
+        help="an uncertain input (repeatable): uniform(low,high), normal(mean,std), "
+        "truncnormal(mean,std,low,high), lognormal(median,sigma), fixed(value) or a number, e.g. "
+        "foundation.friction_coefficient=uniform(0.2,0.4)",
+    )
+    return parser
+
+
+def sampled_scan_inputs(args, command: str, prefix: str, passed=()) -> tuple:
+    """Switch on float64 and read what `add_sampled_scan_command`, `add_sampled_scan_options` and
+    `add_out_options` parsed, apart from `--uncertain`; check the output folder (`prepare_out_dir`).
+
+    **Arguments**
+    - `args`: the parsed command line.
+    - `command`: the subcommand, as its folder's marker names it.
+    - `prefix`: the prefix of the default output folder (see `default_out`).
+    - `passed`: the names of further options that are keywords of the same name of the library call.
+
+    **Returns** `(scenario, out, keywords)`: the scenario with `--set` applied, the output folder, and the
+    keywords of the library call (`lift_risk`, `optimise_lift`): `times` (the saved `Times`), `options`
+    (the `SolverOptions`), `batch` (the scan's `BatchOptions`), `progress` (off with `--quiet`) and those
+    named in `passed`.
+
+    **Raises** `ScenarioError` naming the field of a bad scenario, override, option or output folder.
+    """
+    from ..._io.scenario import apply_overrides, load_scenario
+    from ..._numerics.options import SolverOptions
+    from ..._numerics.times import Times
+    from ..scan import BatchOptions
+
+    enable_x64()
+    scenario, _ = apply_overrides(
+        load_scenario(args.scenario, allow_implausible=args.allow_implausible), args.set
+    )
+    out = Path(args.out) if args.out else default_out(args.scenario, prefix)
+    prepare_out_dir(out, command, overwrite=args.overwrite)
+    options = SolverOptions(
+        CLI_SOLVERS[args.solver](), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps
+    )
+    batch = BatchOptions(lanes=args.lanes, chunk_size=args.chunk_size)
+    keywords = dict(
+        times=Times(args.t1, n=args.n_save), options=options, batch=batch, progress=not args.quiet
+    )
+    return scenario, out, {**keywords, **{name: getattr(args, name) for name in passed}}
+
+
 def add_sampled_scan_options(parser) -> None:
     """The options that `risk` and `optimise-lift` share: the horizon and saved times, the solver and its
     tolerances, the scan layout, `--set` and `--allow-implausible`."""

@@ -26,6 +26,7 @@ from .common import (
     CLI_SOLVERS,
     RTOL_HELP,
     add_allow_implausible,
+    add_out_options,
     claim_out_dir,
     default_out,
     prepare_out_dir,
@@ -126,18 +127,7 @@ def configure_parser(subparsers) -> None:
         "as in `jaxhoist simulate --set`); checked before compiling",
     )
     add_allow_implausible(p)
-    p.add_argument(
-        "--out",
-        default=None,
-        help="output folder (default out/identify-<preset name or scenario file name>); a folder an earlier "
-        "`jaxhoist identify` wrote is reused, its results replaced",
-    )
-    p.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="write into a non-empty --out that `jaxhoist identify` did not write (only estimates.json and "
-        "fit.png are replaced); without it, such a folder is refused",
-    )
+    add_out_options(p, "identify", "estimates.json and fit.png are replaced", prefix="identify-")
     p.add_argument("--no-plots", action="store_true", help="write only the JSON file")
     p.add_argument("--quiet", action="store_true", help="no progress line or bar on stderr")
     p.set_defaults(func=run)

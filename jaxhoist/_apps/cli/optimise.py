@@ -11,17 +11,17 @@ from __future__ import annotations
 
 import json
 import math
-from pathlib import Path
-
-import jax
 
 from ..._errors import ScenarioError
-from ..._numerics.options import SolverOptions
-from ..._numerics.times import Times
 from ..planning import OptimisedLift, optimise_lift
-from ..scan import BatchOptions
-from .common import CLI_SOLVERS, add_sampled_scan_options, claim_out_dir, default_out, prepare_out_dir
-from .risk import parse_distribution, parse_hazard, split_item
+from .common import (
+    add_out_options,
+    add_sampled_scan_command,
+    add_sampled_scan_options,
+    claim_out_dir,
+    sampled_scan_inputs,
+)
+from .risk import parse_hazard, parse_uncertain, split_item
 
 
 def _float(text: str, flag: str, item: str) -> float:
@@ -59,21 +59,13 @@ def parse_limit(item: str):
 def configure_parser(subparsers) -> None:
     """Add `jaxhoist optimise-lift SCENARIO --uncertain PATH=DIST ... --bound PATH=LOW:HIGH ...
     --objective NAME[=WEIGHT] ... [--limit HAZARD:P ...]`."""
-    p = subparsers.add_parser(
+    p = add_sampled_scan_command(
+        subparsers,
         "optimise-lift",
-        help="the design within bounds that minimises an expected outcome of a lift with uncertain inputs",
-        description="Minimise a weighted sum of expected smooth outcomes over a fixed sample of the "
-        "uncertain inputs by L-BFGS-B on the forward sensitivities, then check the hazard limits on a "
-        "fresh sample (docs/lift-planning.md).",
-    )
-    p.add_argument("scenario", metavar="SCENARIO", help="preset name (e.g. paper-4.2) or TOML file")
-    p.add_argument(
-        "--uncertain",
-        action="append",
-        required=True,
-        metavar="PATH=DIST",
-        help="an uncertain input (repeatable), as for `jaxhoist risk`, e.g. "
-        "foundation.friction_coefficient=uniform(0.2,0.4)",
+        "the design within bounds that minimises an expected outcome of a lift with uncertain inputs",
+        "Minimise a weighted sum of expected smooth outcomes over a fixed sample of the uncertain inputs by "
+        "L-BFGS-B on the forward sensitivities, then check the hazard limits on a fresh sample "
+        "(docs/lift-planning.md).",
     )
     p.add_argument(
         "--bound",
@@ -107,60 +99,33 @@ def configure_parser(subparsers) -> None:
     p.add_argument("--check-samples", type=int, default=256, help="members of the fresh sample of the check")
     p.add_argument("--check-replicates", type=int, default=8, help="scrambles of the check's sample")
     add_sampled_scan_options(p)
-    p.add_argument(
-        "--out",
-        default=None,
-        help="output folder for optimise.json (default out/optimise-<preset name or scenario file name>); a "
-        "folder an earlier `jaxhoist optimise-lift` wrote is reused, its results replaced",
-    )
-    p.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="write into a non-empty --out that `jaxhoist optimise-lift` did not write (only optimise.json "
-        "is replaced); without it, such a folder is refused",
+    add_out_options(
+        p, "optimise-lift", "optimise.json is replaced", writes="optimise.json", prefix="optimise-"
     )
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.set_defaults(func=run_cli)
 
 
-def run_cli(args) -> int:
-    jax.config.update("jax_enable_x64", True)
-    from ..._io.scenario import apply_overrides, load_scenario
+#: The options of `jaxhoist optimise-lift` that are keywords of the same name of `optimise_lift`.
+_PASSED = (
+    "samples",
+    "seed",
+    "hoist_distance",
+    "penalty",
+    "starts",
+    "max_iterations",
+    "check_samples",
+    "check_replicates",
+)
 
-    scenario, _ = apply_overrides(
-        load_scenario(args.scenario, allow_implausible=args.allow_implausible), args.set
-    )
-    uncertain = {}
-    for item in args.uncertain:
-        path, spec = split_item(item, "--uncertain")
-        uncertain[path] = parse_distribution(spec)
+
+def run_cli(args) -> int:
+    scenario, out, keywords = sampled_scan_inputs(args, "optimise-lift", "optimise-", _PASSED)
+    uncertain = parse_uncertain(args.uncertain)
     bounds = dict(parse_bound(b) for b in args.bound)
     objective = dict(parse_objective(o) for o in args.objective)
     limits = dict(parse_limit(x) for x in args.limit)
-    out = Path(args.out) if args.out else default_out(args.scenario, "optimise-")
-    prepare_out_dir(out, "optimise-lift", overwrite=args.overwrite)
-    options = SolverOptions(
-        CLI_SOLVERS[args.solver](), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps
-    )
-    res = optimise_lift(
-        scenario,
-        uncertain,
-        objective,
-        bounds,
-        hazard_limits=limits or None,
-        samples=args.samples,
-        seed=args.seed,
-        times=Times(args.t1, n=args.n_save),
-        hoist_distance=args.hoist_distance,
-        penalty=args.penalty,
-        starts=args.starts,
-        max_iterations=args.max_iterations,
-        check_samples=args.check_samples,
-        check_replicates=args.check_replicates,
-        options=options,
-        batch=BatchOptions(lanes=args.lanes, chunk_size=args.chunk_size),
-        progress=not args.quiet,
-    )
+    res = optimise_lift(scenario, uncertain, objective, bounds, hazard_limits=limits or None, **keywords)
     print(res.summary())
     claim_out_dir(out, "optimise-lift", ["optimise.json"])
     path = out / "optimise.json"

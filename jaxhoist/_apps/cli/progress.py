@@ -159,6 +159,20 @@ class _TqdmReport:
             self.bar.close()
             self.bar = None
 
+    def new_bar(self, total: float | int | None, desc: str, unit: str, bar_format: str):
+        """A tqdm bar of `total` steps in `unit` on `stream` (drawing nothing when `quiet`)."""
+        from tqdm import tqdm
+
+        return tqdm(
+            total=total,
+            desc=desc,
+            unit=unit,
+            file=self.stream or sys.stderr,
+            disable=self.quiet,
+            dynamic_ncols=True,
+            bar_format=bar_format,
+        )
+
 
 class ScanProgressBar(_TqdmReport):
     """Renders `jaxhoist._apps.scan.progress.Progress` reports (one per chunk) as a tqdm bar on stderr:
@@ -169,17 +183,12 @@ class ScanProgressBar(_TqdmReport):
     """
 
     def __call__(self, p) -> None:
-        from tqdm import tqdm
-
         if self.bar is None:
-            self.bar = tqdm(
-                total=p.total,
-                desc="scan",
-                unit="member",
-                file=self.stream or sys.stderr,
-                disable=self.quiet,
-                dynamic_ncols=True,
-                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} members [{postfix}]",
+            self.bar = self.new_bar(
+                p.total,
+                "scan",
+                "member",
+                "{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} members [{postfix}]",
             )
         rate = f"{p.rate:.3g} members/s" if p.rate else "compiling"
         eta = "?" if p.eta is None else _fmt_seconds(p.eta)
@@ -210,22 +219,14 @@ class LocatorProgressBar(_TqdmReport):
         self.key, self.w0 = None, None
 
     def __call__(self, r: dict) -> None:
-        from tqdm import tqdm
-
         key = r.get("point")
         if self.bar is None or key != self.key:
             self.close()
             desc = (
                 "locating" if key is None else (f"point {key + 1}/{r['n_points']} ({r['along_value']:.6g})")
             )
-            self.bar = tqdm(
-                total=100.0,
-                desc=desc,
-                unit="%",
-                file=self.stream or sys.stderr,
-                disable=self.quiet,
-                dynamic_ncols=True,
-                bar_format="{desc}: {percentage:3.0f}%|{bar}| [{elapsed}, {postfix}]",
+            self.bar = self.new_bar(
+                100.0, desc, "%", "{desc}: {percentage:3.0f}%|{bar}| [{elapsed}, {postfix}]"
             )
             self.key = key
         if r["iteration"] == 1:  # a new call (a wider retry, the next candidate jump): a new first bracket
@@ -254,20 +255,15 @@ class FitProgressBar(_TqdmReport):
         self.total, self.start = total, None
 
     def __call__(self, r: dict) -> None:
-        from tqdm import tqdm
-
         if self.bar is None or r["start"] != self.start:
             self.close()
             desc = "fit" if r["n_starts"] == 1 else f"fit, start {r['start'] + 1}/{r['n_starts']}"
-            self.bar = tqdm(
-                total=self.total,
-                desc=desc,
-                unit="eval",
-                file=self.stream or sys.stderr,
-                disable=self.quiet,
-                dynamic_ncols=True,
-                # no rate or ETA: the first evaluation carries the compile, and the total is a budget
-                bar_format="{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} evals [{elapsed}{postfix}]",
+            # no rate or ETA: the first evaluation carries the compile, and the total is a budget
+            self.bar = self.new_bar(
+                self.total,
+                desc,
+                "eval",
+                "{desc}: {percentage:3.0f}%|{bar}| {n_fmt}/{total_fmt} evals [{elapsed}{postfix}]",
             )
             self.start = r["start"]
         self.bar.n = r["iteration"]

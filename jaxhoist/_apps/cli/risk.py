@@ -13,13 +13,10 @@ import math
 import re
 from pathlib import Path
 
-import jax
 import numpy as np
 
 from ..._errors import ScenarioError
 from ..._io.validate import parse_values
-from ..._numerics.options import SolverOptions
-from ..._numerics.times import Times
 from ..planning import (
     Fixed,
     Hazard,
@@ -36,8 +33,14 @@ from ..planning import (
     swing,
     tilt,
 )
-from ..scan import BatchOptions, Grid, Sweep
-from .common import CLI_SOLVERS, add_sampled_scan_options, claim_out_dir, default_out, prepare_out_dir
+from ..scan import Grid, Sweep
+from .common import (
+    add_out_options,
+    add_sampled_scan_command,
+    add_sampled_scan_options,
+    claim_out_dir,
+    sampled_scan_inputs,
+)
 
 _DISTRIBUTIONS = {
     "uniform": (Uniform, "uniform(low,high)"),
@@ -118,22 +121,13 @@ def parse_hazard(text: str, flag: str = "--hazard") -> Hazard:
 
 def configure_parser(subparsers) -> None:
     """Add `jaxhoist risk SCENARIO --uncertain PATH=DIST ... --hazard SPEC ... [--design PATH=VALUES ...]`."""
-    p = subparsers.add_parser(
+    p = add_sampled_scan_command(
+        subparsers,
         "risk",
-        help="hazard probabilities of a lift with uncertain inputs, over a grid of designs",
-        description="Sample the uncertain inputs (randomised quasi-Monte Carlo), solve every design point "
-        "with every sample as one scan, and print and save the probability of each hazard with its "
-        "confidence interval (docs/lift-planning.md).",
-    )
-    p.add_argument("scenario", metavar="SCENARIO", help="preset name (e.g. paper-4.2) or TOML file")
-    p.add_argument(
-        "--uncertain",
-        action="append",
-        required=True,
-        metavar="PATH=DIST",
-        help="an uncertain input (repeatable): uniform(low,high), normal(mean,std), "
-        "truncnormal(mean,std,low,high), lognormal(median,sigma), fixed(value) or a number, e.g. "
-        "foundation.friction_coefficient=uniform(0.2,0.4)",
+        "hazard probabilities of a lift with uncertain inputs, over a grid of designs",
+        "Sample the uncertain inputs (randomised quasi-Monte Carlo), solve every design point with every "
+        "sample as one scan, and print and save the probability of each hazard with its confidence "
+        "interval (docs/lift-planning.md).",
     )
     p.add_argument(
         "--hazard",
@@ -162,17 +156,12 @@ def configure_parser(subparsers) -> None:
         help="largest share of failed members of a design point that still gives numbers",
     )
     add_sampled_scan_options(p)
-    p.add_argument(
-        "--out",
-        default=None,
-        help="output folder for risk.nc, risk.json and the maps (default out/risk-<preset name or scenario "
-        "file name>); a folder an earlier `jaxhoist risk` wrote is reused, its results replaced",
-    )
-    p.add_argument(
-        "--overwrite",
-        action="store_true",
-        help="write into a non-empty --out that `jaxhoist risk` did not write (only risk.nc, risk.json and "
-        "risk_*.png are replaced); without it, such a folder is refused",
+    add_out_options(
+        p,
+        "risk",
+        "risk.nc, risk.json and risk_*.png are replaced",
+        writes="risk.nc, risk.json and the maps",
+        prefix="risk-",
     )
     p.add_argument("--quiet", action="store_true", help="no progress lines on stderr")
     p.add_argument("--no-plots", action="store_true", help="do not write risk_<hazard>.png")
@@ -189,43 +178,24 @@ def _design(items: list[str]):
     return Sweep(*next(iter(axes.items()))) if len(axes) == 1 else Grid(axes)
 
 
+#: The options of `jaxhoist risk` that are keywords of the same name of `lift_risk`.
+_PASSED = ("samples", "replicates", "seed", "confidence", "max_failed")
+
 #: What `jaxhoist risk` writes into its folder (replaced when it runs there again).
 _RISK_OUTPUTS = ("risk.nc", "risk.json", "risk_*.png")
 
 
-def run_cli(args) -> int:
-    jax.config.update("jax_enable_x64", True)
-    from ..._io.scenario import apply_overrides, load_scenario
+def parse_uncertain(items: list[str]) -> dict:
+    """The `--uncertain PATH=DIST` items -> {path: distribution}, or a `ScenarioError` naming the flag."""
+    return {path: parse_distribution(spec) for path, spec in (split_item(i, "--uncertain") for i in items)}
 
-    scenario, _ = apply_overrides(
-        load_scenario(args.scenario, allow_implausible=args.allow_implausible), args.set
-    )
-    uncertain = {}
-    for item in args.uncertain:
-        path, spec = split_item(item, "--uncertain")
-        uncertain[path] = parse_distribution(spec)
+
+def run_cli(args) -> int:
+    scenario, out, keywords = sampled_scan_inputs(args, "risk", "risk-", _PASSED)
+    uncertain = parse_uncertain(args.uncertain)
     hazards = [parse_hazard(h) for h in args.hazard]
     design = _design(args.design)
-    out = Path(args.out) if args.out else default_out(args.scenario, "risk-")
-    prepare_out_dir(out, "risk", overwrite=args.overwrite)
-    options = SolverOptions(
-        CLI_SOLVERS[args.solver](), rtol=args.rtol, atol=args.atol, max_steps=args.max_steps
-    )
-    risk = lift_risk(
-        scenario,
-        uncertain,
-        hazards,
-        design,
-        samples=args.samples,
-        replicates=args.replicates,
-        times=Times(args.t1, n=args.n_save),
-        seed=args.seed,
-        confidence=args.confidence,
-        max_failed=args.max_failed,
-        options=options,
-        batch=BatchOptions(lanes=args.lanes, chunk_size=args.chunk_size),
-        progress=not args.quiet,
-    )
+    risk = lift_risk(scenario, uncertain, hazards, design, **keywords)
     claim_out_dir(out, "risk", _RISK_OUTPUTS)
     print(f"risk          {scenario.name}: {risk.samples} samples x {int(np.prod(risk.shape))} design points")
     for p, d in risk.uncertain.items():

@@ -241,13 +241,18 @@ def flat_z(params: list[Param], theta: np.ndarray) -> np.ndarray:
     return np.concatenate(out)
 
 
-def flat_dtheta_dz(params: list[Param], z: np.ndarray) -> np.ndarray:
+def _per_param(params: list[Param], z: np.ndarray, f) -> np.ndarray:
+    """`f(kind, z_p, ref, lo, hi, scale)` on each parameter's segment `z_p` of the flat `z`, flattened."""
     out, i = [], 0
     for p in params:
         seg = z[i : i + p.size].reshape(p.shape)
-        out.append(np.asarray(_dtheta_dz(p.kind, seg, p.ref, p.lo, p.hi, p.scale)).ravel())
+        out.append(np.asarray(f(p.kind, seg, p.ref, p.lo, p.hi, p.scale)).ravel())
         i += p.size
     return np.concatenate(out)
+
+
+def flat_dtheta_dz(params: list[Param], z: np.ndarray) -> np.ndarray:
+    return _per_param(params, z, _dtheta_dz)
 
 
 def apply_params(scenario: Scenario, values: Mapping[str, Any]) -> Scenario:
@@ -265,12 +270,7 @@ def apply_params(scenario: Scenario, values: Mapping[str, Any]) -> Scenario:
 
 
 def theta_of(plist: list[Param], z: np.ndarray) -> np.ndarray:
-    out, i = [], 0
-    for p in plist:
-        seg = z[i : i + p.size].reshape(p.shape)
-        out.append(np.asarray(to_theta(p.kind, seg, p.ref, p.lo, p.hi, p.scale)).ravel())
-        i += p.size
-    return np.concatenate(out).astype(np.float64)
+    return _per_param(plist, z, to_theta).astype(np.float64)
 
 
 def random_starts(

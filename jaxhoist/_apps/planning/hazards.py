@@ -25,25 +25,21 @@ import math
 from ..._errors import ScenarioError
 from ..._numerics import observables as obs_mod
 
+#: Built-in observables that count or time events (a time possibly inf).
+EVENTS = frozenset(
+    {"liftoff_time", "last_contact_time", "detachment_times", "impact_times", "impact_counts", "impacts"}
+)
 #: Built-in observables that never take a negative value: a threshold below 0 on one of them is a mistake
 #: (a hazard that always or never happens).
-NONNEGATIVE = frozenset(
-    {
-        "max_tilt",
-        "slide_distance",
-        "ground_slide",
-        "swing_amplitude",
-        "max_rope_tension",
-        "liftoff_time",
-        "last_contact_time",
-        "detachment_times",
-        "impact_times",
-        "impact_counts",
-        "impacts",
-        "contact_time",
-        "configuration_time",
-    }
-)
+NONNEGATIVE = EVENTS | {
+    "max_tilt",
+    "slide_distance",
+    "ground_slide",
+    "swing_amplitude",
+    "max_rope_tension",
+    "contact_time",
+    "configuration_time",
+}
 
 
 @dataclasses.dataclass(frozen=True)

@@ -15,16 +15,16 @@ from typing import Any
 
 import numpy as np
 
-from ..._errors import ScenarioError, require_x64
+from ..._errors import ScenarioError
 from ..._numerics import observables as obs_mod
 from ..._numerics.batch import ScanStatus
 from ..._numerics.times import TimesLike, as_times
 from ..._physics.params import Scenario
 from ..._physics.paths import check_path, get_param, param_unit, set_param
 from ..scan import BatchOptions, Points, scan
-from .hazards import Hazard
-from .risk import LiftRisk, check_hazards, hazard_observables, lift_risk
-from .uncertain import check_uncertain, sample
+from .hazards import EVENTS, Hazard
+from .risk import LiftRisk, check_hazards, check_inputs, hazard_observables, lift_risk
+from .uncertain import sample
 
 #: The objective's pseudo-observable: the time [s] the hoist takes to reel in `hoist_distance` metres.
 HOIST_TIME = "hoist_time"
@@ -37,17 +37,7 @@ FAILED = 1e3
 
 #: Observables an objective refuses: counts and event times (possibly inf) whose derivative is zero or
 #: undefined almost everywhere; they belong in `hazard_limits`.
-NOT_SMOOTH = frozenset(
-    {
-        "liftoff_time",
-        "last_contact_time",
-        "detachment_times",
-        "impact_times",
-        "impact_counts",
-        "impacts",
-        "first_corner",
-    }
-)
+NOT_SMOOTH = EVENTS | {"first_corner"}
 
 
 def optimise_lift(
@@ -258,13 +248,7 @@ def _prepare(
 ) -> dict[str, Any]:
     """Every argument of `optimise_lift` checked (a `ScenarioError` naming the field, before anything is
     compiled), the fixed sample drawn and the `_Problem` built."""
-    require_x64()
-    if not isinstance(scenario, Scenario):
-        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
-    scenario.check()
-    dists = check_uncertain(uncertain)
-    for p in dists:
-        check_path(scenario, p)
+    dists = check_inputs(scenario, uncertain)
     paths, lo, hi = _check_bounds(scenario, design_bounds, dists)
     weights, t_weight = _check_objective(objective)
     distance = _check_hoist_time(scenario, t_weight, hoist_distance)

@@ -20,10 +20,28 @@ from ..._physics.paths import check_path, param_unit
 from ..scan import BatchOptions, Grid, Points, ScanResult, Sweep, scan
 from ..scan.sweep import validate_members
 from .hazards import Hazard
-from .uncertain import check_uncertain, sample
+from .uncertain import AbstractDistribution, check_uncertain, sample
 
 #: The file format tag of `LiftRisk.save` and `to_netcdf`.
 FORMAT = "jaxhoist-lift-risk-1"
+
+
+def check_inputs(scenario: Scenario, uncertain) -> dict[str, AbstractDistribution]:
+    """What `lift_risk` and `optimise_lift` check first: float64 is on, `scenario` is a valid `Scenario`
+    and `uncertain` maps paths of it to distributions (see `check_uncertain`).
+
+    **Returns** the distributions by path.
+
+    **Raises** `TypeError` for a `scenario` that is no `Scenario`; `ScenarioError` naming the field.
+    """
+    require_x64()
+    if not isinstance(scenario, Scenario):
+        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
+    scenario.check()
+    dists = check_uncertain(uncertain)
+    for p in dists:
+        check_path(scenario, p)
+    return dists
 
 
 def lift_risk(
@@ -100,13 +118,7 @@ def lift_risk(
     **Raises** `ScenarioError` (a `ValueError`) naming the field for bad distributions, paths, hazards,
     designs or settings, before anything is compiled.
     """
-    require_x64()
-    if not isinstance(scenario, Scenario):
-        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
-    scenario.check()
-    dists = check_uncertain(uncertain)
-    for p in dists:
-        check_path(scenario, p)
+    dists = check_inputs(scenario, uncertain)
     hz = check_hazards(hazards)
     des = _check_design(scenario, design, dists)
     samples, replicates, seed = _check_counts(samples, replicates, seed)
@@ -555,19 +567,9 @@ class LiftRisk:
     def to_netcdf(self, path: str | Path) -> Path:
         """Write the risk map as a classic netCDF file (the variables of `to_xarray`; names netCDF does not
         allow, such as brackets, become '_', the original kept in the `path` attribute)."""
-        from ..._io.netcdf import nc_name, write_netcdf
+        from ..._io.netcdf import nc_name, nc_variable, write_netcdf
 
         dims, coords, variables, attrs = self._layout()
         nc_dims = {nc_name(d): n for d, n in dims.items()}
-        out = []
-        for k, d, v, a in [*coords, *variables]:
-            a = {**a, "path": k} if nc_name(k) != k else dict(a)
-            dd = tuple(nc_name(x) for x in d)
-            if isinstance(v, list):  # text labels -> (n, strlen) characters
-                width = max(1, *(len(x.encode("utf-8")) for x in v))
-                nc_dims[f"{dd[0]}_strlen"] = width
-                chars = np.array([list(x.encode("utf-8").ljust(width, b"\0")) for x in v], dtype=np.uint8)
-                v, dd = chars.view("S1").reshape(len(v), width), (*dd, f"{dd[0]}_strlen")
-                a["_Encoding"] = "utf-8"
-            out.append((nc_name(k), dd, np.asarray(v), a))
+        out = [nc_variable(k, d, v, a, nc_dims) for k, d, v, a in [*coords, *variables]]
         return write_netcdf(path, nc_dims, out, {"title": "jaxhoist lift risk", **attrs})

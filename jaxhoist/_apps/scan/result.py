@@ -291,25 +291,16 @@ class ScanResult:
         attributes, failure reasons and the scan's metadata as JSON text in global attributes. Names that
         netCDF does not allow (brackets) become '_' (`"load.mass_centre[0]"` -> `load.mass_centre_0_`); the
         original path is kept in the `path` attribute."""
-        from ..._io.netcdf import nc_name, write_netcdf
+        from ..._io.netcdf import nc_name, nc_variable, write_netcdf
 
         dims, coords, variables = self._layout()
         nc_dims = {nc_name(d): n for d, n in dims.items()}
         # CF: the parameters along `member` are auxiliary coordinates of every variable on that dimension
         aux = " ".join(nc_name(p) for p in self.params) if self.mode != "grid" else ""
-        out = []
-        for k, d, v, a in [*coords, *variables]:
-            a = {**a, "path": k} if nc_name(k) != k else dict(a)
-            if aux and "member" in d and k not in self.params:
-                a["coordinates"] = aux
-            dd = tuple(nc_name(x) for x in d)
-            if isinstance(v, list):  # text labels -> (n, strlen) characters
-                width = max(1, *(len(x.encode("utf-8")) for x in v))
-                nc_dims[f"{dd[0]}_strlen"] = width
-                chars = np.array([list(x.encode("utf-8").ljust(width, b"\0")) for x in v], dtype=np.uint8)
-                v, dd = chars.view("S1").reshape(len(v), width), (*dd, f"{dd[0]}_strlen")
-                a["_Encoding"] = "utf-8"  # read back as text, not bytes
-            out.append((nc_name(k), dd, np.asarray(v), a))
+        out = [
+            nc_variable(k, d, v, a, nc_dims, aux if "member" in d and k not in self.params else "")
+            for k, d, v, a in [*coords, *variables]
+        ]
         attrs = {
             "title": f"jaxhoist scan of {self.attrs.get('scenario', '?')}",
             "format": FORMAT,
