@@ -178,27 +178,17 @@ def _trap(*args, **kwargs):
     raise AssertionError("the scan was reached with an invalid knot")
 
 
+def _optimise(bounds):
+    """`optimise_lift` of the peak rope tension under uncertain μ, with the design `bounds`."""
+    mu = {"foundation.friction_coefficient": jh.Uniform(0.2, 0.4)}
+    return lambda sc: jh.optimise_lift(sc, mu, "max_rope_tension", bounds)
+
+
 @pytest.mark.parametrize(
     ("call", "field"),
     [
-        (
-            lambda sc: jh.optimise_lift(
-                sc,
-                {"foundation.friction_coefficient": jh.Uniform(0.2, 0.4)},
-                "max_rope_tension",
-                {"hoist.speeds[2]": (0.2, 0.6)},
-            ),
-            "hoist.speeds[2] = 0.6 m/s is above hoist.max_speed",
-        ),
-        (
-            lambda sc: jh.optimise_lift(
-                sc,
-                {"foundation.friction_coefficient": jh.Uniform(0.2, 0.4)},
-                "max_rope_tension",
-                {"hoist.times[1]": (0.5, 2.0)},
-            ),
-            "hoist.times must increase strictly",
-        ),
+        (_optimise({"hoist.speeds[2]": (0.2, 0.6)}), "hoist.speeds[2] = 0.6 m/s is above hoist.max_speed"),
+        (_optimise({"hoist.times[1]": (0.5, 2.0)}), "hoist.times must increase strictly"),
         (
             lambda sc: jh.lift_risk(
                 sc,
