@@ -11,7 +11,11 @@ What it runs:
    observables=[final_position, final_euler])` for each n of --sizes with the default layout, every CPU
    core as a device (--devices to change); the solve only, compilation excluded (the scan's
    `timings_s["compute"]` / n); the group width and count; steps median / max; the ratio of the cost per
-   trajectory to that of the largest scan. --repeat runs the whole list again (compiled programs reused).
+   trajectory to that of the largest scan. --repeat runs the whole list again (compiled programs reused);
+   a run that compiled nothing also reports its CPU time per trajectory (user + system, every thread),
+   the measure to compare on a machine whose other work takes the cores (wall time then measures the
+   share of the cores the process got as much as the scan's own cost; on an idle machine compare wall
+   times, which show the devices working in parallel).
    With --compare-lanes W, each size also runs with `BatchOptions(lanes=W)` (e.g. 16, the width that a scan
    of fewer than 512 members had by default before the width followed the devices too).
 2. **the first derivative scan's compile**, cold and warm (--deriv-n members, 0 to skip): two fresh
@@ -27,6 +31,7 @@ from __future__ import annotations
 import argparse
 import json
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -68,8 +73,16 @@ print(json.dumps({"compile_s": t["compile"], "compute_s": t["compute"], "wall_s"
 """
 
 
+def cpu_seconds() -> float:
+    """User + system CPU time of this process, every thread [s]."""
+    r = resource.getrusage(resource.RUSAGE_SELF)
+    return r.ru_utime + r.ru_stime
+
+
 def scan_row(sc, n: int, t1: float, lanes: int | None) -> dict:
-    """One scan of n μ evenly in [0.1, 0.6]: its layout, compile and per-trajectory solve time."""
+    """One scan of n μ evenly in [0.1, 0.6]: its layout, compile and per-trajectory solve time (wall), and
+    the CPU time of the whole call (the solve's alone where nothing was compiled)."""
+    cpu0 = cpu_seconds()
     res = jh.scan(
         sc,
         {MU: np.linspace(0.1, 0.6, n)},
@@ -78,6 +91,7 @@ def scan_row(sc, n: int, t1: float, lanes: int | None) -> dict:
         batch=jh.BatchOptions(lanes=lanes),
         accuracy=False,
     )
+    cpu = cpu_seconds() - cpu0
     t = res.attrs["timings_s"]
     steps = np.asarray(res.num_accepted_steps)
     return {
@@ -88,6 +102,7 @@ def scan_row(sc, n: int, t1: float, lanes: int | None) -> dict:
         "compile_s": t["compile"],
         "compute_s": t["compute"],
         "ms_per_trajectory": 1e3 * t["compute"] / n,
+        "cpu_ms_per_trajectory": 1e3 * cpu / n if t["compile"] == 0.0 else None,
         "steps_median": float(np.median(steps)),
         "steps_max": int(steps.max()),
         "failed": int((~res.ok).sum()),
@@ -141,17 +156,27 @@ def main(argv=None):
                 row.update(scan_row(sc, n, t1, lanes))
                 rows.append(row)
                 print(f"  {row}", flush=True)
-    print("\n| members | layout | lanes x groups | ms per trajectory | / largest | steps median / max |")
-    print("|---|---|---|---|---|---|")
+    print(
+        "\n| members | layout | lanes x groups | ms per trajectory | / largest | CPU ms per trajectory | "
+        "/ largest | steps median / max |"
+    )
+    print("|---|---|---|---|---|---|---|---|")
     for row in rows:
         big = max(  # the largest default scan of the same round
             (r for r in rows if r["repeat"] == row["repeat"] and r["layout"] == "default"),
             key=lambda r: r["n"],
         )
         row["ratio_to_largest"] = row["ms_per_trajectory"] / big["ms_per_trajectory"]
+        cpu, big_cpu = row["cpu_ms_per_trajectory"], big["cpu_ms_per_trajectory"]
+        row["cpu_ratio_to_largest"] = cpu / big_cpu if cpu is not None and big_cpu is not None else None
+        cpu_cols = (
+            "– | –"
+            if row["cpu_ratio_to_largest"] is None
+            else f"{cpu:.2f} | {row['cpu_ratio_to_largest']:.2f}x"
+        )
         print(
             f"| {row['n']} | {row['layout']} (run {row['repeat'] + 1}) | {row['lanes']} x {row['groups']} | "
-            f"{row['ms_per_trajectory']:.2f} | {row['ratio_to_largest']:.2f}x | "
+            f"{row['ms_per_trajectory']:.2f} | {row['ratio_to_largest']:.2f}x | {cpu_cols} | "
             f"{row['steps_median']:.0f} / {row['steps_max']} |"
         )
     deriv = []
