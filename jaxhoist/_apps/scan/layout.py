@@ -95,8 +95,8 @@ def adaptive_lanes(n: int, n_devices: int = 1, accelerator: bool = False) -> int
     Why: a vmapped step costs far less per member in a wide group (the per-kernel cost of the small
     per-member systems is shared), but a group takes as many steps as its slowest member, and a group runs
     on one device, so a scan of fewer groups than devices leaves devices idle. The width that keeps every
-    device busy with the widest groups wins: a scan of 256 members of paper-4.2 over 25 s in 16 groups
-    of 16 ran at about 7x the cost per trajectory of 4096 members in groups of 256
+    device busy with the widest groups wins: 256 members of paper-4.2 over 25 s on two CPU devices cost
+    0.92x the CPU time per trajectory of 4096 members in 2 groups of 128, against 1.57x in 16 groups of 16
     (`experiments/benchmarks/bench_scan_sizes.py`, docs/performance.md). The lock-step waste of wide groups
     is small where neighbours take about the same steps, as in a sorted scan of one parameter; a sparse
     scan of few, far-apart members loses some of the gain (64 members over μ = 0.1-0.6 in one group of 64:
