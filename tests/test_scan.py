@@ -182,6 +182,29 @@ def test_layout_independent_and_failing_group_mate_isolated(paper42, solver):
     np.testing.assert_array_equal(two.num_accepted_steps[keep], clean.num_accepted_steps[keep])
 
 
+def test_a_member_is_the_same_whatever_the_member_count_and_the_group_width(paper42):
+    """The default group width follows the member count and the devices (`adaptive_lanes`), so a member
+    must not depend on them beyond rounding: on paper-4.2 over 0.5 s with the default solver, four members
+    solved among eight in groups of 4 are bit for bit what they are solved alone in a group of 4 (the same
+    program, other group mates, another member count), and within 1e-9 relative, in the same steps, of
+    the eight in one group of 8 (another width: XLA may round differently in a wider vmap)."""
+    n = 8
+    mus = {MU: np.linspace(0.1, 0.6, n)}
+    kw = dict(observables=["final_position", "final_euler"], options=jh.SolverOptions(max_steps=2000))
+    times = jh.Times(0.5, n=11)
+    four = scan(paper42, jh.Points(mus), times, batch=jh.BatchOptions(lanes=4, sort=False), **kw)
+    sub = {MU: mus[MU][::2]}
+    alone = scan(paper42, jh.Points(sub), times, batch=jh.BatchOptions(lanes=4, sort=False), **kw)
+    wide = scan(paper42, jh.Points(mus), times, batch=jh.BatchOptions(lanes=8, sort=False), **kw)
+    assert np.all(four.ok) and np.all(alone.ok) and np.all(wide.ok)
+    assert (four.attrs["lanes"], alone.attrs["lanes"], wide.attrs["lanes"]) == (4, 4, 8)
+    for k in four.data:
+        np.testing.assert_array_equal(alone[k], four[k][::2], err_msg=k)
+        np.testing.assert_allclose(wide[k], four[k], rtol=1e-9, atol=1e-12, err_msg=k)
+    np.testing.assert_array_equal(alone.num_accepted_steps, four.num_accepted_steps[::2])
+    np.testing.assert_array_equal(wide.num_accepted_steps, four.num_accepted_steps)
+
+
 def test_poisoned_members_are_marked_and_the_rest_unchanged(box, clean):
     """μ = NaN is refused on the host (not solved); μ = 1e4 makes the regularised friction so stiff that
     the solve runs out of steps. Both are marked with their reason; every other member is bit-for-bit the
@@ -742,33 +765,39 @@ def test_sweep_objects_count_members_and_refuse_bad_input(box):
         assert "\n" not in str(err.value)
 
 
-def test_default_lanes_widen_with_the_member_count_only():
-    """The default group width of an adaptive scan grows with the number of members (a denser scan's
-    groups are close neighbours that take about the same steps) from 16 to 256 on CPUs, keeping at least 16
-    groups, and never depends on the device count (results must not); on accelerators the whole scan is
-    one group of up to 65 536; constant steps keep 256; `lanes` given wins, capped at the member count's
-    next power of two."""
+def test_default_lanes_follow_the_member_count_and_the_devices():
+    """The default group width of an adaptive scan on CPUs is the power of two in 16-256 whose groups,
+    shared out over the devices, cost least (a lock-step iteration costing `STEP_OVERHEAD` + the width):
+    the widest groups that still keep every device busy, so that a small scan costs about what a large one
+    does per trajectory. On accelerators each device gets one group of up to 65 536; constant steps keep
+    256; `lanes` given wins, capped at the member count's next power of two."""
     from types import SimpleNamespace
 
     from jaxhoist._apps.scan.layout import adaptive_lanes
 
-    widths = {n: adaptive_lanes(n) for n in (1, 64, 511, 512, 1024, 4096, 65536)}
-    assert widths == {1: 16, 64: 16, 511: 16, 512: 32, 1024: 64, 4096: 256, 65536: 256}
-    for n, w in widths.items():
-        assert w == 16 or n // w >= 16
+    widths = {d: {n: adaptive_lanes(n, d) for n in (1, 64, 256, 512, 1024, 4096, 65536)} for d in (1, 2, 16)}
+    assert widths[1] == {1: 16, 64: 64, 256: 256, 512: 256, 1024: 256, 4096: 256, 65536: 256}
+    assert widths[2] == {1: 16, 64: 32, 256: 128, 512: 256, 1024: 256, 4096: 256, 65536: 256}
+    assert widths[16] == {1: 16, 64: 16, 256: 16, 512: 32, 1024: 64, 4096: 256, 65536: 256}
+    for d, ws in widths.items():  # every device gets a group where the scan has enough members
+        for n, w in ws.items():
+            assert w == 16 or -(-n // w) >= d
     adaptive, fixed = (
         jh.SolverOptions(),
         jh.SolverOptions(diffrax.Bosh3(), diffrax.ConstantStepSize(), dt0=1e-3),
     )
-    assert jh.BatchOptions().lanes_for(adaptive, 4096) == 256
-    assert jh.BatchOptions(devices=jax.devices()[:1]).lanes_for(adaptive, 4096) == 256
+    two = tuple(jax.devices()[:2])
+    assert jh.BatchOptions().lanes_for(adaptive, 4096, two) == 256
+    assert jh.BatchOptions().lanes_for(adaptive, 256, two) == 128
+    assert jh.BatchOptions().lanes_for(adaptive, 256, two[:1]) == 256
     assert jh.BatchOptions().lanes_for(fixed, 100) == 128  # 256, capped at the next power of two
     assert jh.BatchOptions(lanes=8).lanes_for(adaptive, 4096) == 8
     gpus = tuple(SimpleNamespace(platform="gpu") for _ in range(2))
     assert [adaptive_lanes(n, accelerator=True) for n in (1, 4096, 10**6)] == [65536] * 3
+    assert jh.BatchOptions().lanes_for(adaptive, 4096, gpus[:1]) == 4096  # capped at the next power of two
+    assert jh.BatchOptions().lanes_for(adaptive, 4096, gpus) == 2048  # a group per GPU
     for devices in (gpus[:1], gpus):
-        assert jh.BatchOptions().lanes_for(adaptive, 4096, devices) == 4096  # capped at the next power of two
-        assert jh.BatchOptions().lanes_for(adaptive, 100_000, devices) == 65536
+        assert jh.BatchOptions().lanes_for(adaptive, 200_000, devices) == 65536
         assert jh.BatchOptions().lanes_for(fixed, 4096, devices) == 256
         assert jh.BatchOptions(lanes=8).lanes_for(adaptive, 4096, devices) == 8
     cpu_and_gpu = (jax.devices()[0], gpus[0])  # not all accelerators: the CPU rule

@@ -1,6 +1,7 @@
-"""The batch core of a scan: one member's solve and observables, a vmapped lock-step group of members, the
-groups of a chunk on each device (`lax.map`), and the devices in parallel (one single-device program per
-device, the same for any device count; failing group mates isolated: `CompiledChunk`). Pure: no I/O, no
+"""The batch core of a scan: one member's solve and observables, a vmapped lock-step group of members (the
+one compiled program, the same for any member count, chunk size and device count), the groups of a chunk
+on each device one after another, and the devices in parallel (failing group mates isolated:
+`CompiledChunk`). Pure: no I/O, no
 printing; a member's failure is its status, never an exception. `apps.scan` lays the members out and
 runs the chunks.
 """
@@ -124,18 +125,9 @@ def member(scenario, ts, row, spec: BatchSpec):
     }
 
 
-def device_fn(scenario, ts, values, active, spec: BatchSpec):
-    """values (G, L, P), active (G,) -> outputs with leading (G, L). Groups run one after another."""
-    group = jax.vmap(lambda row: member(scenario, ts, row, spec))
-    shapes = jax.eval_shape(group, values[0])
-
-    def body(args):
-        v, a = args
-        return jax.lax.cond(
-            a, group, lambda _: jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), shapes), v
-        )
-
-    return jax.lax.map(body, (values, active))
+def group_fn(scenario, ts, values, spec: BatchSpec):
+    """values (L, P) -> outputs with leading (L,): one lock-step group, a `jax.vmap` of `member`."""
+    return jax.vmap(lambda row: member(scenario, ts, row, spec))(values)
 
 
 def _to_device(tree, device):
@@ -165,12 +157,16 @@ def describe_devices(devices: tuple) -> list[str]:
 
 class CompiledChunk:
     """One chunk's computation, compiled: `(scenario, ts, values (G, L, P), active (G,))` -> outputs with
-    leading (G, L) as numpy arrays.
+    leading (G, L) as numpy arrays (an inactive group's outputs are zeros).
 
-    **One program whatever the device count**. The G groups are split into equal contiguous
-    shares, one per device, and every share runs the *same single-device program* (`device_fn`) in its
-    own host thread, so the shares run concurrently (`execution_targets`: on host CPU devices one compiled
-    program serves every share; an accelerator gets its own compiled copy). A partitioned SPMD program
+    **One program whatever the member count, chunk size and device count**: the compiled program solves
+    one group (`group_fn`). The G groups are split into equal contiguous shares, one per device; each share
+    runs in its own host thread, which calls the program on the share's active groups one after another,
+    so the shares run concurrently (`execution_targets`: on host CPU devices one compiled program serves
+    every share; an accelerator gets its own compiled copy). The groups are a host loop rather than a
+    loop inside the program (`lax.map`), so that a scan of another size reuses the compiled group, and
+    the group is traced once (a `lax.cond` skipping inactive groups needed the group's output shapes, a
+    second trace). A partitioned SPMD program
     (`shard_map` over a mesh of two or more devices) goes through XLA's partitioning pass pipeline and
     rounded differently from the one-device program (2.6e-7 m with Tsit5, 4.7e-6 m with the Rosenbrock-W
     solver on paper-4.2 after 3 s): with one single-device program, a member's result does not depend on
@@ -185,33 +181,36 @@ class CompiledChunk:
     the failure gives. The failed members keep their first-pass status (and NaN values).
     """
 
-    def __init__(self, spec: BatchSpec, executables: dict, groups_per_device: int):
+    def __init__(self, spec: BatchSpec, executables: dict):
         self.spec = spec
         self.executables = executables  # target device -> compiled program
-        self.groups_per_device = groups_per_device
 
     def _run(self, scenario, ts, values, active) -> dict:
-        g = self.groups_per_device
         values, active = np.asarray(values), np.asarray(active)
         targets = execution_targets(self.spec.devices)
+        if values.shape[0] % len(targets):
+            raise ValueError(f"{values.shape[0]} groups do not split evenly over {len(targets)} devices")
+        g = values.shape[0] // len(targets)
 
         def share(k):
-            blk = slice(k * g, (k + 1) * g)
-            if not active[blk].any():
+            groups = [i for i in range(k * g, (k + 1) * g) if active[i]]
+            if not groups:
                 return None
-            out = self.executables[targets[k]](
-                *_to_device((scenario, ts, values[blk], active[blk]), targets[k])
-            )
-            return jax.tree_util.tree_map(np.asarray, out)
+            exe = self.executables[targets[k]]
+            sc, t = _to_device((scenario, ts), targets[k])
+            outs = {i: exe(sc, t, jax.device_put(values[i], targets[k])) for i in groups}
+            return {i: jax.tree_util.tree_map(np.asarray, o) for i, o in outs.items()}
 
         if len(targets) == 1:
-            outs = [share(0)]
+            shares = [share(0)]
         else:
             with concurrent.futures.ThreadPoolExecutor(len(targets)) as pool:
-                outs = list(pool.map(share, range(len(targets))))
-        done = next(o for o in outs if o is not None)
-        outs = [jax.tree_util.tree_map(np.zeros_like, done) if o is None else o for o in outs]
-        return jax.tree_util.tree_map(lambda *xs: np.concatenate(xs), *outs)
+                shares = list(pool.map(share, range(len(targets))))
+        outs = {i: o for s in shares if s is not None for i, o in s.items()}
+        zeros = jax.tree_util.tree_map(np.zeros_like, next(iter(outs.values())))
+        return jax.tree_util.tree_map(
+            lambda *xs: np.stack(xs), *[outs.get(i, zeros) for i in range(values.shape[0])]
+        )
 
     def __call__(self, scenario, ts, values, active) -> dict:
         active = np.asarray(active)
@@ -235,8 +234,8 @@ class CompiledChunk:
 
 
 class _LoweredChunk:
-    def __init__(self, spec: BatchSpec, lowered: dict, groups_per_device: int):
-        self.spec, self.lowered, self.groups_per_device = spec, lowered, groups_per_device
+    def __init__(self, spec: BatchSpec, lowered: dict):
+        self.spec, self.lowered = spec, lowered
 
     def compile(self) -> CompiledChunk:
         items = list(self.lowered.items())
@@ -247,30 +246,30 @@ class _LoweredChunk:
                 exes = dict(
                     zip([d for d, _ in items], pool.map(lambda kv: kv[1].compile(), items), strict=True)
                 )
-        return CompiledChunk(self.spec, exes, self.groups_per_device)
+        return CompiledChunk(self.spec, exes)
 
 
 class ChunkProgram:
     """The batch core for one `BatchSpec`, with the ahead-of-time interface of a jitted function:
-    `chunk_fn(spec).lower(scenario, ts, values, active).compile()` gives a `CompiledChunk`. G (the leading
-    axis of `values`) must be a multiple of the number of devices."""
+    `chunk_fn(spec).lower(scenario, ts, values, active).compile()` gives a `CompiledChunk` for any number
+    of groups G (what is lowered and compiled is one group, `group_fn`, of the shape of `values[0]`). G (the
+    leading axis of `values`) must be a multiple of the number of devices."""
 
     def __init__(self, spec: BatchSpec):
         self.spec = spec
-        self._fn = eqx.filter_jit(functools.partial(device_fn, spec=spec))
+        self._fn = eqx.filter_jit(functools.partial(group_fn, spec=spec))
 
     def lower(self, scenario, ts, values, active) -> _LoweredChunk:
         n_dev = len(self.spec.devices)
         n_groups = int(np.shape(values)[0])
         if n_groups % n_dev:
             raise ValueError(f"{n_groups} groups do not split evenly over {n_dev} devices")
-        g = n_groups // n_dev
-        values, active = np.asarray(values), np.asarray(active)
+        values = np.asarray(values)
         lowered = {
-            d: self._fn.lower(*_to_device((scenario, ts, values[:g], active[:g]), d))
+            d: self._fn.lower(*_to_device((scenario, ts, values[0]), d))
             for d in dict.fromkeys(execution_targets(self.spec.devices))
         }
-        return _LoweredChunk(self.spec, lowered, g)
+        return _LoweredChunk(self.spec, lowered)
 
 
 @functools.lru_cache(maxsize=32)

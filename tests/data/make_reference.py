@@ -94,9 +94,10 @@ def scan() -> dict[str, np.ndarray]:
         derivatives=True,
         # the solver the reference was recorded with (the default of scan(derivatives=True) until 2026-11-24)
         options=jh.SolverOptions(diffrax.Tsit5(), adjoint=diffrax.ForwardMode()),
-        batch=jh.BatchOptions(
-            devices=jax.devices()[:1]
-        ),  # one device: valid while the multi-device path changes
+        # one device (valid while the multi-device path changes) and the group width the reference was
+        # recorded with (the default for 64 members until the default width followed the device count; a
+        # width is a numerical setting: another moves these values by rounding)
+        batch=jh.BatchOptions(devices=jax.devices()[:1], lanes=16),
     )
     out = {f"scan/{k}": np.asarray(v) for k, v in res.data.items()}
     out["scan/status"] = np.asarray(res.status)

@@ -99,7 +99,8 @@ def configure_parser(subparsers) -> None:
         "--lanes",
         type=int,
         default=None,
-        help="members per vmapped lock-step solve (default 16, or 256 with --fixed-step)",
+        help="members per vmapped lock-step solve (default: 16-256 from the member count and the devices, "
+        "or 256 with --fixed-step)",
     )
     p.add_argument(
         "--chunk-size", type=int, default=None, help="members per compiled call (default: automatic)"

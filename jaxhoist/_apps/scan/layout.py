@@ -27,9 +27,9 @@ class BatchOptions(eqx.Module):
     - `lanes`: members solved together in one vmapped, lock-step solve (a numerical setting: results are
       independent of the chunk size and devices, not of `lanes`; XLA may round differently in a vmap of
       another width); capped at the number of members. Default (None): with adaptive steps on CPUs 16 to
-      256, as wide as still gives 16 groups, on accelerators (GPU, TPU) the whole scan in one group of up
-      to 65 536 members (`adaptive_lanes`: wide groups cost less per member, but wait for their slowest
-      member), 256 with constant steps.
+      256, the width whose groups, shared out over the devices, cost least (`adaptive_lanes`: wide groups
+      cost less per member, but wait for their slowest member, and every device should get a group); on
+      accelerators (GPU, TPU) one group per device of up to 65 536 members; 256 with constant steps.
     - `chunk_size`: members per compiled call (rounded up to whole groups on every device); default (None):
       up to 8 groups per device, fewer if the saved histories would exceed `max_memory`.
     - `max_memory`: bytes of saved histories per chunk that the default chunk size keeps below [B].
@@ -62,52 +62,69 @@ class BatchOptions(eqx.Module):
 
     def lanes_for(self, options: SolverOptions, n: int, devices: tuple = ()) -> int:
         """The group width for `n` members on `devices`: `lanes` if given, else 256 with constant steps and
-        `adaptive_lanes(n, accelerator)` with adaptive ones (`accelerator`: every device is a GPU or TPU);
-        capped at the next power of two >= n."""
+        `adaptive_lanes(n, len(devices), accelerator)` with adaptive ones (`accelerator`: every device is a
+        GPU or TPU); capped at the next power of two >= n."""
         if self.lanes is not None:
             lanes = int(self.lanes)
         elif options.fixed_step:
             lanes = 256
         else:
             accelerator = bool(devices) and all(d.platform != "cpu" for d in devices)
-            lanes = adaptive_lanes(n, accelerator=accelerator)
+            lanes = adaptive_lanes(n, max(1, len(devices)), accelerator=accelerator)
         return int(min(lanes, 1 << max(0, math.ceil(math.log2(n)))))
 
 
-#: Bounds of the default group width with adaptive steps on CPUs, and the number of groups it keeps at least.
+#: Bounds of the default group width with adaptive steps on CPUs (powers of two).
 ADAPTIVE_LANES = (16, 256)
-MIN_GROUPS = 16
+#: The cost of one lock-step iteration of a group that does not grow with its width, in members' worth
+#: (a vmapped step of L members on a CPU costs about (STEP_OVERHEAD + L) times a member's share).
+STEP_OVERHEAD = 48
 #: The default group width with adaptive steps on accelerators (GPU, TPU): one group up to this many members.
 ACCELERATOR_LANES = 65536
 
 
-def adaptive_lanes(n: int, accelerator: bool = False) -> int:
-    """The default group width of an adaptive scan of `n` members.
+def adaptive_lanes(n: int, n_devices: int = 1, accelerator: bool = False) -> int:
+    """The default group width of an adaptive scan of `n` members on `n_devices` devices.
 
-    On CPUs: the widest power of two in `ADAPTIVE_LANES` that still splits the scan into `MIN_GROUPS` groups
-    (4096 members: 256 lanes; 1024: 64; up to 511: 16). On accelerators: the whole scan in one group, up to
-    `ACCELERATOR_LANES` members. It depends on `n` and the kind of device only, never on the device count,
-    so that results stay independent of how many devices share the scan (the width is a numerical setting:
-    XLA may round differently in a wider vmap).
+    On CPUs: the power of two in `ADAPTIVE_LANES` for which the scan's groups, shared out over the
+    devices, cost least, counting a group's lock-step iteration as `STEP_OVERHEAD` + its width; the
+    narrower of equal costs (4096 members: 256 lanes on one device or two; 512: 256 on two; 256: 128 on
+    two, 256 on one; 64: 32 on two, 64 on one). On accelerators (GPU, TPU): one group per device, up to
+    `ACCELERATOR_LANES` members (the whole scan in one group on one device).
 
     Why: a vmapped step costs far less per member in a wide group (the per-kernel cost of the small
-    per-member systems is shared), but a group takes as many steps as its slowest member. In a dense scan,
-    where a group's members are close neighbours, they take about the same steps, so wide groups win; in a
-    sparse one they do not. A script since removed (paper-4.2, 25 s, windows of a 4096-member μ-scan, one
-    device): 92 / 45 / 40 / 38 ms per trajectory for 16 / 64 / 128 / 256 lanes, lock-step efficiency
-    0.98-0.95, the same results; 64 members spread over μ = 0.1-0.6 instead: 16 and 32 lanes 1.0x, 64 lanes
-    1.25x (efficiency 0.39). Member count stands in for density: a bigger scan of a fixed range is denser.
+    per-member systems is shared), but a group takes as many steps as its slowest member, and a group runs
+    on one device, so a scan of fewer groups than devices leaves devices idle. The width that keeps every
+    device busy with the widest groups wins: 256 members of paper-4.2 over 25 s on two CPU devices cost
+    0.92x the CPU time per trajectory of 4096 members in 2 groups of 128, against 1.57x in 16 groups of 16
+    (`experiments/benchmarks/bench_scan_sizes.py`, docs/performance.md). The lock-step waste of wide groups
+    is small where neighbours take about the same steps, as in a sorted scan of one parameter; a sparse
+    scan of few, far-apart members loses some of the gain (64 members over μ = 0.1-0.6 in one group of 64:
+    1.25x the cost of groups of 16 at a lock-step efficiency of 0.39, with an earlier solver whose steps
+    varied more). The width is a numerical setting (XLA may round differently in a vmap of another width),
+    and the default follows the device count: pin `BatchOptions(lanes=...)` for results that are the same
+    bit for bit on any number of devices.
     On a GPU a step's kernels cost about the same for a few hundred members as for tens of thousands (they
     are bound by launches, not arithmetic), so groups run one after another waste the chip: one group, even
     at the lock-step efficiency of a whole scan, wins (docs/performance.md, "On a GPU").
     """
-    if accelerator:
-        return ACCELERATOR_LANES
+    if accelerator:  # one group per device
+        per_device = math.ceil(n / max(1, n_devices))
+        return (
+            ACCELERATOR_LANES
+            if n_devices <= 1
+            else min(ACCELERATOR_LANES, 1 << math.ceil(math.log2(per_device)))
+        )
     lo, hi = ADAPTIVE_LANES
-    lanes = lo
-    while lanes * 2 <= hi and n >= MIN_GROUPS * lanes * 2:
+    best, lanes = None, lo
+    while lanes <= hi:
+        rounds = math.ceil(math.ceil(n / lanes) / max(1, n_devices))
+        cost = rounds * (STEP_OVERHEAD + lanes)
+        if best is None or cost < best[0]:
+            best = (cost, lanes)
         lanes *= 2
-    return lanes
+    assert best is not None
+    return best[1]
 
 
 def scan_solver_options(options: SolverOptions | None, derivatives: bool) -> SolverOptions:

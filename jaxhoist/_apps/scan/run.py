@@ -19,8 +19,8 @@ How the work is laid out (and why results do not depend on the chunk size or the
   last member). A group is solved by one `jax.vmap` of the traceable core `numerics.solve.solve`, in lock
   step: it costs what its slowest member costs, which sorting keeps close to the others;
 - a *chunk* is a whole number of groups per device; on each device the chunk's groups run one after the
-  other (`lax.map`), and the devices' shares run in parallel, one host thread each, so a slow group on one
-  device does not hold up the other (`numerics.batch.CompiledChunk`);
+  other (calls of the one compiled group program), and the devices' shares run in parallel, one host
+  thread each, so a slow group on one device does not hold up the other (`numerics.batch.CompiledChunk`);
 - each group is the same single-device compiled computation on the same inputs whatever the chunk size
   and the number of devices (never a partitioned SPMD program, which rounds differently), so the results
   are bit-for-bit identical; a healthy member is also bit-for-bit what it is without a failing group mate.
@@ -397,12 +397,13 @@ class _Run:
         rows = self.solve_rows[idx]
         pad = groups * lanes - rows.shape[0]
         rows_p = np.concatenate([rows, np.repeat(rows[-1:], pad, axis=0)]) if pad else rows
-        active = jnp.asarray(np.arange(groups) < math.ceil(rows.shape[0] / lanes))
-        vals = jnp.asarray(rows_p.reshape(groups, lanes, len(self.spec.paths)))
+        active = np.arange(groups) < math.ceil(rows.shape[0] / lanes)
+        vals = rows_p.reshape(groups, lanes, len(self.spec.paths))
         t_start = time.perf_counter()
+        # one compiled group serves any number of groups (`numerics.batch.CompiledChunk`)
         fn, dt = compile_cache.compiled(
             "scan",
-            (self.spec, *compile_cache.structure_key(self.scenario, self.ts, vals)),
+            (self.spec, *compile_cache.structure_key(self.scenario, self.ts, jnp.asarray(vals[0]))),
             lambda: chunk_fn(self.spec).lower(self.scenario, self.ts, vals, active),
         )
         if dt:
