@@ -149,7 +149,8 @@ def environment(tmp_path_factory) -> dict[str, str]:
     env = dict(os.environ)
     env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
     env["MPLBACKEND"] = "Agg"
-    env["JAXHOIST_CACHE_DIR"] = str(tmp_path_factory.mktemp("compilation-cache"))
+    # JAXHOIST_CACHE_DIR: the session's compilation cache (tests/conftest.py), so a command's second run
+    # loads what its first compiled
     env.pop("PYTEST_CURRENT_TEST", None)
     return env
 
