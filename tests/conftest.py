@@ -139,3 +139,32 @@ def _release_compiled_code():
     compile_cache._CACHE.clear()  # the bifurcation locator's solves among them
     batch.chunk_fn.cache_clear()
     jax.clear_caches()
+
+
+def pytest_collection_modifyitems(config, items):
+    """The documented pages of tests/test_docs.py first: with `--no-loadscope-reorder` (pyproject.toml's
+    addopts) pytest-xdist hands out the units of work in this order, and the pages are the longest units, so
+    the two workers finish together rather than one waiting on a long unit handed out last."""
+    items.sort(key=lambda item: item.path.name != "test_docs.py")  # stable: the order within a file is kept
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """`--dist loadfile` with each page of tests/test_docs.py a unit of its own: every other test file runs
+    whole in one worker (its module fixtures and compiled functions shared), while the documented pages
+    (minutes each, the blocks of a page sharing a folder) spread over both workers instead of holding one of
+    them for most of the run. Other `--dist` modes are left to pytest-xdist."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class FileOrPageScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            file, _, rest = nodeid.partition("::")
+            if file.endswith("test_docs.py") and "[" in rest:
+                return (
+                    file + "::" + rest.split("[", 1)[1].rsplit(":", 1)[0]
+                )  # the page, from the id PAGE:LINE
+            return file
+
+    return FileOrPageScheduling(config, log)

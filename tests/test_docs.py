@@ -135,6 +135,7 @@ def _blocks() -> list:
             if block.syntax not in RUNNABLE:
                 continue
             marks = [eval(m, {"pytest": pytest, "sys": sys}) for m in block.marks]
+            # the id starts with the page: tests/conftest.py makes each page one unit of work for pytest-xdist
             params.append(pytest.param(rel, block, marks=marks, id=f"{rel}:{block.lineno}"))
     return params
 
