@@ -7,14 +7,40 @@ fields `name` and `t1` and the pytree structure are the same) and change leaf *v
 (`RegularisedCoulomb` in the preset, `BristleFriction` in `paper42_bristle`) changes the structure.
 """
 
+import atexit
 import os
+import shutil
+import tempfile
 
 import jax
 
-# The command line's `main()`, run in this process by the CLI tests, switches the persistent compilation cache
-# on: keep it off here (and in the subprocesses that inherit this environment), never the user's cache folder.
-# tests/test_compilation_cache.py gives its subprocesses a folder of their own.
-os.environ["JAXHOIST_CACHE_DIR"] = ""
+# One persistent compilation cache for the whole test session, in a temporary folder (never the user's cache
+# folder): the process that imports this file first (pytest's controller, or the one process of `-n 0`)
+# creates it, empty, and deletes it at exit; the xdist workers and every subprocess (the documented commands
+# and scripts of tests/test_docs.py, the CLI, scripts of tests/test_scan.py) inherit it through the
+# environment: JAXHOIST_CACHE_DIR for the command line's `main()` (also run in this process by the CLI tests)
+# and `jh.enable_compilation_cache()`, JAX's own variables for any process that imports JAX. So a program
+# compiled once in the session is loaded, not compiled again, in the next test module (each module drops its
+# compiled code, see `_release_compiled_code`), in the other worker, or in a command's second run. Every
+# program is stored, the small ones too (as `jh.enable_compilation_cache()` sets it). The suite starts from an
+# empty cache every time; set JAXHOIST_TEST_CACHE_DIR to a folder to keep the cache between sessions instead.
+# tests/test_compilation_cache.py gives its subprocesses folders of their own, to test the cold behaviour.
+if not os.environ.get("JAXHOIST_TEST_CACHE_DIR"):
+    _folder = tempfile.mkdtemp(prefix="jaxhoist-test-cache-")
+    atexit.register(shutil.rmtree, _folder, ignore_errors=True)
+    os.environ["JAXHOIST_TEST_CACHE_DIR"] = _folder
+CACHE_ENV = {
+    "JAXHOIST_CACHE_DIR": os.environ["JAXHOIST_TEST_CACHE_DIR"],
+    "JAX_COMPILATION_CACHE_DIR": os.environ["JAXHOIST_TEST_CACHE_DIR"],
+    "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
+    "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "-1",
+}
+os.environ.update(CACHE_ENV)
+# JAX read its variables when it was imported (a plugin may have imported it before this file): set them here
+# too, before the first compilation, which decides once per process whether the cache is used.
+jax.config.update("jax_compilation_cache_dir", CACHE_ENV["JAX_COMPILATION_CACHE_DIR"])
+jax.config.update("jax_persistent_cache_min_compile_time_secs", 0.0)
+jax.config.update("jax_persistent_cache_min_entry_size_bytes", -1)
 
 # Two CPU devices so that sharding code paths are exercised; this must happen before the backend starts.
 try:
@@ -113,3 +139,32 @@ def _release_compiled_code():
     compile_cache._CACHE.clear()  # the bifurcation locator's solves among them
     batch.chunk_fn.cache_clear()
     jax.clear_caches()
+
+
+def pytest_collection_modifyitems(config, items):
+    """The documented pages of tests/test_docs.py first: with `--no-loadscope-reorder` (pyproject.toml's
+    addopts) pytest-xdist hands out the units of work in this order, and the pages are the longest units, so
+    the two workers finish together rather than one waiting on a long unit handed out last."""
+    items.sort(key=lambda item: item.path.name != "test_docs.py")  # stable: the order within a file is kept
+
+
+@pytest.hookimpl(optionalhook=True)
+def pytest_xdist_make_scheduler(config, log):
+    """`--dist loadfile` with each page of tests/test_docs.py a unit of its own: every other test file runs
+    whole in one worker (its module fixtures and compiled functions shared), while the documented pages
+    (minutes each, the blocks of a page sharing a folder) spread over both workers instead of holding one of
+    them for most of the run. Other `--dist` modes are left to pytest-xdist."""
+    if config.getvalue("dist") != "loadfile":
+        return None
+    from xdist.scheduler import LoadScopeScheduling
+
+    class FileOrPageScheduling(LoadScopeScheduling):
+        def _split_scope(self, nodeid: str) -> str:
+            file, _, rest = nodeid.partition("::")
+            if file.endswith("test_docs.py") and "[" in rest:
+                return (
+                    file + "::" + rest.split("[", 1)[1].rsplit(":", 1)[0]
+                )  # the page, from the id PAGE:LINE
+            return file
+
+    return FileOrPageScheduling(config, log)

@@ -113,8 +113,18 @@ print(json.dumps(seen))
 """
 
 
+def _cold_env() -> dict[str, str]:
+    """This environment without the test session's compilation cache (tests/conftest.py), which JAX would
+    use in a subprocess: each test here starts from a folder of its own, as a new user does."""
+    return {
+        k: v
+        for k, v in os.environ.items()
+        if not k.startswith("JAX_PERSISTENT_CACHE") and k != "JAX_COMPILATION_CACHE_DIR"
+    }
+
+
 def _run_solve(cache: Path, out: Path, *mus: str) -> dict:
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
+    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
     env.pop(pc.ENV_VAR, None)
     proc = subprocess.run(
         [sys.executable, "-c", _SOLVE_SCRIPT, str(cache), str(out), *mus],
@@ -164,7 +174,7 @@ def test_second_process_loads_the_program_and_returns_the_same_bits(tmp_path):
 def _cli(
     tmp_path: Path, out: str, *extra: str, cache: str, quiet: bool = True
 ) -> subprocess.CompletedProcess:
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu", pc.ENV_VAR: cache}
+    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu", pc.ENV_VAR: cache}
     args = ["simulate", "paper-4.2", "--out", str(tmp_path / out), "--t1", "0.2", "--n-save", "5"]
     proc = subprocess.run(
         [sys.executable, "-m", "jaxhoist", *args, "--no-plots", *(["--quiet"] if quiet else []), *extra],
@@ -216,7 +226,7 @@ print("loaded" if loaded else "compiled")
 
 
 def _run_stored(folder: Path, out: Path, scale: str = "1.0") -> tuple[str, str]:
-    env = {**os.environ, "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
+    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
     proc = subprocess.run(
         [sys.executable, "-c", _STORED_SCRIPT, str(folder), str(out), scale],
         env=env,

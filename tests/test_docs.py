@@ -112,6 +112,7 @@ def _blocks() -> list:
             if block.syntax not in RUNNABLE:
                 continue
             marks = [eval(m, {"pytest": pytest, "sys": sys}) for m in block.marks]
+            # the id starts with the page: tests/conftest.py makes each page one unit of work for pytest-xdist
             params.append(pytest.param(rel, block, marks=marks, id=f"{rel}:{block.lineno}"))
     return params
 
@@ -126,7 +127,8 @@ def environment(tmp_path_factory) -> dict[str, str]:
     env = dict(os.environ)
     env["PATH"] = os.pathsep.join([str(Path(sys.executable).parent), env.get("PATH", "")])
     env["MPLBACKEND"] = "Agg"
-    env["JAXHOIST_CACHE_DIR"] = str(tmp_path_factory.mktemp("compilation-cache"))
+    # JAXHOIST_CACHE_DIR: the session's compilation cache (tests/conftest.py), so a command's second run
+    # loads what its first compiled
     env.pop("PYTEST_CURRENT_TEST", None)
     return env
 
