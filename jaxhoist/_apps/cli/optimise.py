@@ -65,7 +65,7 @@ def configure_parser(subparsers) -> None:
         "the design within bounds that minimises an expected outcome of a lift with uncertain inputs",
         "Minimise a weighted sum of expected smooth outcomes over a fixed sample of the uncertain inputs by "
         "L-BFGS-B on the forward sensitivities, then check the hazard limits on a fresh sample "
-        "(docs/lift-planning.md).",
+        "(docs/lift-optimisation.md).",
     )
     p.add_argument(
         "--bound",
