@@ -52,7 +52,7 @@ KW = dict(
 
 
 def drag_box() -> jh.Scenario:
-    """The box of docs/lift-planning.md's example at the optimiser's start: boom tip at x = 1.6 m, hoist 0.3 m/s."""
+    """The box of docs/lift-planning.md's example at the optimiser's start: tip x = 1.6 m, hoist 0.3 m/s."""
     return _inputs.drag_box(1.6, speed=0.3, t1=T1)
 
 
