@@ -608,9 +608,7 @@ class _Problem:
         rate = float(sc.hoist.rate(tT))
         for j, p in enumerate(self.paths):
             if p.startswith("hoist."):
-                ds = jax.grad(lambda v, p=p: set_param(sc, p, v).hoist.shortening(tT))(
-                    np.float64(x[j])
-                )
+                ds = jax.grad(lambda v, p=p: set_param(sc, p, v).hoist.shortening(tT))(np.float64(x[j]))
                 g[j] = -float(ds) / rate if rate > 0 else math.nan
         return T, g
 
