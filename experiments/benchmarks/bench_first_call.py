@@ -1,7 +1,7 @@
 """Time to first result of the Python API: the first call of `scan` (256 values of μ), `scan` with
 derivatives (16 values), `identify` (the docs' five-parameter fit) and `locate_bifurcation` (paper-4.3's μ*),
-each in a fresh Python process with the README's set-up lines (float64, the persistent compilation cache),
-cold (an empty cache folder) and warm (the same folder again, a new process).
+each in a fresh Python process with the README's set-up lines (float64, every core, the persistent
+compilation cache), cold (an empty cache folder) and warm (the same folder again, a new process).
 
     python experiments/benchmarks/bench_first_call.py [--out DIR] [--quick] [--case NAME ...]
 
@@ -25,10 +25,11 @@ from pathlib import Path
 ROOT = Path(__file__).resolve().parents[2]  # the repository root
 
 SETUP = """\
-import json, sys, time
+import json, os, sys, time
 t0 = time.perf_counter()
 import jax
 jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_num_cpu_devices", os.cpu_count())  # scans shard over every core, as in the README
 import numpy as np
 import jaxhoist as jh
 jh.enable_compilation_cache(sys.argv[1])
