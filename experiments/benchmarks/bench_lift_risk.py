@@ -36,6 +36,7 @@ from pathlib import Path
 import jax
 
 jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_num_cpu_devices", os.cpu_count())  # every core a device, as in the README's set-up
 
 import numpy as np  # noqa: E402
 

@@ -41,6 +41,7 @@ from __future__ import annotations
 import argparse
 import json
 import math
+import os
 import sys
 import time
 from pathlib import Path
@@ -48,6 +49,7 @@ from pathlib import Path
 import jax
 
 jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_num_cpu_devices", os.cpu_count())  # every core a device, as in the README's set-up
 
 import equinox as eqx  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
