@@ -6,7 +6,8 @@
     res.estimates["foundation.friction_coefficient"]
 
 The fit is weighted nonlinear least squares, solved by optimistix's Levenberg-Marquardt
-(`optimistix.least_squares` with `optimistix.LevenbergMarquardt`) through the differentiable solver. The
+(`optimistix.LevenbergMarquardt`, iterated as `optimistix.least_squares` does, one compiled step at a time
+from the host, see `core.Core`) through the differentiable solver. The
 Jacobian comes from forward-mode sensitivities, no finite differences: the state and its p sensitivities are
 integrated together as one ODE whose step-size control also watches the sensitivities (see
 `_sensitivity_solve` for why `jax.jacfwd` through `diffrax.ForwardMode` is not used by default), by the
@@ -19,9 +20,10 @@ leaf θ = lo + (hi - lo) sigmoid(z) (scaled logit), any other θ = θ_ref + scal
 Gauss-Newton one, σ² (JᵀJ)⁻¹ at the optimum, carried to θ by the chain rule (delta method); σ² = 1 with
 residuals whitened by given noise levels, else the residual variance estimate RSS / (n - p).
 
-Everything the user gives is checked on the host before anything is compiled; the compiled core is cached
-per problem structure (parameters, signals, sizes, solver options), so repeated fits and several starts
-compile once.
+Everything the user gives is checked on the host before anything is compiled; the compiled programs are
+cached per problem structure (parameters, signals, sizes, solver options), so repeated fits and several
+starts compile once, and they hold no host callback, so JAX's persistent compilation cache stores them for
+the next process.
 """
 
 from __future__ import annotations
