@@ -18,6 +18,10 @@ import numpy as np
 import pytest
 
 import jaxhoist as jh
+from jaxhoist._apps.identify import core as identify_core
+from jaxhoist._apps.identify import fit as identify_fit
+from jaxhoist._apps.identify.options import fit_solver_options
+from jaxhoist._io.measurement import Measurement
 from jaxhoist._numerics import batch
 from jaxhoist._numerics import persistent_cache as pc
 from jaxhoist._numerics import stored_programs as sp
@@ -72,6 +76,21 @@ def test_default_scan_group_program_has_no_host_callback(tiny):
     lowered = batch.chunk_fn(spec).lower(sc, ts, jnp.full((1, 2, 1), 0.5), jnp.ones((1,), bool))
     for program in lowered.lowered.values():
         _assert_no_host_callback(program)
+
+
+def test_identify_pieces_have_no_host_callback(tiny):
+    # the tests' one-parameter problem (tests/test_identify.py); the data values do not enter the programs
+    sc, _ = tiny
+    t = np.linspace(0.0, 0.4, 21)
+    names = ("position_x", "position_y", "position_z")
+    m = Measurement(t, {n: np.ones_like(t) for n in names}, {n: 0.005 for n in names})
+    prob = identify_fit._setup(sc, m, ["mu"], options=fit_solver_options(None))
+    z0 = jnp.asarray(identify_fit.flat_z(prob.params, prob.theta0))
+    lm_tol, scale = jnp.asarray([1e-4, 1e-6]), jnp.asarray(1.0)
+    fn = identify_core._residual_fn(prob.cfg)
+    init = identify_core._lm_init.lower(fn, z0, prob.args, lm_tol, scale)
+    assert "callback" not in init.as_text()  # the first state: no solve, no custom_call at all
+    _assert_no_host_callback(identify_core.lower_step(fn, init.compile(), z0, prob.args, lm_tol, scale))
 
 
 # ------------------------------------------------------------------------------------ across processes
@@ -169,6 +188,62 @@ def test_second_process_loads_the_program_and_returns_the_same_bits(tmp_path):
     c = np.load(tmp_path / "c.npz")
     for k in c.files:
         np.testing.assert_array_equal(a[k], c[k], err_msg=k)
+
+
+_IDENTIFY_SCRIPT = r"""
+import json, logging, sys
+import jax, numpy as np
+jax.config.update("jax_enable_x64", True)
+import jaxhoist as jh
+
+seen = {"hits": [], "misses": []}
+
+class Record(logging.Handler):
+    def emit(self, record):
+        m = record.getMessage()
+        if m.startswith("Persistent compilation cache hit for"):
+            seen["hits"].append(m.split("'")[1])
+        elif m.startswith("PERSISTENT COMPILATION CACHE MISS for"):
+            seen["misses"].append(m.split("'")[1])
+
+log = logging.getLogger("jax._src.compiler")
+log.addHandler(Record())
+log.setLevel(logging.DEBUG)
+log.propagate = False
+jh.enable_compilation_cache(sys.argv[1])
+sc = jh.load_scenario("paper-4.2")
+m = jh.synthetic_measurement(sc, np.linspace(0.0, 0.4, 21), ["position"])
+res = jh.identify(sc, m, ["mu"], start={"mu": 0.3}, noise={"position": 0.005})
+seen["estimate"], seen["cost"], seen["iterations"] = res.values[0].hex(), res.cost.hex(), res.iterations
+print(json.dumps(seen))
+"""
+
+
+def test_second_process_loads_the_identify_programs_and_fits_the_same_bits(tmp_path):
+    # the tests' one-parameter problem (tests/test_identify.py: μ from the mass-centre path, 21 samples)
+    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
+    env.pop(pc.ENV_VAR, None)
+    runs = []
+    for _ in range(2):
+        proc = subprocess.run(
+            [sys.executable, "-c", _IDENTIFY_SCRIPT, str(tmp_path / "cache")],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=900,
+        )
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+    first, second = runs
+    pieces = {"jit__lm_init", "jit__lm_step"}
+    assert pieces <= set(first["misses"]) and not pieces & set(first["hits"])
+    assert pieces <= set(second["hits"]) and not pieces & set(second["misses"])  # loaded, not compiled
+    assert first["iterations"] > 1
+    assert (second["estimate"], second["cost"], second["iterations"]) == (
+        first["estimate"],
+        first["cost"],
+        first["iterations"],
+    )
 
 
 def _cli(

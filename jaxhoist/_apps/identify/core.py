@@ -1,6 +1,7 @@
 """The compiled core of `identify`: the model with its forward sensitivities, the residual function with a
-one-pass Jacobian (`jax.custom_jvp`), the Levenberg-Marquardt run, and the host side of its progress
-reports."""
+one-pass Jacobian (`jax.custom_jvp`), the Levenberg-Marquardt run as compiled pieces (its start, one step)
+in a loop on the host, and the host side of its progress reports. No piece holds a host callback, so JAX's
+persistent compilation cache stores them."""
 
 from __future__ import annotations
 
@@ -8,6 +9,7 @@ import dataclasses
 import math
 import time
 import typing
+from collections.abc import Callable
 
 import diffrax
 import equinox as eqx
@@ -15,8 +17,19 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import optimistix as optx
+from equinox.internal import ω
+from optimistix._misc import (
+    OutAsArray,
+    cauchy_termination,
+    filter_cond,
+    inexact_asarray,
+    tree_allfinite,
+    tree_where,
+)
+from optimistix._solver.gauss_newton import _GaussNewtonState, _make_f_info
 
 from ..._errors import SolveStatus
+from ..._numerics.callback_free import callback_free
 from ..._numerics.compile_cache import compiled, structure_key
 from ..._numerics.options import SolverOptions
 from ..._numerics.rosenbrock import RosenbrockW
@@ -33,10 +46,9 @@ _VERBOSE = False
 
 
 class FitReporter:
-    """Host side of the fit's progress reports. The compiled core always calls `_report` (through
-    `jax.debug.callback`, once or more per LM evaluation); `_report` forwards to the reporter installed by
-    `identify` for the duration of one LM run, so the compiled program does not depend on the callback and
-    nothing is reported (or printed) when none is installed."""
+    """Host side of the fit's progress reports: `Core` calls it after every Levenberg-Marquardt evaluation
+    (one per step, accepted or rejected) with the point z, the cost there and the solve's (status, steps),
+    and it hands `progress` one dict per evaluation (see `identify`'s `progress`)."""
 
     def __init__(self, progress, start: int, n_starts: int, t0: float):
         self.progress, self.start, self.n_starts, self.t0 = progress, start, n_starts, t0
@@ -45,7 +57,7 @@ class FitReporter:
     def __call__(self, z, cost, info) -> None:
         z = np.array(z, dtype=np.float64)
         if self.last_z is not None and np.array_equal(z, self.last_z):
-            return  # the same evaluation seen again (its Jacobian pass)
+            return  # the same point evaluated again: one report
         self.last_z = z
         self.n += 1
         cost = float(cost)
@@ -69,15 +81,6 @@ class FitReporter:
                 elapsed=time.perf_counter() - self.t0,
             )
         )
-
-
-REPORTER: list = [None]  # the active `_FitReporter`, or None
-
-
-def _report(z, cost, info) -> None:
-    rep = REPORTER[0]
-    if rep is not None:
-        rep(z, cost, info)
 
 
 # ------------------------------------------------------------------------------------- the core
@@ -117,6 +120,7 @@ def model(cfg: Config, z, args):
     return ((_signals(cfg, traj) - data) / sigma).ravel(), traj.status, traj.num_accepted_steps
 
 
+@callback_free  # diffrax's checks of `ts` (already checked on the host) return NaN instead of calling back
 def _sensitivity_solve(cfg: Config, z, args):
     """Model signals and their derivatives d(signal)/dz from the forward sensitivity equations.
 
@@ -265,8 +269,8 @@ def _residual_fn(cfg: Config):
     return fn
 
 
-# no_type_check: the tests' jaxtyping hook would check the inherited __init__ (rtol: float), which
-# `_fit_core` calls with traced tolerances (as it called optimistix's class, which the hook leaves alone)
+# no_type_check: the tests' jaxtyping hook would check the inherited __init__ (rtol: float), which the
+# compiled pieces call with traced tolerances (as they called optimistix's class, which the hook leaves alone)
 @typing.no_type_check
 class _LevenbergMarquardt(optx.LevenbergMarquardt):
     """optimistix's Levenberg-Marquardt that also stops when, after a rejected step, the next trial step is
@@ -285,47 +289,189 @@ class _LevenbergMarquardt(optx.LevenbergMarquardt):
         below = self.norm(jax.tree_util.tree_map(lambda d, s_: jnp.abs(d) / s_, step, scale)) < 1
         return done | ((state.num_steps_since_acceptance > 0) & below), result
 
+    def step_and_evaluation(self, fn, y, args, options, state, tags):
+        """`step` that also returns the evaluation it made, `(z, aux)`: the point where `fn` was evaluated
+        (`state.y_eval`) and its auxiliary output, which `step` keeps only for an accepted step.
+
+        The body of optimistix's `AbstractGaussNewton.step` (optimistix 0.1.0) without its `verbose` log;
+        `tests/test_identify.py` checks that the host-driven loop over it takes optimistix's iterates."""
+        jac = options.get("jac", "fwd")
+        f_eval_info, aux_eval = _make_f_info(fn, state.y_eval, args, tags, jac)
+        # the Jacobian operator's static part (a jaxpr, compared by identity) is the state's, as in optimistix
+        dynamic = eqx.filter(f_eval_info.jac, eqx.is_array)
+        static = eqx.filter(state.f_info.jac, eqx.is_array, inverse=True)
+        f_eval_info = eqx.tree_at(lambda f: f.jac, f_eval_info, eqx.combine(dynamic, static))
+
+        step_size, accept, search_result, search_state = self.search.step(
+            state.first_step, y, state.y_eval, state.f_info, f_eval_info, state.search_state
+        )
+        num_steps = state.num_steps + 1
+        num_accepted_steps = state.num_accepted_steps + jnp.where(accept, 1, 0)
+        num_steps_since_acceptance = jnp.where(accept, 0, state.num_steps_since_acceptance + 1)
+
+        def accepted(descent_state):
+            descent_state = self.descent.query(state.y_eval, f_eval_info, descent_state)
+            y_diff = (state.y_eval**ω - y**ω).ω
+            f_diff = (f_eval_info.residual**ω - state.f_info.residual**ω).ω
+            terminate = cauchy_termination(
+                self.rtol, self.atol, self.norm, state.y_eval, y_diff, f_eval_info.residual, f_diff
+            )
+            return state.y_eval, f_eval_info, aux_eval, descent_state, terminate
+
+        def rejected(descent_state):
+            return y, state.f_info, state.aux, descent_state, jnp.array(False)
+
+        y_new, f_info, aux, descent_state, terminate = filter_cond(
+            accept, accepted, rejected, state.descent_state
+        )
+        y_descent, descent_result = self.descent.step(step_size, descent_state)
+        y_eval = (y_new**ω + y_descent**ω).ω
+        result = optx.RESULTS.where(search_result == optx.RESULTS.successful, descent_result, search_result)
+        prev_aux = tree_where(state.first_step, aux, state.aux)
+        new_state = _GaussNewtonState(
+            first_step=jnp.array(False),
+            y_eval=y_eval,
+            search_state=search_state,
+            f_info=f_info,
+            aux=aux,
+            descent_state=descent_state,
+            terminate=terminate,
+            result=result,
+            num_steps=num_steps,
+            num_accepted_steps=num_accepted_steps,
+            num_steps_since_acceptance=num_steps_since_acceptance,
+        )
+        return y_new, new_state, prev_aux, (state.y_eval, aux_eval)
+
+
+# ------------------------------------------------------------------- the Levenberg-Marquardt pieces
+#
+# `optimistix.least_squares(fn, solver, z0, args, has_aux=True, max_steps=cfg.max_iterations, throw=False,
+# options={"jac": "fwd"})` runs `solver.init`, then `solver.step` and `terminate` in a while loop, then
+# `postprocess` (optimistix's `_iterate`), in one program. Here the loop runs on the host over two compiled
+# pieces, `_lm_init` and `_lm_step` (one step and its termination test), which hand on the loop's carry
+# (z, steps taken, the arrays of the solver state, aux, terminate, result). `_lm_init` also hands on the
+# residual function as traced there (closure-converted: a jaxpr and its constants) and the solver state's
+# static part, so that `_lm_step` neither traces the model again nor builds a first state. Neither piece holds
+# a host callback, so JAX's persistent cache stores both; the host reports progress between steps.
+
+_OPTIONS = {"jac": "fwd"}
+_TAGS: frozenset = frozenset()
+
+
+def _solver(lm_tol):
+    return _LevenbergMarquardt(rtol=lm_tol[0], atol=lm_tol[1])  # pyright: ignore[reportCallIssue]
+
+
+def _terminate_and_result(solver, fn, y, args, state):
+    done, result = solver.terminate(fn, y, args, _OPTIONS, state, _TAGS)
+    return done, optx.RESULTS.where(tree_allfinite(y), result, optx.RESULTS.nonfinite)
+
+
+def _outcome(solver, fn, args, static, carry, scale):
+    """Whether the loop goes on (the step budget aside: the host counts it), and what `least_squares` would
+    return if it stopped here: `(value, r, J, info, steps, accepted steps, codes)`, r and J of the unscaled
+    residuals at the value, info the solve's (status, steps) there, codes (converged, reached
+    max_iterations; the latter read only when the host stops at the budget)."""
+    y, num_steps, dynamic, aux, terminate, result = carry
+    successful = result == optx.RESULTS.successful
+    go_on = jnp.invert(terminate) & successful
+    result = optx.RESULTS.where(
+        successful & jnp.invert(terminate), optx.RESULTS.nonlinear_max_steps_reached, result
+    )
+    state = eqx.combine(static, dynamic)
+    value, aux, _ = solver.postprocess(fn, y, aux, args, _OPTIONS, state, _TAGS, result)
+    f_info = state.f_info
+    J = f_info.jac.as_matrix() / scale  # J @ e_i through the custom JVP: no new solve
+    codes = jnp.stack([result == optx.RESULTS.successful, result == optx.RESULTS.nonlinear_max_steps_reached])
+    return go_on, (value, f_info.residual / scale, J, aux[:2], num_steps, state.num_accepted_steps, codes)
+
 
 @eqx.filter_jit
-def _fit_core(cfg: Config, z0, args, lm_tol, scale):
-    """Levenberg-Marquardt on the residuals multiplied by `scale`. The LM tolerances and the scale are traced
-    (not static), so changing them does not recompile; with infinite tolerances the run stops after the
-    first evaluation, which `identify` uses to probe the Jacobian at the start (same compiled program).
+def _lm_init(residual_fn, z0, args, lm_tol, scale):
+    """What `least_squares` builds before iterating: the residual function `residual_fn(z, args) -> (r,
+    info)` (`_residual_fn`'s) times `scale`, its aux info and the cost 0.5 Σ r² of the unscaled r,
+    closure-converted; the first solver state and the loop's first carry. **Returns** `((fn, static part of
+    the state), carry, _outcome)`."""
 
-    optimistix's LM starts with the damping λ = 1 (and changes it by the trust-region ratio test); `identify`
-    chooses `scale` so that λ = 1 equals the largest diagonal entry of JᵀJ at the start (Marquardt's τ = 1)
-    instead of a nearly undamped Gauss-Newton step, which on paper-4.2 jumps k and h by factors of 10³ into
-    stiff, expensive regions."""
-    inner = _residual_fn(cfg)
+    def residuals(z, a):
+        r, info = residual_fn(z, a)
+        return r * scale, jnp.concatenate([info, (0.5 * jnp.sum(r**2))[None]])
 
-    def fn(z, a):
-        r, info = inner(z, a)
-        jax.debug.callback(_report, z, 0.5 * jnp.sum(r**2), info)
-        return r * scale, info
-
-    # LevenbergMarquardt.__init__ (inherited) gives norm, descent and search their defaults
-    solver = _LevenbergMarquardt(rtol=lm_tol[0], atol=lm_tol[1], verbose=_VERBOSE)  # pyright: ignore[reportCallIssue]
-    sol = optx.least_squares(
-        fn, solver, z0, args, has_aux=True, max_steps=cfg.max_iterations, throw=False, options={"jac": "fwd"}
-    )
-    f_info = sol.state.f_info
-    J = f_info.jac.as_matrix() / scale  # J @ e_i through the custom JVP: no new solve
-    codes = jnp.stack(
-        [sol.result == optx.RESULTS.successful, sol.result == optx.RESULTS.nonlinear_max_steps_reached]
-    )
-    return (
-        sol.value,
-        f_info.residual / scale,
-        J,
-        sol.aux,
-        sol.stats["num_steps"],
-        sol.state.num_accepted_steps,
-        codes,
-    )
+    y0 = inexact_asarray(z0)
+    fn = eqx.filter_closure_convert(OutAsArray(residuals), y0, args)
+    f_struct, aux_struct = fn.out_struct  # pyright: ignore[reportFunctionMemberAccess]
+    solver = _solver(lm_tol)
+    state = solver.init(fn, y0, args, _OPTIONS, f_struct, aux_struct, _TAGS)
+    terminate, result = _terminate_and_result(solver, fn, y0, args, state)
+    dynamic, static = eqx.partition(state, eqx.is_array)
+    aux = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), aux_struct)
+    carry = (y0, jnp.array(0), dynamic, aux, terminate, result)
+    return (fn, static), carry, _outcome(solver, fn, args, static, carry, scale)
 
 
-def compiled_core(cfg: Config, z0, args, lm_tol, scale):
-    """`_fit_core` compiled ahead of time (so compile and fit are timed apart), cached per structure."""
-    key = (cfg, *structure_key(z0, args, lm_tol, scale))
-    fn, _ = compiled("identify", key, lambda: _fit_core.lower(cfg, z0, args, lm_tol, scale))
-    return fn
+@eqx.filter_jit
+def _lm_step(problem, carry, args, lm_tol, scale):
+    """One Levenberg-Marquardt step (one evaluation of the residuals and their Jacobian) and its
+    termination test. **Returns** the next carry, its `_outcome` and the evaluation `(z, [status, solver
+    steps, cost])`."""
+    fn, static = problem
+    y, num_steps, dynamic, _, _, _ = carry
+    solver = _solver(lm_tol)
+    state = eqx.combine(static, dynamic)
+    y_new, state, aux, evaluation = solver.step_and_evaluation(fn, y, args, _OPTIONS, state, _TAGS)
+    terminate, result = _terminate_and_result(solver, fn, y, args, state)  # optimistix tests the old y
+    dynamic, new_static = eqx.partition(state, eqx.is_array)
+    assert eqx.tree_equal(static, new_static) is True
+    carry = (y_new, num_steps + 1, dynamic, aux, terminate, result)
+    return carry, _outcome(solver, fn, args, static, carry, scale), evaluation
+
+
+def lower_step(residual_fn, init, z0, args, lm_tol, scale):
+    """`_lm_step` lowered for what `init` (`_lm_init` compiled for `residual_fn`) makes from these inputs."""
+    problem, carry, _ = init(residual_fn, z0, args, lm_tol, scale)
+    return _lm_step.lower(problem, carry, args, lm_tol, scale)
+
+
+class Core:
+    """The fit's compiled pieces for one problem structure, and the host loop over them."""
+
+    def __init__(self, residual_fn, max_iterations: int, init, step):
+        self.residual_fn, self.max_iterations = residual_fn, max_iterations
+        self._init, self._step = init, step
+
+    def __call__(self, z0, args, lm_tol, scale, report: Callable | None = None):
+        """Levenberg-Marquardt on the residuals multiplied by `scale` from `z0`, with the termination
+        tolerances `lm_tol` = [rtol, atol], at most `max_iterations` steps; `report(z, cost, info)` (if
+        given) after every evaluation, on the host. The tolerances and the scale are arguments of the
+        compiled pieces (not static), so changing them does not recompile; with tolerances of 1e300 the run
+        stops after the first evaluation, which `identify` uses to probe the Jacobian at the start.
+
+        optimistix's LM starts with the damping λ = 1 (and changes it by the trust-region ratio test);
+        `identify` chooses `scale` so that λ = 1 equals the largest diagonal entry of JᵀJ at the start
+        (Marquardt's τ = 1) instead of a nearly undamped Gauss-Newton step, which on paper-4.2 jumps k and h
+        by factors of 10³ into stiff, expensive regions.
+
+        **Returns** `(z, r, J, info, iterations, accepted steps, codes)` as numpy arrays: the estimate, the
+        unscaled residuals (n,) and Jacobian dr/dz (n, p) there, info = (solve status, solver steps) there,
+        codes = (converged, reached max_iterations)."""
+        problem, carry, (go_on, out) = self._init(self.residual_fn, z0, args, lm_tol, scale)
+        steps = 0
+        while bool(go_on) and steps < self.max_iterations:
+            carry, (go_on, out), (z, info) = self._step(problem, carry, args, lm_tol, scale)
+            steps += 1
+            if report is not None:
+                info = np.asarray(info)
+                report(np.asarray(z), info[2], info[:2])
+        return tuple(np.asarray(x) for x in out)
+
+
+def compiled_core(cfg: Config, z0, args, lm_tol, scale) -> Core:
+    """The fit's pieces compiled ahead of time (so compile and fit are timed apart), cached per structure:
+    other tolerances, scales, starts, data values and step budgets reuse them."""
+    static = dataclasses.replace(cfg, max_iterations=0)  # the host counts the steps
+    key = (static, *structure_key(z0, args, lm_tol, scale))
+    fn = _residual_fn(static)
+    init, _ = compiled("identify", ("init", *key), lambda: _lm_init.lower(fn, z0, args, lm_tol, scale))
+    step, _ = compiled("identify", ("step", *key), lambda: lower_step(fn, init, z0, args, lm_tol, scale))
+    return Core(fn, cfg.max_iterations, init, step)

@@ -6,7 +6,8 @@
     res.estimates["foundation.friction_coefficient"]
 
 The fit is weighted nonlinear least squares, solved by optimistix's Levenberg-Marquardt
-(`optimistix.least_squares` with `optimistix.LevenbergMarquardt`) through the differentiable solver. The
+(`optimistix.LevenbergMarquardt`, iterated as `optimistix.least_squares` does, one compiled step at a time
+from the host, see `core.Core`) through the differentiable solver. The
 Jacobian comes from forward-mode sensitivities, no finite differences: the state and its p sensitivities are
 integrated together as one ODE whose step-size control also watches the sensitivities (see
 `_sensitivity_solve` for why `jax.jacfwd` through `diffrax.ForwardMode` is not used by default), by the
@@ -19,9 +20,10 @@ leaf θ = lo + (hi - lo) sigmoid(z) (scaled logit), any other θ = θ_ref + scal
 Gauss-Newton one, σ² (JᵀJ)⁻¹ at the optimum, carried to θ by the chain rule (delta method); σ² = 1 with
 residuals whitened by given noise levels, else the residual variance estimate RSS / (n - p).
 
-Everything the user gives is checked on the host before anything is compiled; the compiled core is cached
-per problem structure (parameters, signals, sizes, solver options), so repeated fits and several starts
-compile once.
+Everything the user gives is checked on the host before anything is compiled; the compiled programs are
+cached per problem structure (parameters, signals, sizes, solver options), so repeated fits and several
+starts compile once, and they hold no host callback, so JAX's persistent compilation cache stores them for
+the next process.
 """
 
 from __future__ import annotations
@@ -35,7 +37,6 @@ from typing import Any
 
 import diffrax
 import equinox as eqx
-import jax
 import jax.numpy as jnp
 import numpy as np
 
@@ -54,7 +55,7 @@ from ..._numerics.times import Times
 from ..._physics.params import Scenario
 from ..._physics.paths import param_unit
 from ..simulate import simulate
-from .core import REPORTER, Config, FitReporter, compiled_core, model
+from .core import Config, FitReporter, compiled_core, model
 from .options import FitOptions, fit_solver_options
 from .parameters import ALIASES as ALIASES
 from .parameters import SYMBOLS as SYMBOLS
@@ -231,8 +232,8 @@ def identify(
       without a known noise level); default `FitOptions()`. Signals with neither a noise level nor a weight
       are scaled by their spread; unless every fitted signal has a noise level, the covariance uses the
       residual variance estimate RSS/(n - p).
-    - `progress`: called on the host (through `jax.debug.callback` from the compiled fit) after every
-      Levenberg-Marquardt evaluation, accepted or rejected, with a dict: `start` (0-based) and `n_starts`,
+    - `progress`: called on the host between the compiled Levenberg-Marquardt steps, after every
+      evaluation, accepted or rejected, with a dict: `start` (0-based) and `n_starts`,
       `iteration` (1, 2, ... within the start), `cost` (0.5 Σ r² of the whitened residuals there),
       `best_cost` (the lowest so far, non-increasing), `improved` (this evaluation lowered it: LM accepts
       such steps), `step` (|Δz| from the best point so far, in the fit variables z: log θ for positive
@@ -278,7 +279,7 @@ def identify(
     compile_time = time.perf_counter() - c0
     runs, outs = [], []
     for th in starts:
-        run, out = _run_start(core, cfg, args, plist, th, lm_tol, (len(runs), len(starts)), progress, wall0)
+        run, out = _run_start(core, args, plist, th, lm_tol, (len(runs), len(starts)), progress, wall0)
         runs.append(run)
         outs.append(out)
     best = int(np.argmin([s.cost if np.isfinite(s.cost) else np.inf for s in runs]))
@@ -294,25 +295,19 @@ def identify(
     )
 
 
-def _run_start(core, cfg, args, plist, th, lm_tol, which: tuple[int, int], progress, wall0: float):
+def _run_start(core, args, plist, th, lm_tol, which: tuple[int, int], progress, wall0: float):
     """One Levenberg-Marquardt run from start `th` (`which`: its index and the number of starts).
     **Returns** `(StartResult, (z, r, J, info, theta))`."""
     w0 = time.perf_counter()
     one = jnp.asarray(1.0)
     probe_tol = jnp.asarray([1e300, 1e300])  # stops after the first evaluation (inf * 0 would give NaN)
     z0 = jnp.asarray(flat_z(plist, th))
-    # Probe J at the start (one evaluation), then set the damping scale (see `_fit_core`).
-    J0 = np.asarray(core(cfg, z0, args, probe_tol, one)[2])
+    # Probe J at the start (one evaluation), then set the damping scale (see `core.Core.__call__`).
+    J0 = core(z0, args, probe_tol, one)[2]
     d = float(np.max(np.sum(J0**2, axis=0))) if np.all(np.isfinite(J0)) else 0.0
     scale = jnp.asarray(1.0 / math.sqrt(d) if d > 0 else 1.0)
-    if progress is not None:
-        REPORTER[0] = FitReporter(progress, which[0], which[1], wall0)
-    try:
-        z, r, J, info, n_steps, n_acc, codes = jax.block_until_ready(core(cfg, z0, args, lm_tol, scale))
-        jax.effects_barrier()  # every report delivered before the reporter goes
-    finally:
-        REPORTER[0] = None
-    z, r, J, info, codes = (np.asarray(x) for x in (z, r, J, info, codes))
+    report = None if progress is None else FitReporter(progress, which[0], which[1], wall0)
+    z, r, J, info, n_steps, n_acc, codes = core(z0, args, lm_tol, scale, report)
     theta = theta_of(plist, z)
     converged = bool(codes[0])
     msg = "converged" if converged else ("reached max_iterations" if codes[1] else "LM failed")
