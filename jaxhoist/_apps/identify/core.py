@@ -293,8 +293,10 @@ class _LevenbergMarquardt(optx.LevenbergMarquardt):
         """`step` that also returns the evaluation it made, `(z, aux)`: the point where `fn` was evaluated
         (`state.y_eval`) and its auxiliary output, which `step` keeps only for an accepted step.
 
-        The body of optimistix's `AbstractGaussNewton.step` (optimistix 0.1.0) without its `verbose` log;
-        `tests/test_identify.py` checks that the host-driven loop over it takes optimistix's iterates."""
+        Adapted from optimistix's `AbstractGaussNewton.step` (optimistix 0.1.0, Apache License 2.0, by
+        Patrick Kidger and contributors): its body without the `verbose` log, returning the evaluation too.
+        It uses optimistix's private names, so an optimistix upgrade can break it: the pin in pyproject.toml
+        and `tests/test_identify.py` (the host-driven loop takes optimistix's own iterates) guard that."""
         jac = options.get("jac", "fwd")
         f_eval_info, aux_eval = _make_f_info(fn, state.y_eval, args, tags, jac)
         # the Jacobian operator's static part (a jaxpr, compared by identity) is the state's, as in optimistix
