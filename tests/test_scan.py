@@ -144,7 +144,7 @@ def test_a_renamed_scenario_reuses_the_compiled_chunk(box, clean):
 
 @pytest.mark.parametrize("solver", [None, diffrax.Tsit5()], ids=["default", "tsit5"])
 def test_layout_independent_and_failing_group_mate_isolated(paper42, solver):
-    """Issue 14, on paper-4.2 over 0.5 s in groups of 4, with the default solver (Rosenbrock-W) and Tsit5:
+    """On paper-4.2 over 0.5 s in groups of 4, with the default solver (Rosenbrock-W) and Tsit5:
     a scan on two devices in chunks of 8 equals, bit for bit, one on one device in chunks of 4 (the
     partitioned program used before differed by 4.7e-6 m with Rosenbrock-W); and a member whose rope of
     1e16 N/m on a tip of 1e-12 kg exhausts its steps (marked `max_steps`) leaves its three group mates
@@ -565,7 +565,7 @@ def test_four_devices_and_resumes_across_device_counts(clean, tmp_path):
 
 
 def test_fingerprint_sees_constants_and_closures_of_custom_observables():
-    """Issue 14: a custom observable whose constant or closed-over value changed must not reuse the chunks
+    """A custom observable whose constant or closed-over value changed must not reuse the chunks
     of the old one (the fingerprint hashed only the bytecode)."""
     from jaxhoist._apps.scan.run import _fingerprint
     from jaxhoist._numerics.batch import BatchSpec as _Spec
@@ -626,7 +626,7 @@ def test_fingerprint_sees_solver_settings_beyond_the_tolerances():
 
 
 def test_a_damaged_or_foreign_store_is_recomputed_with_a_warning(box, clean, tmp_path):
-    """Issue 14: chunk files are verified on resume (content checksum from the manifest, the scan's
+    """Chunk files are verified on resume (content checksum from the manifest, the scan's
     fingerprint and the member indices inside the file); a truncated or emptied chunk, a chunk copied over
     another, a chunk whose values were changed (NaNs marked ok) and a truncated manifest are each recomputed
     with a `ScanStoreWarning` naming the file, and the result equals the clean scan."""
@@ -716,7 +716,7 @@ def test_fingerprint_is_the_same_in_every_process():
 
 
 def test_every_chunk_records_the_devices_it_ran_on(box, tmp_path):
-    """Issue 14: scan.json (attrs) and the manifest say which devices computed each chunk, also for chunks
+    """scan.json (attrs) and the manifest say which devices computed each chunk, also for chunks
     read back from an earlier run on other devices."""
     out = tmp_path / "devs"
     one = jax.devices()[:1]
