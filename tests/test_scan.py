@@ -149,14 +149,13 @@ def test_layout_independent_and_failing_group_mate_isolated(paper42, solver):
     partitioned program used before differed by 4.7e-6 m with Rosenbrock-W); and a member whose rope of
     1e16 N/m on a tip of 1e-12 kg exhausts its steps (marked `max_steps`) leaves its three group mates
     bit-for-bit what they are beside a healthy member (its group is solved again without it,
-    `numerics.batch.CompiledChunk`; without that, a Tsit5 group mate moved by 3e-11 m)."""
-    n = 8
-    rope_k, tip_m = float(paper42.rope.stiffness), float(paper42.boom.tip_mass)
-    base = {MU: np.linspace(0.1, 0.6, n), "rope.stiffness": np.full(n, rope_k)}
-    base["boom.tip_mass"] = np.full(n, tip_m)
+    `numerics.batch.CompiledChunk`; without that, a Tsit5 group mate moved by 3e-11 m). With the default
+    solver the scans are those of the next test (`paper42_members`: the same paths, observables, saved
+    times and groups), so the two tests share one compiled group."""
+    base = paper42_members(paper42)
     bad = {k: v.copy() for k, v in base.items()}
     bad["rope.stiffness"][1], bad["boom.tip_mass"][1] = 1e16, 1e-12
-    kw = dict(observables=["final_position"], options=jh.SolverOptions(solver, max_steps=2000))
+    kw = dict(observables=["final_position", "final_euler"], options=jh.SolverOptions(solver, max_steps=2000))
 
     def batch(**b):
         return jh.BatchOptions(lanes=4, sort=False, **b)
@@ -182,18 +181,28 @@ def test_layout_independent_and_failing_group_mate_isolated(paper42, solver):
     np.testing.assert_array_equal(two.num_accepted_steps[keep], clean.num_accepted_steps[keep])
 
 
+def paper42_members(paper42, n: int = 8) -> dict[str, np.ndarray]:
+    """`n` members of paper-4.2 over μ in [0.1, 0.6], with its rope stiffness and tip mass as paths too (at
+    the preset's values) so that a member can be broken by either."""
+    rope_k, tip_m = float(paper42.rope.stiffness), float(paper42.boom.tip_mass)
+    return {
+        MU: np.linspace(0.1, 0.6, n),
+        "rope.stiffness": np.full(n, rope_k),
+        "boom.tip_mass": np.full(n, tip_m),
+    }
+
+
 def test_a_member_is_the_same_whatever_the_member_count_and_the_group_width(paper42):
     """The default group width follows the member count and the devices (`adaptive_lanes`), so a member
     must not depend on them beyond rounding: on paper-4.2 over 0.5 s with the default solver, four members
     solved among eight in groups of 4 are bit for bit what they are solved alone in a group of 4 (the same
     program, other group mates, another member count), and within 1e-9 relative, in the same steps, of
     the eight in one group of 8 (another width: XLA may round differently in a wider vmap)."""
-    n = 8
-    mus = {MU: np.linspace(0.1, 0.6, n)}
+    mus = paper42_members(paper42)
     kw = dict(observables=["final_position", "final_euler"], options=jh.SolverOptions(max_steps=2000))
     times = jh.Times(0.5, n=11)
     four = scan(paper42, jh.Points(mus), times, batch=jh.BatchOptions(lanes=4, sort=False), **kw)
-    sub = {MU: mus[MU][::2]}
+    sub = {k: v[::2] for k, v in mus.items()}
     alone = scan(paper42, jh.Points(sub), times, batch=jh.BatchOptions(lanes=4, sort=False), **kw)
     wide = scan(paper42, jh.Points(mus), times, batch=jh.BatchOptions(lanes=8, sort=False), **kw)
     assert np.all(four.ok) and np.all(alone.ok) and np.all(wide.ok)
