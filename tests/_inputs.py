@@ -26,6 +26,30 @@ def drag_box(tip_x: float = 2.0, speed: float = 0.2, t1: float = 3.0) -> jh.Scen
     return jh.scenario_from_dict(data, str(DRAG_BOX))
 
 
+def write_knot_box(path: Path) -> Path:
+    """`DRAG_BOX` as a scenario file at `path`, with the boom tip 0.6 m aside (x = 1.6 m), t1 = 2 s and a
+    hoist speed profile (`law = "knots"`: 0, 0.25, 0.4 and 0.3 m/s at 0, 0.5, 1.5 and 3 s, at most 0.5 m/s)
+    instead of the constant speed; returns `path`."""
+    text = DRAG_BOX.read_text()
+    for old, new in (
+        ('name = "drag-box"', 'name = "knot-box"'),
+        ("t1 = 3.0", "t1 = 2.0"),
+        ('law = "constant-speed"\nspeed = 0.2\n', KNOT_HOIST),
+        ("tip_position = [2.0, 1.0, 8.5]", "tip_position = [1.6, 1.0, 8.5]"),
+    ):
+        assert text.count(old) == 1, f"{DRAG_BOX} no longer holds {old!r} once"
+        text = text.replace(old, new)
+    path.write_text(text)
+    return path
+
+
+KNOT_HOIST = """law = "knots"
+times = [0.0, 0.5, 1.5, 3.0]
+speeds = [0.0, 0.25, 0.4, 0.3]
+max_speed = 0.5
+"""
+
+
 def symmetric_lift(xi_c: float = 0.45) -> jh.Scenario:
     """The cube of `SYMMETRIC_LIFT` with its mass centre offset along ξ only, to (`xi_c`, 0.5, 0.5) m."""
     data = tomllib.loads(SYMMETRIC_LIFT.read_text())

@@ -49,7 +49,7 @@ except AttributeError:  # older JAX: the XLA flag, read when the backend initial
     flags = os.environ.get("XLA_FLAGS", "")
     os.environ["XLA_FLAGS"] = (flags + " --xla_force_host_platform_device_count=2").strip()
 jax.config.update("jax_enable_x64", True)
-# Strict dtype promotion (issue 11): mixing dtypes (bool or int with float arrays, float32 with float64) is
+# Strict dtype promotion: mixing dtypes (bool or int with float arrays, float32 with float64) is
 # an error rather than a silent promotion; Python scalars stay weakly typed. On by default; opt out with
 # JAXHOIST_STRICT_PROMOTION=0 (e.g. to tell a promotion error from a numerical one).
 STRICT_PROMOTION = os.environ.get("JAXHOIST_STRICT_PROMOTION", "1") != "0"

@@ -227,7 +227,7 @@ def test_invalid_value_and_bad_override_exit_2(tmp_path, capsys, monkeypatch):
 
 def test_unknown_preset_gives_a_hint(capsys, monkeypatch):
     _no_compile(monkeypatch)
-    assert cli.main(["simulate", "paper-2.4", "--quiet"]) == 2  # (paper-4.3 exists since issue 13)
+    assert cli.main(["simulate", "paper-2.4", "--quiet"]) == 2  # a near miss of paper-2.3
     err = capsys.readouterr().err
     assert "paper-2.4" in err and "did you mean 'paper-2.3'" in err and "Traceback" not in err
 

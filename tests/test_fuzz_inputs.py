@@ -1,4 +1,4 @@
-"""Adversarial inputs, fuzzed (issue 14): a mutated scenario file either loads or raises `ScenarioError` with
+"""Adversarial inputs, fuzzed: a mutated scenario file either loads or raises `ScenarioError` with
 one line of bounded length, never another exception; `simulate --set PATH=VALUE` either passes validation
 (reaching the compile step, trapped here: nothing is solved) or exits 2 with one bounded line on stderr.
 

@@ -13,6 +13,7 @@ import jax
 
 jax.config.update("jax_enable_x64", True)  # tests/conftest.py also does this
 
+import _inputs  # noqa: E402
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
@@ -259,32 +260,6 @@ def test_hoist_time_of_a_profile_and_its_gradient():
         opt_mod._check_hoist_time(box(jh.KnotHoist([0.0, 1.0], [0.2, 0.0])), 0.1, 1.0)
 
 
-KNOTS_TOML = """
-name = "knot-box"
-t1 = 2.0
-[load]
-size = [2.0, 2.0, 0.5]
-mass = 1000.0
-[foundation]
-stiffness = 1.5e7
-damping = 2.0e5
-friction_coefficient = 0.3
-[rope]
-stiffness = 3e4
-damping = 3e3
-attachment = [1.0, 1.0, 0.5]
-[hoist]
-law = "knots"
-times = [0.0, 0.5, 1.5, 3.0]
-speeds = [0.0, 0.25, 0.4, 0.3]
-max_speed = 0.5
-[boom]
-tip_position = [1.6, 1.0, 8.5]
-tip_mass = 500.0
-stiffness = 5.0e6
-"""
-
-
 @pytest.mark.parametrize(
     ("args", "field"),
     [
@@ -303,8 +278,7 @@ def test_cli_knot_designs_are_checked_before_compiling(tmp_path, capsys, monkeyp
 
     monkeypatch.setattr(opt_mod, "scan", _trap)
     monkeypatch.setattr(risk_mod, "scan", _trap)
-    toml = tmp_path / "knots.toml"
-    toml.write_text(KNOTS_TOML)
+    toml = _inputs.write_knot_box(tmp_path / "knots.toml")
     unc = ["--uncertain", "foundation.friction_coefficient=uniform(0.2,0.4)"]
     code = cli.main([args[0], str(toml), *unc, *args[1:], "--out", str(tmp_path / "out")])
     err = capsys.readouterr().err

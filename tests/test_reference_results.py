@@ -1,24 +1,22 @@
-"""The restructuring of numerics/apps (issue 11) changes no result: short-horizon solves of the three presets
-with both models, and a 64-member scan with forward-mode sensitivities, equal bit for bit what the code
-gave before the restructuring (`tests/data/reference_results.npz`, written by `tests/data/make_reference.py`
-on the commit before the first move).
+"""Moving code between modules changes no result: short-horizon solves of the three presets with both
+models, and a 64-member scan with forward-mode sensitivities, equal bit for bit what the code gave when
+`tests/data/reference_results.npz` was recorded (by `tests/data/make_reference.py`).
 
-The comparison is exact (`assert_array_equal`, NaN equal to NaN): the moves change where code lives, not the
+The comparison is exact (`assert_array_equal`, NaN equal to NaN): a move changes where code lives, not the
 arithmetic. Should a later change alter only the order of a summation, loosen to 1e-14 relative for the
 arrays concerned and say why here and in the commit message. The scan runs on one device, as the reference
 did, so the comparison does not depend on how a scan is spread over devices.
 
-Re-recorded on purpose, each time with the differences listed in the commit message: the nine
-`paper-4.2/rigid/*` arrays after the rigid model of issue 15 was merged (9712dfa: sustained contact cycles
-through a compliant phase, persistent contact after impacts; up to 7.7e-7 m and 1.7 N, 748 accepted steps
-instead of 928), and the elastic preset arrays, which the default Rosenbrock-W solver computes, whenever its
-steps changed on purpose (issue 10): the cheaper W step (4c5189b), the corner velocities turning with the
-body in W (65642d2), the cubic dense output (c2800a0), the band-entry friction slope (979f1ea, f520da9;
-<= 2.9e-5 m over 2 s), the W solve without the 9x18 right-hand-side map (rounding; <= 5.5e-6 m), the
-stages' ∂f/∂t term with a PI controller at rtol 5e-4 by default (2026-11-27: <= 4.2e-5 m, 2.0e-5 rad,
-169 N of normal force and 54 N of rope tension over 2 s; paper-4.2 in 206 accepted steps instead of 274,
-paper-4.1 105 instead of 97, paper-2.3 178 instead of 164: rtol halved). The scan arrays (Tsit5, pinned
-options) are still those of the code before issue 11.
+Re-recorded on purpose, each time with the differences listed in the commit message (git history keeps
+them): the nine `paper-4.2/rigid/*` arrays when the rigid model gained sustained contact cycles through a
+compliant phase and persistent contact after impacts (up to 7.7e-7 m and 1.7 N, 748 accepted steps instead
+of 928), and the elastic preset arrays, which the default Rosenbrock-W solver computes, whenever its steps
+changed on purpose: the cheaper W step, the corner velocities turning with the body in W, the cubic dense
+output, the band-entry friction slope (<= 2.9e-5 m over 2 s), the W solve without the 9x18
+right-hand-side map (rounding; <= 5.5e-6 m), the stages' ∂f/∂t term with a PI controller at rtol 5e-4 by
+default (<= 4.2e-5 m, 2.0e-5 rad, 169 N of normal force and 54 N of rope tension over 2 s; paper-4.2 in 206
+accepted steps instead of 274, paper-4.1 105 instead of 97, paper-2.3 178 instead of 164: rtol halved). The
+scan arrays (Tsit5, pinned options) have never been re-recorded.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-"""The rigid model near its presets (issue 15): friction values around paper-2.3 that used to raise
+"""The rigid model near its presets: friction values around paper-2.3 that used to raise
 `RigidContactError` now complete, with the contact choice the stiff-foundation limit makes, the grazing
 impact resolved by the documented fallback (recorded in the phase log), and the energy balance closed.
 
@@ -34,7 +34,7 @@ def test_landing_on_three_corners_follows_the_stiff_foundation_limit(mu):
     """After the load drops back onto D and E (paper-2.3, t ≈ 9.7-11.0 s), the rigid contact problem has
     two consistent three-corner configurations (D or E free). The linear corner-load law (2.3) of the
     flat landing gives D a negative load, so the stiff-foundation rule frees D and the box is carried on E,
-    F, H, as the stiff elastic foundation carries it (issue 15); before, this raised "non-uniqueness"."""
+    F, H, as the stiff elastic foundation carries it (no "non-uniqueness" error)."""
     tr = _run(mu, 11.1)
     ph = tr.phases
     assert ph[-1].end == "t1" and float(tr.ts[-1]) == pytest.approx(11.1)
@@ -168,8 +168,8 @@ def test_persistent_contact_holds_a_corner_the_impact_would_lift():
 def test_stall_rule_finds_a_stalled_phase_after_thousands_of_steps():
     """paper-4.2 (elastic rope): the first sliding phase (all four corners, 0.305 ms) stalls, its mean step
     falling to about 1e-7 s. The `StallRule` (mean step under 2e-7 s over 5000 step attempts) ends it after
-    5000 attempts, where before it ran to `max_steps` (here 12 000 instead of the default 200 000, to stay
-    cheap: 30 000 until 2026-11-27, which cost the slow run 9 s more); either way the stalled solve is
+    5000 attempts, where without it the phase runs to `max_steps` (here 12 000 instead of the default
+    200 000, to stay cheap); either way the stalled solve is
     dropped and the phase is chosen again from its start without that configuration, so the trajectory is
     the same sample for sample and only the steps spent differ."""
     sc = jh.load_scenario("paper-4.2")

@@ -408,9 +408,9 @@ def test_forward_and_reverse_derivatives_match_central_differences(paper42):
     # so the central differences are taken from the primals of the jvp already compiled (measured equal bit
     # for bit to those of the plain opts_r solve, which compiled a third program of the same solve). The two
     # programs round differently: 4e-14 relative without the stages' ∂f/∂t term, 1.9-2.1e-12 with it (its
-    # forward-mode derivative in t is fused differently in each program; the bound was 1e-12 before the term
-    # became the default, 2026-11-27). A step sequence that differs (one acceptance flipped) puts the primals
-    # apart by the local error at rtol 1e-7, ~1e-9 and more, so 1e-11 still tells the two cases apart.
+    # forward-mode derivative in t is fused differently in each program). A step sequence that differs (one
+    # acceptance flipped) puts the primals apart by the local error at rtol 1e-7, ~1e-9 and more, so 1e-11
+    # still tells the two cases apart.
     assert abs(float(x0_fwd) - float(x0_rev)) <= 1e-11 * abs(float(x0_rev))
     dm = 1e-4
     d_fd = float((fwd(mu0 + dm)[0] - fwd(mu0 - dm)[0]) / (2 * dm))

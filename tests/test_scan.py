@@ -144,19 +144,18 @@ def test_a_renamed_scenario_reuses_the_compiled_chunk(box, clean):
 
 @pytest.mark.parametrize("solver", [None, diffrax.Tsit5()], ids=["default", "tsit5"])
 def test_layout_independent_and_failing_group_mate_isolated(paper42, solver):
-    """Issue 14, on paper-4.2 over 0.5 s in groups of 4, with the default solver (Rosenbrock-W) and Tsit5:
+    """On paper-4.2 over 0.5 s in groups of 4, with the default solver (Rosenbrock-W) and Tsit5:
     a scan on two devices in chunks of 8 equals, bit for bit, one on one device in chunks of 4 (the
     partitioned program used before differed by 4.7e-6 m with Rosenbrock-W); and a member whose rope of
     1e16 N/m on a tip of 1e-12 kg exhausts its steps (marked `max_steps`) leaves its three group mates
     bit-for-bit what they are beside a healthy member (its group is solved again without it,
-    `numerics.batch.CompiledChunk`; without that, a Tsit5 group mate moved by 3e-11 m)."""
-    n = 8
-    rope_k, tip_m = float(paper42.rope.stiffness), float(paper42.boom.tip_mass)
-    base = {MU: np.linspace(0.1, 0.6, n), "rope.stiffness": np.full(n, rope_k)}
-    base["boom.tip_mass"] = np.full(n, tip_m)
+    `numerics.batch.CompiledChunk`; without that, a Tsit5 group mate moved by 3e-11 m). With the default
+    solver the scans are those of the next test (`paper42_members`: the same paths, observables, saved
+    times and groups), so the two tests share one compiled group."""
+    base = paper42_members(paper42)
     bad = {k: v.copy() for k, v in base.items()}
     bad["rope.stiffness"][1], bad["boom.tip_mass"][1] = 1e16, 1e-12
-    kw = dict(observables=["final_position"], options=jh.SolverOptions(solver, max_steps=2000))
+    kw = dict(observables=["final_position", "final_euler"], options=jh.SolverOptions(solver, max_steps=2000))
 
     def batch(**b):
         return jh.BatchOptions(lanes=4, sort=False, **b)
@@ -182,18 +181,28 @@ def test_layout_independent_and_failing_group_mate_isolated(paper42, solver):
     np.testing.assert_array_equal(two.num_accepted_steps[keep], clean.num_accepted_steps[keep])
 
 
+def paper42_members(paper42, n: int = 8) -> dict[str, np.ndarray]:
+    """`n` members of paper-4.2 over μ in [0.1, 0.6], with its rope stiffness and tip mass as paths too (at
+    the preset's values) so that a member can be broken by either."""
+    rope_k, tip_m = float(paper42.rope.stiffness), float(paper42.boom.tip_mass)
+    return {
+        MU: np.linspace(0.1, 0.6, n),
+        "rope.stiffness": np.full(n, rope_k),
+        "boom.tip_mass": np.full(n, tip_m),
+    }
+
+
 def test_a_member_is_the_same_whatever_the_member_count_and_the_group_width(paper42):
     """The default group width follows the member count and the devices (`adaptive_lanes`), so a member
     must not depend on them beyond rounding: on paper-4.2 over 0.5 s with the default solver, four members
     solved among eight in groups of 4 are bit for bit what they are solved alone in a group of 4 (the same
     program, other group mates, another member count), and within 1e-9 relative, in the same steps, of
     the eight in one group of 8 (another width: XLA may round differently in a wider vmap)."""
-    n = 8
-    mus = {MU: np.linspace(0.1, 0.6, n)}
+    mus = paper42_members(paper42)
     kw = dict(observables=["final_position", "final_euler"], options=jh.SolverOptions(max_steps=2000))
     times = jh.Times(0.5, n=11)
     four = scan(paper42, jh.Points(mus), times, batch=jh.BatchOptions(lanes=4, sort=False), **kw)
-    sub = {MU: mus[MU][::2]}
+    sub = {k: v[::2] for k, v in mus.items()}
     alone = scan(paper42, jh.Points(sub), times, batch=jh.BatchOptions(lanes=4, sort=False), **kw)
     wide = scan(paper42, jh.Points(mus), times, batch=jh.BatchOptions(lanes=8, sort=False), **kw)
     assert np.all(four.ok) and np.all(alone.ok) and np.all(wide.ok)
@@ -565,7 +574,7 @@ def test_four_devices_and_resumes_across_device_counts(clean, tmp_path):
 
 
 def test_fingerprint_sees_constants_and_closures_of_custom_observables():
-    """Issue 14: a custom observable whose constant or closed-over value changed must not reuse the chunks
+    """A custom observable whose constant or closed-over value changed must not reuse the chunks
     of the old one (the fingerprint hashed only the bytecode)."""
     from jaxhoist._apps.scan.run import _fingerprint
     from jaxhoist._numerics.batch import BatchSpec as _Spec
@@ -626,7 +635,7 @@ def test_fingerprint_sees_solver_settings_beyond_the_tolerances():
 
 
 def test_a_damaged_or_foreign_store_is_recomputed_with_a_warning(box, clean, tmp_path):
-    """Issue 14: chunk files are verified on resume (content checksum from the manifest, the scan's
+    """Chunk files are verified on resume (content checksum from the manifest, the scan's
     fingerprint and the member indices inside the file); a truncated or emptied chunk, a chunk copied over
     another, a chunk whose values were changed (NaNs marked ok) and a truncated manifest are each recomputed
     with a `ScanStoreWarning` naming the file, and the result equals the clean scan."""
@@ -716,7 +725,7 @@ def test_fingerprint_is_the_same_in_every_process():
 
 
 def test_every_chunk_records_the_devices_it_ran_on(box, tmp_path):
-    """Issue 14: scan.json (attrs) and the manifest say which devices computed each chunk, also for chunks
+    """scan.json (attrs) and the manifest say which devices computed each chunk, also for chunks
     read back from an earlier run on other devices."""
     out = tmp_path / "devs"
     one = jax.devices()[:1]

@@ -271,7 +271,7 @@ def test_zero_is_a_switch_where_the_range_says_so(paper42):
     "path,value",
     [("rope.stiffness", 1e16), ("boom.tip_mass", 1e-12), ("foundation.friction_coefficient", 1e4)],
 )
-def test_absurd_values_of_the_issue_are_refused_and_solved_with_the_opt_in(paper42, path, value):
+def test_absurd_values_are_refused_and_solved_with_the_opt_in(paper42, path, value):
     with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
         with pytest.raises(jh.ScenarioError, match=_named(path)):
             jh.simulate(paper42.replace(**{path: value}), 0.1)

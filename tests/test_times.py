@@ -1,4 +1,4 @@
-"""`jaxhoist.Times`: the saved times of every entry point (issue 11): resolution, defaults, checks before
+"""`jaxhoist.Times`: the saved times of every entry point: resolution, defaults, checks before
 anything is compiled, `as_times`, and a traced t1 under `jax.jit`."""
 
 import jax

@@ -333,7 +333,7 @@ def test_bad_times_and_options(paper42):
                 jh.simulate(paper42, **kw)
 
 
-# ------------------------------------------------- adversarial inputs (issue 14 points 4-5, issue 12.5)
+# ------------------------------------------------------------------------------------ adversarial inputs
 # Every bad input ends in one `ScenarioError` line of bounded length naming the field (exit 2 from the
 # CLI), before anything is compiled; nothing else escapes (no OverflowError, UnicodeDecodeError,
 # RecursionError, AttributeError, TypeError from a pytree, shape error while compiling).
@@ -507,7 +507,7 @@ def test_plausible_extremes_still_accepted(paper42):
     paper42.replace(**{"load.mass": 1.0, "foundation.stiffness": 1e3}).check()
 
 
-# ---- the Python API refuses what the CLI refuses (issue 12 point 5)
+# ---- the Python API refuses what the CLI refuses
 
 
 @pytest.mark.parametrize(

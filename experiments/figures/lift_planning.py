@@ -3,7 +3,7 @@ boom tip's position, and a lift optimised over the tip and a hoist speed profile
 constant-speed lift and against a grid search over the same design family and sample.
 
     python experiments/figures/lift_planning.py --out out/lift_planning          # 9 x 9 tips, 64 samples
-    python experiments/figures/lift_planning.py --out out/lift_planning --quick  # 6 s, 3 x 3 tips, 4 samples
+    python experiments/figures/lift_planning.py --out out/lift_planning --quick  # 2 s, 2 x 2 tips, 4 samples
 
 Uncertain inputs: the friction coefficient μ ~ U(0.2, 0.5) and the mass centre's ξ_C (`load.mass_centre[0]`)
 ~ N(1.0 m, 0.1 m). Hazards:
@@ -77,9 +77,9 @@ GROUND_TILT = jh.Observable(
 
 
 def settings(quick: bool) -> dict:
-    if quick:  # 6 s: the drag phase only; the full run's compiled programs, much shorter solves
-        return dict(t1=6.0, n_save=121, nx=3, ny=3, map_samples=4, map_rep=2, opt_samples=4, iters=1,
-                    check_samples=8, check_rep=2, max_steps=20_000, grid=2, fd_h=0.01)  # fmt: skip
+    if quick:  # a smoke run: every step of the full run on 2 s of the lift and the smallest samples
+        return dict(t1=2.0, n_save=41, nx=2, ny=2, map_samples=4, map_rep=2, opt_samples=2, iters=1,
+                    check_samples=4, check_rep=2, max_steps=20_000, grid=2, fd_h=0.01)  # fmt: skip
     return dict(t1=25.0, n_save=501, nx=9, ny=9, map_samples=64, map_rep=8, opt_samples=32, iters=20,
                 check_samples=256, check_rep=8, max_steps=200_000, grid=3, fd_h=0.01)  # fmt: skip
 
@@ -87,7 +87,7 @@ def settings(quick: bool) -> dict:
 def main(argv=None) -> int:
     p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     p.add_argument("--out", required=True, help="output folder")
-    p.add_argument("--quick", action="store_true", help="6 s, 3 x 3 tips, 4 samples, 1 iteration (smoke run)")
+    p.add_argument("--quick", action="store_true", help="2 s, 2 x 2 tips, 4 samples, 1 iteration (smoke run)")
     p.add_argument("--grid", type=int, default=None, help="grid-search points per design axis (5 axes)")
     args = p.parse_args(argv)
     out = Path(args.out)

@@ -1,8 +1,8 @@
-"""Record the reference results that `tests/test_reference_results.py` compares against (issue 11).
+"""Record the reference results that `tests/test_reference_results.py` compares against.
 
-The restructuring of numerics/apps (issue 11) must not change any result: this script, run once on the
-code before the restructuring, stores short-horizon results of the three presets with both models and of a
-64-member scan with forward-mode sensitivities in `tests/data/reference_results.npz` (a few hundred kB).
+Moving code between modules must not change any result: this script, run once before such a move, stores
+short-horizon results of the three presets with both models and of a 64-member scan with forward-mode
+sensitivities in `tests/data/reference_results.npz` (a few hundred kB).
 Re-run it only when a result is meant to change, and say why in the commit message.
 
     PYTHONPATH=$PWD python tests/data/make_reference.py
@@ -23,8 +23,7 @@ PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2")
 T1 = 2.0  # [s]: the elastic model's horizon, short so that the comparison stays cheap
 # The rigid model's horizon [s] and rope per preset: paper-4.2 with the elastic rope takes 124 000 steps in
 # its first 0.1 s, and with either rope it enters a Zeno sequence of impacts at 0.44-0.48 s (more than
-# max_phases = 2000 phases), so it runs 0.2 s with the inextensible rope (748 accepted steps since the
-# issue-15 merge, 928 before).
+# max_phases = 2000 phases), so it runs 0.2 s with the inextensible rope (748 accepted steps).
 RIGID = {
     "paper-2.3": (0.45, jh.ElasticRope()),
     "paper-4.1": (0.45, jh.ElasticRope()),
@@ -92,7 +91,7 @@ def scan() -> dict[str, np.ndarray]:
         jh.Times(SCAN_T1, n=N_SAVE),
         observables=list(SCAN_OBSERVABLES),
         derivatives=True,
-        # the solver the reference was recorded with (the default of scan(derivatives=True) until 2026-11-24)
+        # the solver the reference was recorded with (then the default of scan(derivatives=True))
         options=jh.SolverOptions(diffrax.Tsit5(), adjoint=diffrax.ForwardMode()),
         # one device (valid while the multi-device path changes) and the group width the reference was
         # recorded with (the default for 64 members until the default width followed the device count; a

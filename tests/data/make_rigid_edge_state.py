@@ -1,5 +1,5 @@
 """Record the state that `tests/test_rigid_sweep.py` starts from to test the rule for a repeated
-least-violation choice (issue 15; docs/rigid-model.md, "Resolution of contact choices and impacts").
+least-violation choice (docs/rigid-model.md, "Resolution of contact choices and impacts").
 
 paper-4.1 (μ = 0.15) with the rope point B moved to ξ = 0.25 m and the elastic rope: from about 35 s the load
 rests on its edge F-H, and at times no contact configuration passes the consistency check (F and H sticking
