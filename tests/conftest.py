@@ -34,6 +34,10 @@ CACHE_ENV = {
     "JAX_COMPILATION_CACHE_DIR": os.environ["JAXHOIST_TEST_CACHE_DIR"],
     "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
     "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "-1",
+    # The workers run with two CPU devices (below); a process with another device count never loads their
+    # programs (the count is part of the compiled program's key), so subprocesses that do not set the count
+    # themselves get the same two.
+    "JAX_NUM_CPU_DEVICES": "2",
 }
 os.environ.update(CACHE_ENV)
 # JAX read its variables when it was imported (a plugin may have imported it before this file): set them here
