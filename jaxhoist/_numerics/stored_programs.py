@@ -1,23 +1,29 @@
 """Compiled programs stored whole on disk, next to JAX's persistent compilation cache: a later process
-loads the executable without tracing or lowering the program first.
+loads the executable without tracing or lowering the program first. `compile_cache.program` is the way
+in: `simulate`'s solve core (the Python API with concrete inputs, and the command line), a scan's group
+program where the scan runs on host CPU, and the bifurcation locator's solves (with and without the
+derivative).
 
 JAX's persistent cache is keyed by the lowered program's text, so every process still traces the Python
 function into JAX's form and lowers it before it can look the program up (for `simulate`'s solve core that
 is most of a warm run's time). Here the key is what decides the program before any tracing: the inputs'
-pytree structure, the array leaves' shapes and dtypes, the static (non-array) leaves, the versions of
-jaxhoist (a digest of its source files), JAX, jaxlib, equinox, diffrax, lineax, optimistix and numpy, the
-backend and its devices and the JAX settings that change a trace. A hit deserialises the executable
-(`jax.experimental.serialize_executable`); a miss traces, lowers and compiles and stores the result
-instead of JAX's cache entry (which would only double the folder's size). Where JAX's cache already holds
-the program (written by plain `jit` use), its executable is used but not stored: loaded from JAX's cache,
-it serialises without its machine code. A loaded program needs nothing set up by lowering except jaxlib's
-CPU LAPACK routines, which `load` sets up.
+pytree structure, the array leaves' shapes and dtypes, the static (non-array) leaves (a dataclass such as
+a scan's `BatchSpec` field by field; a function of jaxhoist by its name, or, where it is a lambda or made
+inside another function such as an observable's factory, by its code and the values it captured), the
+versions of jaxhoist (a digest of its source files), JAX, jaxlib, equinox, diffrax, lineax, optimistix and
+numpy, the backend and its devices and the JAX settings that change a trace. A hit deserialises the
+executable (`jax.experimental.serialize_executable`); a miss traces, lowers and compiles and stores the
+result instead of JAX's cache entry (which would only double the folder's size). Where JAX's cache already
+holds the program (written by plain `jit` use), its executable is used but not stored: loaded from JAX's
+cache, it serialises without its machine code. A loaded program needs nothing set up by lowering except
+jaxlib's CPU LAPACK routines, which `load` sets up.
 
 A stored program is never trusted blindly: each file carries a SHA-256 digest of its content and the full
 key it was compiled for; a file whose digest or key does not match, or that fails to load, is compiled
 again and overwritten. A key that cannot be written down stably (a static leaf without a stable text, such
-as a lambda) stores nothing: the program is compiled as usual. Like JAX's cache, the folder is trusted
-otherwise (loading an executable can run code), so keep it private.
+as a user's own observable, whose code the key does not cover) stores nothing: the program is compiled as
+usual. Like JAX's cache, the folder is trusted otherwise (loading an executable can run code), so keep it
+private.
 """
 
 from __future__ import annotations
