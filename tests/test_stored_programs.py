@@ -1,6 +1,7 @@
 """Compiled programs stored whole (`stored_programs`, through `compile_cache.program`): a second process with
 the same cache folder loads the scan's group program (plain and with forward-mode sensitivities) and
-`simulate`'s solve core without tracing them, and returns the same bits; a damaged stored file is compiled
+`simulate`'s solve core and the bifurcation locator's solves without tracing them, and returns the same
+bits; a damaged stored file is compiled
 again with a warning; programs whose key has no stable text (a user's lambda observable) are not stored.
 Short horizons and few members: the compile is what is tested, not the physics."""
 
@@ -248,3 +249,48 @@ def test_simulate_under_a_callers_trace_stores_nothing(tmp_path, monkeypatch, pa
     assert not (tmp_path / sp.SUBFOLDER).exists()
     monkeypatch.setattr(pc, "_ENABLED", [None])
     np.testing.assert_allclose(got, jh.simulate(paper42, ts).position, rtol=1e-12)
+
+
+_LOCATOR_SCRIPT = r"""
+import json, sys
+import jax, jax.numpy as jnp
+jax.config.update("jax_enable_x64", True)
+import jaxhoist as jh
+from jaxhoist._apps.bifurcation import eval as eval_mod
+from jaxhoist._numerics import observables as obs_mod
+
+traced = []
+_value = eval_mod._value
+def counting(*args, **kwargs):  # every trace of the value and slope programs calls it
+    traced.append(1)
+    return _value(*args, **kwargs)
+eval_mod._value = counting
+
+jh.enable_compilation_cache(sys.argv[1])
+sc = jh.load_scenario("paper-4.3").unlabelled()
+ev = eval_mod.Evaluator(sc, "foundation.friction_coefficient", obs_mod.get("final_theta"),
+                        jnp.linspace(0.0, 0.5, 6), jh.SolverOptions())
+y = ev.value(0.36)
+y2, dy = ev.value_and_slope(0.365)
+print(json.dumps({"values": [y, y2, dy], "traced": len(traced)}))
+"""
+
+
+def test_a_second_process_loads_the_locators_solves_untraced_with_the_same_bits(tmp_path):
+    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
+    env.pop(pc.ENV_VAR, None)
+    runs = []
+    for _ in range(2):
+        proc = subprocess.run(
+            [sys.executable, "-c", _LOCATOR_SCRIPT, str(tmp_path / "cache")],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+    assert runs[0]["traced"] > 0 and runs[1]["traced"] == 0
+    assert runs[0]["values"] == runs[1]["values"]  # bit for bit (JSON keeps every digit of a float)
+    names = sorted(p.name.rsplit("-", 2)[0] for p in (tmp_path / "cache" / sp.SUBFOLDER).glob("*-cache"))
+    assert names == ["bifurcation-jvp", "bifurcation-value"]
