@@ -1,9 +1,9 @@
 """Compiled programs stored whole (`stored_programs`, through `compile_cache.program`): a second process with
 the same cache folder loads the scan's group program (plain and with forward-mode sensitivities) and
 `simulate`'s solve core and the bifurcation locator's solves without tracing them, and returns the same
-bits; a damaged stored file is compiled
-again with a warning; programs whose key has no stable text (a user's lambda observable) are not stored.
-Short horizons and few members: the compile is what is tested, not the physics."""
+bits; a damaged stored file is compiled again with a warning; programs whose key has no stable text (a
+user's lambda observable) are not stored. Short horizons and few members: the compile is what is tested,
+not the physics."""
 
 import json
 import subprocess
