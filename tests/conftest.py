@@ -138,11 +138,14 @@ def _release_compiled_code():
     compile died with a segmentation fault (tests/test_statics.py, after ~250 tests). Within a module the
     compiled functions are still shared."""
     yield
-    from jaxhoist._numerics import batch, compile_cache
+    from jaxhoist._numerics import batch, compile_cache, persistent_cache
 
     compile_cache._CACHE.clear()  # the bifurcation locator's solves among them
     batch.chunk_fn.cache_clear()
     jax.clear_caches()
+    # the command line's `main()`, run in this process, switches the library's cache on (stored programs):
+    # the next module starts with it off again, as a fresh Python process does
+    persistent_cache._ENABLED[0] = None
 
 
 def pytest_collection_modifyitems(config, items):

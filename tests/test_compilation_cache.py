@@ -1,7 +1,8 @@
 """The persistent compilation cache: compiled cores without host callbacks (which JAX refuses to store), a
-second process that loads instead of compiling and returns the same bits, a damaged entry recompiled rather
-than trusted, `--no-cache`, and the cache folder's location and size bound. Every test uses a folder under
-`tmp_path`, never the user's cache."""
+second process that loads instead of compiling and returns the same bits (JAX's cache, for a user's own
+`jax.jit` around `simulate`; jaxhoist's own programs stored whole: also tests/test_stored_programs.py), a
+damaged entry recompiled rather than trusted, `--no-cache`, and the cache folder's location and size bound.
+Every test uses a folder under `tmp_path`, never the user's cache."""
 
 import hashlib
 import json
@@ -119,13 +120,18 @@ import warnings
 warnings.simplefilter("always")
 with warnings.catch_warnings(record=True) as caught:
     folder = jh.enable_compilation_cache(sys.argv[1])
+    base = jh.load_scenario("paper-4.2")
+
+    @jax.jit
+    def lift(mu):  # a user's own program around simulate: JAX's cache stores it (no stored program)
+        sc = eqx.tree_at(lambda s: s.foundation.friction_coefficient, base, mu)
+        traj = jh.simulate(sc, jh.Times(0.2, n=5), throw=False)
+        return {k: getattr(traj, k) for k in ("position", "euler", "rope_tension", "normal_forces")}
+
     out = {}
     for mu in sys.argv[3:]:
-        sc = jh.load_scenario("paper-4.2")
-        sc = eqx.tree_at(lambda s: s.foundation.friction_coefficient, sc, float(mu))
-        traj = jh.simulate(sc, jh.Times(0.2, n=5))
-        for k in ("position", "euler", "rope_tension", "normal_forces"):
-            out[f"{k}@{mu}"] = np.asarray(getattr(traj, k))
+        for k, v in lift(float(mu)).items():
+            out[f"{k}@{mu}"] = np.asarray(v)
 seen["warnings"] = [str(w.message) for w in caught]
 np.savez(sys.argv[2], **out)
 print(json.dumps(seen))
@@ -163,13 +169,13 @@ def _entries(folder: Path) -> list[Path]:
 def test_second_process_loads_the_program_and_returns_the_same_bits(tmp_path):
     cache = tmp_path / "cache"
     first = _run_solve(cache, tmp_path / "a.npz", "0.5")
-    assert "jit_solve" in first["misses"] and "jit_solve" not in first["hits"]
+    assert "jit_lift" in first["misses"] and "jit_lift" not in first["hits"]
     written = _entries(cache)
-    assert any(p.name.startswith("jit_solve-") for p in written)
+    assert any(p.name.startswith("jit_lift-") for p in written)
 
-    # a new process, the same value and another one: the solve core is loaded, never compiled
+    # a new process, the same value and another one: the program is loaded from JAX's cache, not compiled
     second = _run_solve(cache, tmp_path / "b.npz", "0.5", "0.3")
-    assert "jit_solve" in second["hits"] and "jit_solve" not in second["misses"]
+    assert "jit_lift" in second["hits"] and "jit_lift" not in second["misses"]
     assert _entries(cache) == written  # nothing new was compiled and stored
     a, b = np.load(tmp_path / "a.npz"), np.load(tmp_path / "b.npz")
     for k in a.files:
@@ -183,7 +189,7 @@ def test_second_process_loads_the_program_and_returns_the_same_bits(tmp_path):
         data[mid : mid + 16] = bytes(x ^ 0xFF for x in data[mid : mid + 16])
         p.write_bytes(bytes(data))
     third = _run_solve(cache, tmp_path / "c.npz", "0.5")
-    assert "jit_solve" in third["misses"] and "jit_solve" not in third["hits"]
+    assert "jit_lift" in third["misses"] and "jit_lift" not in third["hits"]
     assert any("persistent compilation cache" in w for w in third["warnings"])
     c = np.load(tmp_path / "c.npz")
     for k in c.files:

@@ -21,6 +21,7 @@ import numpy as np
 
 from .._errors import SolveStatus
 from .._physics.paths import set_param
+from . import compile_cache
 from . import fixed_step as fixed_mod
 from .options import SolverOptions
 from .solve import solve
@@ -275,6 +276,45 @@ class ChunkProgram:
 @functools.lru_cache(maxsize=32)
 def chunk_fn(spec: BatchSpec) -> ChunkProgram:
     return ChunkProgram(spec)
+
+
+def stores_whole(spec: BatchSpec) -> bool:
+    """Whether the group program of `spec` goes through `compile_cache.program` (and so, with the persistent
+    compilation cache on, is stored whole and loaded by a later process without tracing): where every
+    share of a chunk runs on one host CPU device, the default device. Accelerators (one copy of the
+    program per device) are compiled by `ChunkProgram` (JAX's persistent cache stores their XLA compile)."""
+    targets = set(execution_targets(spec.devices))
+    if len(targets) != 1:
+        return False
+    (target,) = targets
+    return target.platform == "cpu" and target == jax.devices()[0]
+
+
+def compiled_chunk(spec: BatchSpec, scenario, ts, values, active) -> tuple[CompiledChunk, float, bool]:
+    """The `CompiledChunk` of `spec` for chunks shaped like `values` (G, L, P), made once per process.
+
+    **Returns** `(chunk, seconds spent making its program now, loaded)`: `loaded` True where the group
+    program was loaded from the persistent compilation cache's folder (`compile_cache.program`)."""
+    if stores_whole(spec):
+        (target,) = set(execution_targets(spec.devices))
+        args = (*_to_device((scenario, ts, np.asarray(values)[0]), target), spec)
+        exe, seconds, loaded = compile_cache.program("scan", "scan-group", group_fn, args)
+        return CompiledChunk(spec, {target: _GroupCall(exe, spec)}), seconds, loaded
+    key = (spec, *compile_cache.structure_key(scenario, ts, jnp.asarray(values[0])))
+    chunk, seconds = compile_cache.compiled(
+        "scan", key, lambda: chunk_fn(spec).lower(scenario, ts, values, active)
+    )
+    return chunk, seconds, False
+
+
+class _GroupCall:
+    """`exe(scenario, ts, values)` for the program of `group_fn`, which also takes the (static) spec."""
+
+    def __init__(self, exe, spec: BatchSpec):
+        self.exe, self.spec = exe, spec
+
+    def __call__(self, scenario, ts, values):
+        return self.exe(scenario, ts, values, self.spec)
 
 
 def flatten_out(out: Mapping, n: int) -> dict[str, np.ndarray]:

@@ -1,17 +1,24 @@
-"""The one ahead-of-time compile cache of the package: `compiled(kind, key, lower)` lowers and compiles once
-per `(kind, key)` and keeps the executable for the process's lifetime, so repeated calls (scan chunks, the
-command line's `main()` called again in one process, identification starts) compile once and can time the
-compilation apart from the run. `structure_key` is the usual key: pytree structure, leaf shapes and dtypes.
+"""The one ahead-of-time compile cache of the package. `program(kind, name, fn, args)` gives the executable of
+`fn(*args)`: from the process's cache, else (with the persistent compilation cache on) loaded whole from
+the cache folder without tracing or lowering (`stored_programs`), else traced, lowered and compiled (and
+stored there). `compiled(kind, key, lower)` lowers and compiles once per `(kind, key)` for programs made
+another way (an accelerator's copies of a scan's group program, identification's cores). Either keeps the
+executable for the process's lifetime, so repeated calls (scan chunks, the command line's `main()` called
+again in one process, identification starts) compile once and can time the compilation apart from the run.
+`structure_key` is the usual key: pytree structure, leaf shapes and dtypes.
 """
 
 from __future__ import annotations
 
+import contextlib
 import time
 from collections.abc import Callable, Hashable
 from typing import Any
 
 import equinox as eqx
 import jax
+
+from . import persistent_cache, stored_programs
 
 _CACHE: dict[tuple[str, Hashable], Any] = {}
 
@@ -23,26 +30,63 @@ def structure_key(*trees) -> tuple:
     return (treedef, tuple((x.shape, str(x.dtype)) if eqx.is_array(x) else x for x in leaves))
 
 
-def is_cached(kind: str, key: Hashable) -> bool:
-    return (kind, key) in _CACHE
-
-
 def compiled(kind: str, key: Hashable, lower: Callable[[], Any]) -> tuple[Any, float]:
     """The executable cached under `(kind, key)`, else `lower().compile()` stored there. **Returns**
     `(executable, seconds spent compiling now)` (0.0 on a hit)."""
-    return remember(kind, key, lambda: lower().compile())
-
-
-def remember(kind: str, key: Hashable, make: Callable[[], Any]) -> tuple[Any, float]:
-    """The executable cached under `(kind, key)`, else `make()` stored there (for executables made another
-    way than `lower().compile()`, e.g. loaded by `stored_programs`). **Returns** `(executable, seconds spent
-    making it now)` (0.0 on a hit)."""
     full = (kind, key)
     if full in _CACHE:
         return _CACHE[full], 0.0
     t0 = time.perf_counter()
-    _CACHE[full] = exe = make()
+    _CACHE[full] = exe = lower().compile()
     return exe, time.perf_counter() - t0
+
+
+def _quiet(label: str) -> contextlib.AbstractContextManager:
+    return contextlib.nullcontext()
+
+
+def program(
+    kind: str,
+    name: str,
+    fn: Callable[..., Any],
+    args: tuple,
+    *,
+    step: Callable[[str], contextlib.AbstractContextManager] = _quiet,
+) -> tuple[Callable[..., Any], float, bool]:
+    """The executable of `fn(*args)`, called as `exe(*args)` (arrays of the same shapes and dtypes, the
+    same static parts): the one cached in this process under `kind` and the structure of `args`
+    (`structure_key`), else, where `persistent_cache.enable_compilation_cache` is on, the program stored
+    whole in its folder (`stored_programs.load`: nothing traced or lowered), else `fn` traced, lowered and
+    compiled (and stored there where the cache is on and `args` have a stable key).
+
+    **Arguments**
+    - `kind`: the in-process cache's name for `fn` (one function per kind).
+    - `name`: the stored programs' name for `fn`: it must name one function of jaxhoist, whose source the
+      stored program's key covers.
+    - `fn`, `args`: the function and its arguments (arrays are the program's inputs; everything else is
+      static, part of the program).
+    - `step`: called with what is done now ("loading the compiled program", "compiling", "compiling (cached
+      in this process)"), returns a context manager around it (the command line's progress lines).
+
+    **Returns** `(executable, seconds spent making it now, loaded)`: 0.0 seconds on a hit of this process's
+    cache; `loaded` True where it was loaded from the cache folder now.
+    """
+    full = (kind, structure_key(*args))
+    if full in _CACHE:
+        with step("compiling (cached in this process)"):
+            return _CACHE[full], 0.0, False
+    t0 = time.perf_counter()
+    folder = persistent_cache.enabled_folder()
+    exe = None
+    if folder is not None and stored_programs.is_stored(folder, name, args):
+        with step("loading the compiled program"):
+            exe = stored_programs.load(folder, name, args)
+    loaded = exe is not None
+    if exe is None:
+        with step("compiling"):
+            exe = stored_programs.compile_and_store(folder, name, fn, args)
+    _CACHE[full] = exe
+    return exe, time.perf_counter() - t0, loaded
 
 
 def count(kind: str) -> int:

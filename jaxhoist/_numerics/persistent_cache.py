@@ -1,10 +1,14 @@
 """JAX's persistent compilation cache for jaxhoist's programs: `enable_compilation_cache`.
 
-With the cache on, every program XLA compiles is stored in a folder on disk, keyed by the program's text,
-the compile options, the device and the JAX/XLA versions; a later process that needs the same program
-(the same command with other parameter values, which are arguments of the program, not constants) loads
-it instead of compiling. jaxhoist's compiled cores carry no host callback, which JAX would refuse to
-store (`callback_free`).
+With the cache on, jaxhoist's own programs (`simulate`'s solve core, a scan's group program on host CPU,
+the bifurcation locator's solves) are stored whole in the folder's `programs` subfolder
+(`stored_programs`, through `compile_cache.program`): a later process that needs the same program (the
+same call with other parameter values, which are arguments of the program, not constants) loads the
+executable without tracing, lowering or compiling it. Every other program XLA compiles (identification's,
+the scan's copies on accelerators, a user's own `jax.jit` around `simulate`) goes to JAX's cache in the
+folder itself, keyed by the program's text, the compile options, the device and the JAX/XLA versions: a
+later process traces and lowers it, then loads it instead of compiling. jaxhoist's compiled cores carry
+no host callback, which neither would store (`callback_free`).
 
 The command line switches the cache on for every run (`--no-cache` or `JAXHOIST_CACHE_DIR=""` to switch
 it off); a library never changes JAX's global configuration on import, so Python users call
@@ -88,12 +92,14 @@ def prune(folder: Path, max_bytes: int) -> int:
 
 
 def enable_compilation_cache(path: str | os.PathLike | None = None, *, max_bytes: int = DEFAULT_MAX_BYTES):
-    """Switch on JAX's persistent compilation cache for this process, so that compiled programs are stored
-    on disk and later processes load them instead of compiling: for `simulate`, about 10 s of XLA
-    compilation on a 2-core machine become a load of about a second (each process still traces the program
-    into JAX's form, which the cache does not store; the command line's `simulate` also stores its program
-    whole in the folder's `programs` subfolder, `stored_programs`, and skips the tracing as well). Call it
-    once, before the first compilation.
+    """Switch on the persistent compilation cache for this process, so that compiled programs are stored on
+    disk and later processes load them instead of compiling. `simulate`'s solve core, a scan's group
+    program (where the scan runs on host CPU: plain and `derivatives=True`) and `locate_bifurcation`'s
+    solves are stored whole in the folder's `programs` subfolder (`stored_programs`): a later process loads
+    the executable without tracing or lowering it (for `simulate`, about 10 s of tracing and compiling on a
+    2-core machine become a load of about half a second). Every other program goes to JAX's own cache in the
+    folder, which saves the XLA compile; a later process still traces and lowers it. Call it once, before
+    the first compilation.
 
     Sets JAX's `jax_compilation_cache_dir` to the folder and `jax_persistent_cache_min_compile_time_secs` to
     0 (every program is stored, the small ones too), and keeps the folder below `max_bytes` by deleting the

@@ -17,10 +17,11 @@ from .._physics import kinematics
 from .._physics.elastic import Constants, State, snapshot, vector_field
 from .._physics.equilibrium import initial_state
 from .._physics.params import Scenario
+from . import compile_cache, persistent_cache
 from .callback_free import callback_free, raise_on_status
 from .options import SolverOptions
 from .sensitivity import solve_forward, uses_tangent_solve
-from .times import Times
+from .times import Times, is_tracer
 from .trajectory import Trajectory as Trajectory
 
 
@@ -130,6 +131,22 @@ _solve_forward = solve_forward(_solve_plain, step_size_controller, outputs, _sta
 _solve_jit = eqx.filter_jit(solve)
 
 
+def _core(scenario: Scenario, ts, options: SolverOptions):
+    """The compiled solve core for these inputs: with the persistent compilation cache on and concrete inputs,
+    the one program of `compile_cache.program` (stored whole in the cache folder, so that a later process
+    loads it without tracing or lowering it; the command line's `simulate` shares it); under a caller's
+    trace (`jax.jit`, `jax.vmap`, `jax.grad`), with an in-loop progress meter (a host callback, which no
+    stored program carries) or with the cache off, `_solve_jit`."""
+    args = (scenario, ts, options)
+    if (
+        persistent_cache.enabled_folder() is None
+        or not isinstance(options.progress_meter, diffrax.NoProgressMeter)
+        or any(map(is_tracer, jax.tree_util.tree_leaves(args)))
+    ):
+        return _solve_jit
+    return compile_cache.program("simulate", "solve", solve, args)[0]
+
+
 def _raise_on_failure(traj: Trajectory) -> Trajectory:
     return raise_on_status(traj, traj.status, SolveStatus.OK, [s.message for s in SolveStatus])
 
@@ -178,5 +195,6 @@ def simulate_elastic(
     _, ts = times.resolve(scenario, DEFAULT_N, jnp)
     ts = jnp.asarray(ts, dtype=jnp.float64)
     with forward_mode_hint():  # jacfwd through the reverse adjoint: say to pass adjoint=diffrax.ForwardMode()
-        traj = _solve_jit(scenario.unlabelled(), ts, options)  # one program for any labels
+        scenario = scenario.unlabelled()  # one program for any labels
+        traj = _core(scenario, ts, options)(scenario, ts, options)
     return _raise_on_failure(traj) if throw else traj

@@ -1,28 +1,35 @@
 """Compiled programs stored whole on disk, next to JAX's persistent compilation cache: a later process
-loads the executable without tracing or lowering the program first.
+loads the executable without tracing or lowering the program first. `compile_cache.program` is the way
+in: `simulate`'s solve core (the Python API with concrete inputs, and the command line), a scan's group
+program where the scan runs on host CPU, and the bifurcation locator's solves (with and without the
+derivative).
 
 JAX's persistent cache is keyed by the lowered program's text, so every process still traces the Python
 function into JAX's form and lowers it before it can look the program up (for `simulate`'s solve core that
 is most of a warm run's time). Here the key is what decides the program before any tracing: the inputs'
-pytree structure, the array leaves' shapes and dtypes, the static (non-array) leaves, the versions of
-jaxhoist (a digest of its source files), JAX, jaxlib, equinox, diffrax, lineax, optimistix and numpy, the
-backend and its devices and the JAX settings that change a trace. A hit deserialises the executable
-(`jax.experimental.serialize_executable`); a miss traces, lowers and compiles and stores the result
-instead of JAX's cache entry (which would only double the folder's size). Where JAX's cache already holds
-the program (written by plain `jit` use), its executable is used but not stored: loaded from JAX's cache,
-it serialises without its machine code. A loaded program needs nothing set up by lowering except jaxlib's
-CPU LAPACK routines, which `load` sets up.
+pytree structure, the array leaves' shapes and dtypes, the static (non-array) leaves (a dataclass such as
+a scan's `BatchSpec` field by field; a function of jaxhoist by its name, or, where it is a lambda or made
+inside another function such as an observable's factory, by its code and the values it captured), the
+versions of jaxhoist (a digest of its source files), JAX, jaxlib, equinox, diffrax, lineax, optimistix and
+numpy, the backend and its devices and the JAX settings that change a trace. A hit deserialises the
+executable (`jax.experimental.serialize_executable`); a miss traces, lowers and compiles and stores the
+result instead of JAX's cache entry (which would only double the folder's size). Where JAX's cache already
+holds the program (written by plain `jit` use), its executable is used but not stored: loaded from JAX's
+cache, it serialises without its machine code. A loaded program needs nothing set up by lowering except
+jaxlib's CPU LAPACK routines, which `load` sets up.
 
 A stored program is never trusted blindly: each file carries a SHA-256 digest of its content and the full
 key it was compiled for; a file whose digest or key does not match, or that fails to load, is compiled
 again and overwritten. A key that cannot be written down stably (a static leaf without a stable text, such
-as a lambda) stores nothing: the program is compiled as usual. Like JAX's cache, the folder is trusted
-otherwise (loading an executable can run code), so keep it private.
+as a user's own observable, whose code the key does not cover) stores nothing: the program is compiled as
+usual. Like JAX's cache, the folder is trusted otherwise (loading an executable can run code), so keep it
+private.
 """
 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import enum
 import hashlib
 import io
@@ -88,20 +95,65 @@ def _qualified(obj) -> str | None:
     return f"{module}.{qualname}"
 
 
+def _function(fn: types.FunctionType) -> str | None:
+    """A stable text of a function: its qualified name where that names it (a module-level function of a
+    covered package, whose source the key covers); for a lambda or a function made inside another (an
+    observable's factory), the name, first line and a digest of its code, with the stable texts of its
+    closure's cells and defaults; None for code outside the covered packages or a cell without one."""
+    named = _qualified(fn)
+    if named is not None:
+        return named
+    module, code = getattr(fn, "__module__", None), getattr(fn, "__code__", None)
+    if not module or module.split(".")[0] not in _COVERED or code is None:
+        return None
+    try:
+        captured = [c.cell_contents for c in fn.__closure__ or ()]
+    except ValueError:  # an empty cell
+        return None
+    consts = [_stable(c) for c in code.co_consts if not isinstance(c, types.CodeType)]
+    inner = [_stable(v) for v in (*captured, *(fn.__defaults__ or ()), *(fn.__kwdefaults__ or {}).items())]
+    if None in consts or None in inner:
+        return None
+    digest = hashlib.sha256(code.co_code + repr((consts, code.co_names)).encode()).hexdigest()[:16]
+    return f"{module}.{fn.__qualname__}@{code.co_firstlineno}:{digest}({', '.join(map(str, inner))})"
+
+
 def _stable(x) -> str | None:
     """A text for a static value that is the same in every process and differs for values that compile
-    differently, or None where there is none."""
+    differently, or None where there is none. A dataclass (an `equinox.Module`, an `Observable`, a
+    `BatchSpec`) is described field by field, an array by its dtype, shape and a digest of its values."""
     if x is None or isinstance(x, (bool, int, float, complex, str, bytes, np.generic, np.dtype)):
         return f"{type(x).__name__}:{x!r}"
     if isinstance(x, enum.Enum):
         owner = _qualified(type(x))
         return None if owner is None else f"{owner}.{x.name}"
-    if isinstance(x, (type, types.FunctionType, types.BuiltinFunctionType)):
+    if isinstance(x, types.FunctionType):
+        return _function(x)
+    if isinstance(x, (type, types.BuiltinFunctionType)):
         return _qualified(x)
+    if isinstance(x, (np.ndarray, jax.Array)):
+        a = np.asarray(x)
+        return f"array {a.dtype} {a.shape} {hashlib.sha256(a.tobytes()).hexdigest()}"
     if isinstance(x, (tuple, list)):
         inner = [_stable(v) for v in x]
         return None if None in inner else f"{type(x).__name__}({', '.join(map(str, inner))})"
-    owner, text = _qualified(type(x)), repr(x)
+    if isinstance(x, (set, frozenset)):
+        inner = [_stable(v) for v in x]
+        return None if None in inner else f"{type(x).__name__}({', '.join(sorted(map(str, inner)))})"
+    if isinstance(x, dict):
+        inner = [(_stable(k), _stable(v)) for k, v in x.items()]
+        return (
+            None
+            if None in [t for kv in inner for t in kv]
+            else f"dict({', '.join(f'{k}: {v}' for k, v in inner)})"
+        )
+    owner = _qualified(type(x))
+    if owner is not None and dataclasses.is_dataclass(x):
+        fields = [(f.name, _stable(getattr(x, f.name, None))) for f in dataclasses.fields(x)]
+        if any(t is None for _, t in fields):
+            return None
+        return f"{owner}({', '.join(f'{n}={t}' for n, t in fields)})"
+    text = repr(x)
     return None if owner is None or " at 0x" in text else f"{owner}:{text}"
 
 
@@ -151,6 +203,13 @@ def program_key(name: str, args: tuple) -> str | None:
 def program_path(folder: Path, name: str, key: str) -> Path:
     """Where the program `name` with the full key `key` is stored under the cache folder `folder`."""
     return Path(folder) / SUBFOLDER / f"{name}-{hashlib.sha256(key.encode()).hexdigest()[:40]}-cache"
+
+
+def is_stored(folder: Path, name: str, args: tuple) -> bool:
+    """Whether a file for the program `name` called with `args` exists under `folder` (whether it is good
+    is known only when `load` reads it)."""
+    key = program_key(name, args)
+    return key is not None and program_path(folder, name, key).is_file()
 
 
 class StoredProgram:

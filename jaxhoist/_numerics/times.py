@@ -18,12 +18,12 @@ from .._errors import ScenarioError
 TimesLike = Union["Times", ArrayLike, Sequence[float | int], None]
 
 
-def _is_tracer(x) -> bool:
+def is_tracer(x) -> bool:
     return isinstance(x, jax.core.Tracer)  # pyright: ignore[reportAttributeAccessIssue]  # jax.core is a lazily loaded submodule
 
 
 def _concrete_float(x):
-    return None if x is None or _is_tracer(x) else float(np.asarray(x))
+    return None if x is None or is_tracer(x) else float(np.asarray(x))
 
 
 def check_times(t1, ts) -> None:
@@ -36,7 +36,7 @@ def check_times(t1, ts) -> None:
     t1c = _concrete_float(t1)
     if t1c is not None and not (np.isfinite(t1c) and t1c > 0):
         raise ScenarioError(f"t1 must be a positive finite time [s], got {t1c}")
-    if ts is not None and not _is_tracer(ts):
+    if ts is not None and not is_tracer(ts):
         a = np.asarray(ts)
         if a.ndim != 1 or a.size < 2:
             raise ScenarioError(f"ts must be a 1-D array of at least 2 times [s], got shape {a.shape}")
@@ -54,7 +54,7 @@ def _is_real(x) -> bool:
     if isinstance(x, bool | str | bytes):
         return False
     try:
-        dtype = jnp.result_type(x) if _is_tracer(x) else np.asarray(x).dtype
+        dtype = jnp.result_type(x) if is_tracer(x) else np.asarray(x).dtype
     except (TypeError, ValueError):
         return False
     return bool(np.issubdtype(dtype, np.integer) or np.issubdtype(dtype, np.floating))

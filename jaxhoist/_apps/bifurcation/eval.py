@@ -1,24 +1,23 @@
 """The bifurcation indicator and its evaluation: the checked inputs of one search (`Problem`), the indicator
 g = observable - level, and `Evaluator`: the observable of one solve at a parameter value, with or without
-its derivative dy/dp (forward mode), compiled once per setting through `numerics.compile_cache`, counted,
-and a failed solve turned into a `BifurcationError`."""
+its derivative dy/dp (forward mode), compiled once per setting through `numerics.compile_cache.program`
+(stored whole where the persistent compilation cache is on), counted, and a failed solve turned into a
+`BifurcationError`."""
 
 from __future__ import annotations
 
 import dataclasses
-import functools
 import time
 from collections.abc import Callable
 
 import diffrax
-import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
 
 from ..._errors import ScenarioError, SolveStatus
 from ..._numerics import observables as obs_mod
-from ..._numerics.compile_cache import compiled, structure_key
+from ..._numerics.compile_cache import program
 from ..._numerics.options import SolverOptions
 from ..._numerics.solve import solve
 from ..._physics.params import Scenario
@@ -114,18 +113,9 @@ def _value(scenario, x, ts, spec: _Spec):
     return jnp.asarray(spec.observable(traj, sc), dtype=jnp.float64), (traj.status, traj.num_accepted_steps)
 
 
-@functools.lru_cache(maxsize=32)
-def _value_fn(spec: _Spec):
-    return eqx.filter_jit(lambda sc, x, ts: _value(sc, x, ts, spec))
-
-
-@functools.lru_cache(maxsize=32)
-def _jvp_fn(spec: _Spec):
-    def f(sc, x, ts):
-        y, dy, aux = jax.jvp(lambda p: _value(sc, p, ts, spec), (x,), (jnp.ones_like(x),), has_aux=True)
-        return y, dy, aux
-
-    return eqx.filter_jit(f)
+def _jvp(scenario, x, ts, spec: _Spec):
+    y, dy, aux = jax.jvp(lambda p: _value(scenario, p, ts, spec), (x,), (jnp.ones_like(x),), has_aux=True)
+    return y, dy, aux
 
 
 class Evaluator:
@@ -147,12 +137,11 @@ class Evaluator:
 
     def _call(self, kind, x):
         spec = self.value_spec if kind == "value" else self.jvp_spec
-        fn = (_value_fn if kind == "value" else _jvp_fn)(spec)
-        xs = jnp.asarray(x, dtype=jnp.float64)
-        key = (spec, structure_key(self.scenario, xs, self.ts))
-        exe, seconds = compiled(f"bifurcation-{kind}", key, lambda: fn.lower(self.scenario, xs, self.ts))
+        fn = _value if kind == "value" else _jvp
+        args = (self.scenario, jnp.asarray(x, dtype=jnp.float64), self.ts, spec)
+        exe, seconds, _ = program(f"bifurcation-{kind}", f"bifurcation-{kind}", fn, args)
         self.compile_time += seconds
-        out = jax.block_until_ready(exe(self.scenario, xs, self.ts))
+        out = jax.block_until_ready(exe(*args))
         aux = out[-1]
         status, steps = int(aux[0]), int(aux[1])
         self.steps += steps

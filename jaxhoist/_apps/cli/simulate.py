@@ -26,41 +26,15 @@ from .progress import LineSink, StepTimer, percent_to_bar, phase_to_bar, tqdm_ba
 # ---------------------------------------------------------------------------------------- simulate
 
 
-def _cache_key(scenario, ts, options):
-    from ..._numerics.compile_cache import structure_key
-
-    return (*structure_key(scenario, ts), options)
-
-
 def _compiled_solve(scenario, ts, options, progress):
     """The solve core `numerics.solve.solve`, compiled ahead of time (so compile and solve are timed apart)
-    and cached per structure/shape/options, so repeated `main()` calls in one process compile once. With
-    the persistent compilation cache on, the compiled program is also stored whole in the cache folder
-    (`stored_programs`), and a later run loads it without tracing or lowering it."""
-    import equinox as eqx
-
-    from ..._numerics import compile_cache, stored_programs
-    from ..._numerics.persistent_cache import enabled_folder
+    through `compile_cache.program`: cached per structure/shape/options, so repeated `main()` calls in one
+    process compile once, and with the persistent compilation cache on, stored whole in the cache folder,
+    so that a later run loads it without tracing or lowering it."""
+    from ..._numerics import compile_cache
     from ..._numerics.solve import solve
 
-    key = _cache_key(scenario, ts, options)
-    if compile_cache.is_cached("cli-simulate", key):
-        with progress("compiling (cached in this process)"):
-            return compile_cache.remember("cli-simulate", key, lambda: None)[0]
-    folder = enabled_folder()
-    args = (scenario, ts, options)
-    if folder is None:
-        with progress("compiling"):
-            return compile_cache.compiled("cli-simulate", key, lambda: eqx.filter_jit(solve).lower(*args))[0]
-    program = None
-    stored_key = stored_programs.program_key("solve", args)
-    if stored_key is not None and stored_programs.program_path(folder, "solve", stored_key).exists():
-        with progress("loading the compiled program"):
-            program = stored_programs.load(folder, "solve", args)
-    if program is None:
-        with progress("compiling"):
-            program = stored_programs.compile_and_store(folder, "solve", solve, args)
-    return compile_cache.remember("cli-simulate", key, lambda: program)[0]
+    return compile_cache.program("simulate", "solve", solve, (scenario, ts, options), step=progress)[0]
 
 
 def _fmt_vec(v) -> str:

@@ -28,7 +28,9 @@ class ScanResult:
     - `ts`, `histories`: saved times [s] and name -> array of shape `shape + (n_t, ...)` if requested.
     - `units`: name -> SI unit for every parameter, observable and history; `descriptions` likewise.
     - `attrs`: JSON-able metadata (scenario, t1, solver options, lanes, devices, timings, the accuracy
-      report `accuracy`).
+      report `accuracy`, and `group_program`: how the compiled group program was had: "compiled",
+      "loaded" from the persistent compilation cache's folder, "reused" from this process, or None where
+      every chunk was read back from `out_dir`).
     """
 
     def __init__(

@@ -58,14 +58,13 @@ import numpy as np
 
 from ..._errors import ScenarioError, require_x64
 from ..._io.scan_store import ScanStore, fingerprint
-from ..._numerics import compile_cache
 from ..._numerics import fixed_step as fixed_mod
 from ..._numerics import observables as obs_mod
 from ..._numerics.batch import (
     HISTORY_UNITS,
     BatchSpec,
     ScanStatus,
-    chunk_fn,
+    compiled_chunk,
     describe_devices,
     flatten_out,
 )
@@ -273,6 +272,7 @@ def _scan(
             "chunk_devices": {str(k): run.chunk_devices[k] for k in sorted(run.chunk_devices)},
             "sorted": bool(batch.sort),
             "timings_s": {**timings, "total": round(time.perf_counter() - wall0, 4)},
+            "group_program": run.program,
             "fingerprint": fp,
         },
     )
@@ -380,6 +380,7 @@ class _Run:
     compile_time: float = 0.0
     compute_time: float = 0.0
     computed: int = 0
+    program: str | None = None  # how the group program was made: "compiled", "loaded", "reused"
 
     def _here(self) -> list[str]:
         """Which devices computed a chunk: this run's, named by process with several."""
@@ -401,11 +402,9 @@ class _Run:
         vals = rows_p.reshape(groups, lanes, len(self.spec.paths))
         t_start = time.perf_counter()
         # one compiled group serves any number of groups (`numerics.batch.CompiledChunk`)
-        fn, dt = compile_cache.compiled(
-            "scan",
-            (self.spec, *compile_cache.structure_key(self.scenario, self.ts, jnp.asarray(vals[0]))),
-            lambda: chunk_fn(self.spec).lower(self.scenario, self.ts, vals, active),
-        )
+        fn, dt, loaded = compiled_chunk(self.spec, self.scenario, self.ts, vals, active)
+        if self.program is None:
+            self.program = "loaded" if loaded else "compiled" if dt else "reused"
         if dt:
             self.compile_time += dt
             t_start = time.perf_counter()

@@ -1,0 +1,296 @@
+"""Compiled programs stored whole (`stored_programs`, through `compile_cache.program`): a second process with
+the same cache folder loads the scan's group program (plain and with forward-mode sensitivities) and
+`simulate`'s solve core and the bifurcation locator's solves without tracing them, and returns the same
+bits; a damaged stored file is compiled again with a warning; programs whose key has no stable text (a
+user's lambda observable) are not stored. Short horizons and few members: the compile is what is tested,
+not the physics."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import jax
+import numpy as np
+from test_compilation_cache import _cold_env
+
+import jaxhoist as jh
+from jaxhoist._numerics import batch
+from jaxhoist._numerics import observables as obs_mod
+from jaxhoist._numerics import persistent_cache as pc
+from jaxhoist._numerics import stored_programs as sp
+
+ROOT = Path(__file__).resolve().parents[1]
+MU = "foundation.friction_coefficient"
+
+
+_KEY_SCRIPT = r"""
+import json
+import jax, jax.numpy as jnp
+jax.config.update("jax_enable_x64", True)
+import jaxhoist as jh
+from jaxhoist._numerics import batch
+from jaxhoist._numerics import observables as obs_mod
+from jaxhoist._numerics import stored_programs as sp
+
+def key(observables, derivatives=False):
+    spec = batch.BatchSpec(paths=("foundation.friction_coefficient",), observables=tuple(observables),
+                           histories=("position",), options=jh.SolverOptions(), lanes=2,
+                           devices=tuple(jax.devices()), derivatives=derivatives)
+    sc = jh.load_scenario("paper-4.2").unlabelled()
+    return sp.program_key("scan-group", (sc, jnp.linspace(0.0, 0.5, 6), jnp.full((2, 1), 0.3), spec))
+
+builtin = [
+    *obs_mod.resolve(None),  # the default observables
+    obs_mod.detachment_time_difference("E", "D"),  # made by a factory: a closure of jaxhoist
+    obs_mod.get("contact_margin[E]"),  # one component: a closure over another function
+    obs_mod.get("final_angular_velocity"),  # a lambda of jaxhoist
+]
+def mine(traj):
+    return traj.position[-1, 0]
+print(json.dumps({
+    "builtin": [key(builtin), key(builtin, True)],
+    "prefixes": [key(builtin[:k]) for k in range(1, len(builtin) + 1)],
+    "closures": [key([obs_mod.detachment_time_difference(c, "D")]) for c in "EF"],
+    "user": [key(builtin + list(obs_mod.resolve({"mine": mine}))),
+             key(builtin + list(obs_mod.resolve({"mine": lambda t: t.position[-1, 0]})))],
+}))
+"""
+
+
+def test_scan_group_programs_have_a_stable_key_unless_an_observable_is_the_users():
+    """In a plain process (pytest's jaxtyping hook wraps jaxhoist's closures in checkers the key does not
+    cover, so that there they are not stored)."""
+    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
+    proc = subprocess.run(
+        [sys.executable, "-c", _KEY_SCRIPT], env=env, capture_output=True, text=True, timeout=600
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    keys = json.loads(proc.stdout.strip().splitlines()[-1])
+    plain, derivatives = keys["builtin"]
+    assert plain is not None and derivatives is not None and plain != derivatives
+    assert "lambda" in plain and "detachment_time_difference" in plain
+    assert None not in keys["prefixes"] and len(set(keys["prefixes"])) == len(keys["prefixes"])
+    e, f = keys["closures"]  # two closures of one factory that differ only in what they captured
+    assert e is not None and f is not None and e != f
+    assert keys["user"] == [None, None]  # a user's code is not covered by the key: nothing is stored
+
+
+# ------------------------------------------------------------------------------------ across processes
+
+_SCAN_SCRIPT = r"""
+import json, sys, warnings
+import jax, numpy as np
+jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_num_cpu_devices", 2)
+import jaxhoist as jh
+from jaxhoist._numerics import batch
+from jaxhoist._numerics import observables as obs_mod
+
+traced = []
+_member = batch.member
+def counting_member(*args, **kwargs):  # every trace of the group program calls it
+    traced.append(1)
+    return _member(*args, **kwargs)
+batch.member = counting_member
+
+warnings.simplefilter("always")
+out, how = {}, {}
+with warnings.catch_warnings(record=True) as caught:
+    jh.enable_compilation_cache(sys.argv[1])
+    sc = jh.load_scenario("paper-4.2")
+    observables = ["final_psi", "max_tilt", obs_mod.detachment_time_difference("E", "D")]
+    for case in sys.argv[3].split(","):
+        res = jh.scan(sc, {"foundation.friction_coefficient": np.linspace(0.2, 0.5, 4)}, jh.Times(0.5, n=6),
+                      observables=observables, histories=["position"], derivatives=case == "derivatives")
+        how[case] = res.attrs["group_program"]
+        for k in [*res.data, *res.histories]:
+            out[f"{case}:{k}"] = res[k]
+        out[f"{case}:status"], out[f"{case}:steps"] = res.status, res.num_accepted_steps
+np.savez(sys.argv[2], **out)
+print(json.dumps({"how": how, "traced": len(traced), "warnings": [str(w.message) for w in caught]}))
+"""
+
+
+def _run_scan(cache: Path, out: Path, cases: str) -> dict:
+    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
+    env.pop(pc.ENV_VAR, None)
+    proc = subprocess.run(
+        [sys.executable, "-c", _SCAN_SCRIPT, str(cache), str(out), cases],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=900,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _assert_same_bits(a: Path, b: Path, prefix: str = "") -> None:
+    x, y = np.load(a), np.load(b)
+    keys = [k for k in x.files if k.startswith(prefix)]
+    assert keys and all(k in y.files for k in keys)
+    for k in keys:
+        np.testing.assert_array_equal(x[k], y[k], err_msg=k, strict=True)
+
+
+def _group_files(cache: Path) -> list[Path]:
+    return sorted((cache / sp.SUBFOLDER).glob("scan-group-*-cache"))
+
+
+def test_a_second_process_loads_the_scan_group_programs_untraced_with_the_same_bits(tmp_path, monkeypatch):
+    cache = tmp_path / "cache"
+    first = _run_scan(cache, tmp_path / "a.npz", "plain,derivatives")
+    assert first["how"] == {"plain": "compiled", "derivatives": "compiled"} and first["traced"] > 0
+    stored = _group_files(cache)
+    assert len(stored) == 2  # one program each, stored whole
+
+    second = _run_scan(cache, tmp_path / "b.npz", "plain,derivatives")
+    assert second["how"] == {"plain": "loaded", "derivatives": "loaded"}
+    assert second["traced"] == 0, "the group program was traced although it was loaded"
+    assert not second["warnings"] and _group_files(cache) == stored
+    _assert_same_bits(tmp_path / "a.npz", tmp_path / "b.npz")
+    assert np.all(np.isfinite(np.load(tmp_path / "b.npz")["derivatives:d_final_psi"]))
+
+    # the stored program gives the bits of the program compiled as for an accelerator (`ChunkProgram`), in
+    # this process, without the cache
+    monkeypatch.setattr(batch, "stores_whole", lambda spec: False)
+    res = jh.scan(
+        jh.load_scenario("paper-4.2"),
+        {MU: np.linspace(0.2, 0.5, 4)},
+        jh.Times(0.5, n=6),
+        observables=["final_psi", "max_tilt", obs_mod.detachment_time_difference("E", "D")],
+        histories=["position"],
+    )
+    a = np.load(tmp_path / "a.npz")
+    for k in [*res.data, *res.histories]:
+        np.testing.assert_array_equal(res[k], a[f"plain:{k}"], err_msg=k, strict=True)
+
+    # a damaged file is not run: a warning, the program compiled again (the same bits) and stored anew
+    for p in stored:
+        data = bytearray(p.read_bytes())
+        data[len(data) // 2] ^= 0xFF
+        p.write_bytes(bytes(data))
+    third = _run_scan(cache, tmp_path / "c.npz", "plain")
+    assert third["how"] == {"plain": "compiled"} and third["traced"] > 0
+    assert any("not used" in w and "compiling it again" in w for w in third["warnings"])
+    _assert_same_bits(tmp_path / "c.npz", tmp_path / "a.npz", "plain:")
+    assert _run_scan(cache, tmp_path / "d.npz", "plain")["how"] == {"plain": "loaded"}  # rewritten whole
+
+
+_SIMULATE_SCRIPT = r"""
+import json, sys, warnings
+import equinox as eqx, jax, numpy as np
+jax.config.update("jax_enable_x64", True)
+import jaxhoist as jh
+from jaxhoist._numerics import compile_cache, solve
+
+traced = []
+_plain = solve._solve_plain
+def counting(*args, **kwargs):  # every trace of the solve core calls it
+    traced.append(1)
+    return _plain(*args, **kwargs)
+solve._solve_plain = counting
+
+warnings.simplefilter("always")
+out = {}
+with warnings.catch_warnings(record=True) as caught:
+    jh.enable_compilation_cache(sys.argv[1])
+    for mu in sys.argv[3:]:
+        sc = jh.load_scenario("paper-4.2")
+        sc = eqx.tree_at(lambda s: s.foundation.friction_coefficient, sc, float(mu))
+        traj = jh.simulate(sc, jh.Times(0.3, n=7))
+        for k in ("position", "euler", "rope_tension", "normal_forces"):
+            out[f"{k}@{mu}"] = np.asarray(getattr(traj, k))
+np.savez(sys.argv[2], **out)
+print(json.dumps({"traced": len(traced), "programs": compile_cache.count("simulate"),
+                  "warnings": [str(w.message) for w in caught]}))
+"""
+
+
+def _run_simulate(cache: Path, out: Path, *mus: str) -> dict:
+    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
+    env.pop(pc.ENV_VAR, None)
+    proc = subprocess.run(
+        [sys.executable, "-c", _SIMULATE_SCRIPT, str(cache), str(out), *mus],
+        env=env,
+        capture_output=True,
+        text=True,
+        timeout=600,
+    )
+    assert proc.returncode == 0, proc.stderr[-3000:]
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def test_a_second_process_loads_simulates_solve_core_untraced_with_the_same_bits(tmp_path, paper42):
+    cache = tmp_path / "cache"
+    first = _run_simulate(cache, tmp_path / "a.npz", "0.25")  # paper-4.2's own μ
+    assert first["traced"] > 0 and first["programs"] == 1
+    [stored] = sorted((cache / sp.SUBFOLDER).glob("solve-*-cache"))
+    second = _run_simulate(cache, tmp_path / "b.npz", "0.25", "0.3")  # another value: the same program
+    assert second["traced"] == 0 and second["programs"] == 1 and not second["warnings"]
+    a, b = np.load(tmp_path / "a.npz"), np.load(tmp_path / "b.npz")
+    for k in a.files:
+        np.testing.assert_array_equal(a[k], b[k], err_msg=k, strict=True)
+    assert not np.array_equal(b["position@0.25"], b["position@0.3"])
+    # the bits of the plain `jax.jit` core in this process (the cache off)
+    traj = jh.simulate(paper42, jh.Times(0.3, n=7))
+    np.testing.assert_array_equal(np.asarray(traj.position), a["position@0.25"], strict=True)
+    assert sorted((cache / sp.SUBFOLDER).glob("*-cache")) == [stored]
+
+
+def test_simulate_under_a_callers_trace_stores_nothing(tmp_path, monkeypatch, paper42):
+    """With the cache on, `simulate` under a caller's `jax.jit` (its inputs tracers) traces the plain `jit`
+    core into the caller's program: nothing is compiled apart, nothing stored, and the values are those of
+    the untraced call."""
+    monkeypatch.setattr(pc, "_ENABLED", [tmp_path])
+    ts = jh.Times(0.1, n=3)
+    got = jax.jit(lambda mu: jh.simulate(paper42.replace(**{MU: mu}), ts, throw=False).position)(0.25)
+    assert not (tmp_path / sp.SUBFOLDER).exists()
+    monkeypatch.setattr(pc, "_ENABLED", [None])
+    np.testing.assert_allclose(got, jh.simulate(paper42, ts).position, rtol=1e-12)
+
+
+_LOCATOR_SCRIPT = r"""
+import json, sys
+import jax, jax.numpy as jnp
+jax.config.update("jax_enable_x64", True)
+import jaxhoist as jh
+from jaxhoist._apps.bifurcation import eval as eval_mod
+from jaxhoist._numerics import observables as obs_mod
+
+traced = []
+_value = eval_mod._value
+def counting(*args, **kwargs):  # every trace of the value and slope programs calls it
+    traced.append(1)
+    return _value(*args, **kwargs)
+eval_mod._value = counting
+
+jh.enable_compilation_cache(sys.argv[1])
+sc = jh.load_scenario("paper-4.3").unlabelled()
+ev = eval_mod.Evaluator(sc, "foundation.friction_coefficient", obs_mod.get("final_theta"),
+                        jnp.linspace(0.0, 0.5, 6), jh.SolverOptions())
+y = ev.value(0.36)
+y2, dy = ev.value_and_slope(0.365)
+print(json.dumps({"values": [y, y2, dy], "traced": len(traced)}))
+"""
+
+
+def test_a_second_process_loads_the_locators_solves_untraced_with_the_same_bits(tmp_path):
+    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
+    env.pop(pc.ENV_VAR, None)
+    runs = []
+    for _ in range(2):
+        proc = subprocess.run(
+            [sys.executable, "-c", _LOCATOR_SCRIPT, str(tmp_path / "cache")],
+            env=env,
+            capture_output=True,
+            text=True,
+            timeout=600,
+        )
+        assert proc.returncode == 0, proc.stderr[-3000:]
+        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+    assert runs[0]["traced"] > 0 and runs[1]["traced"] == 0
+    assert runs[0]["values"] == runs[1]["values"]  # bit for bit (JSON keeps every digit of a float)
+    names = sorted(p.name.rsplit("-", 2)[0] for p in (tmp_path / "cache" / sp.SUBFOLDER).glob("*-cache"))
+    assert names == ["bifurcation-jvp", "bifurcation-value"]
