@@ -18,7 +18,8 @@ body in W (65642d2), the cubic dense output (c2800a0), the band-entry friction s
 stages' ∂f/∂t term with a PI controller at rtol 5e-4 by default (2026-11-27: <= 4.2e-5 m, 2.0e-5 rad,
 169 N of normal force and 54 N of rope tension over 2 s; paper-4.2 in 206 accepted steps instead of 274,
 paper-4.1 105 instead of 97, paper-2.3 178 instead of 164: rtol halved). The scan arrays (Tsit5, pinned
-options) are still those of the code before issue 11.
+options) are still those of the code before issue 11; its sensitivities are compared to 1e-13 relative
+(`RTOL`: one `jax.jvp` for the one swept parameter instead of `jax.jacfwd`, which rounds differently).
 """
 
 from __future__ import annotations
@@ -51,12 +52,23 @@ def mk():
     return _make_reference()
 
 
+#: Arrays compared to a relative tolerance instead of bit for bit, and why: the scan's sensitivities of one
+#: swept parameter are one `jax.jvp` rather than `jax.jacfwd` (a batch of one tangent), a differently
+#: compiled program that rounds differently: measured up to 2.3e-14 relative (d_final_psi), 1.8e-14
+#: (d_final_position), 2.3e-15 (d_max_tilt); the values, status and steps stay bit for bit.
+RTOL = {"scan/d_": 1e-13}
+
+
 def _compare(got: dict[str, np.ndarray], want: dict[str, np.ndarray], prefix: str) -> None:
     want = {k: v for k, v in want.items() if k.startswith(prefix)}
     assert sorted(got) == sorted(want)
     for k, v in want.items():
         assert got[k].dtype == v.dtype, k
-        np.testing.assert_array_equal(got[k], v, err_msg=k, strict=True)
+        rtol = next((r for p, r in RTOL.items() if k.startswith(p)), None)
+        if rtol is None:
+            np.testing.assert_array_equal(got[k], v, err_msg=k, strict=True)
+        else:
+            np.testing.assert_allclose(got[k], v, rtol=rtol, atol=0, err_msg=k, strict=True)
 
 
 def test_presets_both_models_unchanged(mk, reference):
