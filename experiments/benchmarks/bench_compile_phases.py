@@ -88,7 +88,8 @@ PROGRAMS = ("simulate", "scan", "scan-derivatives")
 def run_program(name: str, t1: float, n_save: int, lanes: int, run: bool) -> dict:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "JAXHOIST_CACHE_DIR": ""}
     argv = [sys.executable, "-c", CHILD, name, str(t1), str(n_save), str(lanes), "1" if run else "0"]
-    proc = subprocess.run(argv, env=env, capture_output=True, text=True)
+    # run in the repository root: `python -c` puts the working folder first on sys.path
+    proc = subprocess.run(argv, env=env, capture_output=True, text=True, cwd=ROOT)
     if proc.returncode != 0:
         raise SystemExit(f"{name} failed ({proc.returncode}):\n{proc.stderr[-3000:]}")
     line = [s for s in proc.stdout.splitlines() if s.startswith("RESULT ")][-1]
