@@ -18,8 +18,7 @@ body in W (65642d2), the cubic dense output (c2800a0), the band-entry friction s
 stages' ∂f/∂t term with a PI controller at rtol 5e-4 by default (2026-11-27: <= 4.2e-5 m, 2.0e-5 rad,
 169 N of normal force and 54 N of rope tension over 2 s; paper-4.2 in 206 accepted steps instead of 274,
 paper-4.1 105 instead of 97, paper-2.3 178 instead of 164: rtol halved). The scan arrays (Tsit5, pinned
-options) are still those of the code before issue 11; its sensitivities are compared to 1e-13 relative
-(`RTOL`: one `jax.jvp` for the one swept parameter instead of `jax.jacfwd`, which rounds differently).
+options) are still those of the code before issue 11.
 """
 
 from __future__ import annotations
