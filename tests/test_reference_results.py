@@ -49,12 +49,23 @@ def mk():
     return _make_reference()
 
 
+#: Arrays compared to a relative tolerance instead of bit for bit, and why: the scan's sensitivities of one
+#: swept parameter are one `jax.jvp` rather than `jax.jacfwd` (a batch of one tangent), a differently
+#: compiled program that rounds differently: measured up to 2.3e-14 relative (d_final_psi), 1.8e-14
+#: (d_final_position), 2.3e-15 (d_max_tilt); the values, status and steps stay bit for bit.
+RTOL = {"scan/d_": 1e-13}
+
+
 def _compare(got: dict[str, np.ndarray], want: dict[str, np.ndarray], prefix: str) -> None:
     want = {k: v for k, v in want.items() if k.startswith(prefix)}
     assert sorted(got) == sorted(want)
     for k, v in want.items():
         assert got[k].dtype == v.dtype, k
-        np.testing.assert_array_equal(got[k], v, err_msg=k, strict=True)
+        rtol = next((r for p, r in RTOL.items() if k.startswith(p)), None)
+        if rtol is None:
+            np.testing.assert_array_equal(got[k], v, err_msg=k, strict=True)
+        else:
+            np.testing.assert_allclose(got[k], v, rtol=rtol, atol=0, err_msg=k, strict=True)
 
 
 def test_presets_both_models_unchanged(mk, reference):

@@ -103,7 +103,13 @@ def member(scenario, ts, row, spec: BatchSpec):
         obs = {o.name: o(traj, sc) for o in spec.observables}
         return obs, (obs, traj)
 
-    if spec.derivatives:  # forward-mode sensitivities d observable / d parameter, one tangent per parameter
+    if spec.derivatives and len(spec.paths) == 1:
+        # one parameter: one `jax.jvp`, its tangent as the Jacobian's last axis. `jax.jacfwd` would `vmap`
+        # the tangent solve over a batch of one inside the group's vmap, which took 1.5x the tracing and
+        # 1.25x the XLA compile (CPU time, paper-4.2, 16 lanes: bench_compile_phases.py)
+        _, tangent, (obs, traj) = jax.jvp(run, (row,), (jnp.ones_like(row),), has_aux=True)
+        jac = {k: v[..., None] for k, v in tangent.items()}
+    elif spec.derivatives:  # forward-mode sensitivities d observable / d parameter, one tangent per parameter
         jac, (obs, traj) = jax.jacfwd(run, has_aux=True)(row)
     else:
         _, (obs, traj) = run(row)

@@ -33,12 +33,14 @@ the same for every direction). Reverse mode (`jax.grad`) is not available on thi
 from __future__ import annotations
 
 import dataclasses
+import functools
 from collections.abc import Callable
 
 import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
+from jax.custom_derivatives import SymbolicZero
 
 from .._errors import SolveStatus
 from .._physics.elastic import vector_field
@@ -149,7 +151,9 @@ def solve_forward(solve_plain: Callable, controller: Callable, outputs: Callable
         def run(dyn, ts):
             return solve_plain(eqx.combine(dyn, static), ts, options)
 
-        @run.defjvp
+        # symbolic zeros: the leaves that are not differentiated (every scenario leaf but the swept ones,
+        # and the saved times) stay constants of the tangent solve instead of carrying zero tangents
+        @functools.partial(run.defjvp, symbolic_zeros=True)
         def run_jvp(primals, tangents):
             dyn, ts = primals
             ddyn, dts = tangents
@@ -161,23 +165,35 @@ def solve_forward(solve_plain: Callable, controller: Callable, outputs: Callable
     return solve
 
 
+def _is_zero(x) -> bool:
+    return isinstance(x, SymbolicZero)
+
+
 def _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, status_of):
+    """The tangent of the solve along (`ddyn`, `dts`), whose leaves may be `SymbolicZero`: those are held
+    fixed (no tangent is traced for them), the others differentiated."""
     solver = options.solver
     assert isinstance(solver, RosenbrockW)
+    moving = jax.tree_util.tree_map(lambda x: not _is_zero(x), ddyn, is_leaf=_is_zero)
+    ddyn = eqx.filter(ddyn, moving, is_leaf=_is_zero)
 
-    def init(d):
-        return initial_state(eqx.combine(d, static))
+    def split(d):  # (the differentiated leaves, the fixed ones)
+        return eqx.partition(d, moving)
 
-    (y0, c), (dy0, dc) = jax.jvp(init, (dyn,), (ddyn,))
+    def init(d_mov):
+        return initial_state(eqx.combine(d_mov, split(dyn)[1], static))
+
+    (y0, c), (dy0, dc) = jax.jvp(init, (split(dyn)[0],), (ddyn,))
 
     def field(t, y, args):
         (d, cc), (dd, dcc) = args
         ys, s = y
+        d_mov, d_fix = split(d)
 
         def f(yy, d_, c_):
-            return vector_field(t, yy, (eqx.combine(d_, static), c_))
+            return vector_field(t, yy, (eqx.combine(d_, d_fix, static), c_))
 
-        return jax.jvp(f, (ys, d, cc), (s, dd, dcc))
+        return jax.jvp(f, (ys, d_mov, cc), (s, dd, dcc))
 
     aug_solver = augmented_solver(solver)
     sc = eqx.combine(dyn, static)
@@ -197,9 +213,9 @@ def _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, sta
         throw=False,
     )
     ys, ss = sol.ys  # pyright: ignore[reportGeneralTypeIssues]  # the saved (y, s) pair
-    # a moved saved time t_k moves the saved state by f(t_k, y_k) dt_k
-    rates = jax.vmap(lambda t, y: vector_field(t, y, (sc, c)))(ts, ys)
-    ss = jax.tree_util.tree_map(lambda s, r: s + r * dts.reshape((-1,) + (1,) * (r.ndim - 1)), ss, rates)
+    if not _is_zero(dts):  # a moved saved time t_k moves the saved state by f(t_k, y_k) dt_k
+        rates = jax.vmap(lambda t, y: vector_field(t, y, (sc, c)))(ts, ys)
+        ss = jax.tree_util.tree_map(lambda s, r: s + r * dts.reshape((-1,) + (1,) * (r.ndim - 1)), ss, rates)
     y1 = jax.tree_util.tree_map(lambda x: x[-1], ys)
     status, stats = status_of(sol.result, y1), sol.stats
 
@@ -207,7 +223,12 @@ def _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, sta
     ok = status == SolveStatus.OK
     ss = jax.tree_util.tree_map(lambda s: jnp.where(ok, s, jnp.nan), ss)
 
-    def out(ys_, d_, c_, ts_):
-        return outputs(ts_, ys_, eqx.combine(d_, static), c_, status, stats)
+    d_mov, d_fix = split(dyn)
 
-    return jax.jvp(out, (ys, dyn, c, ts), (ss, ddyn, dc, dts))[1]
+    def out(ys_, d_, c_, ts_=ts):
+        return outputs(ts_, ys_, eqx.combine(d_, d_fix, static), c_, status, stats)
+
+    primals, tangents = (ys, d_mov, c), (ss, ddyn, dc)
+    if not _is_zero(dts):
+        primals, tangents = (*primals, ts), (*tangents, dts)
+    return jax.jvp(out, primals, tangents)[1]
