@@ -3,7 +3,7 @@ apart (`jax.jit(f).trace(...)`, `.lower()`, `.compile()`) for each core program,
 compiled.
 
     python experiments/benchmarks/bench_compile_phases.py [--program NAME ...] [--t1 25] [--n-save 501]
-        [--lanes 16] [--run] [--out DIR]
+        [--lanes 16] [--run] [--out DIR] [--quick]
 
 Programs: `simulate` (the elastic core of `jaxhoist simulate` / `jh.simulate`, default solver),
 `scan` (one lock-step group of `jh.scan` of the friction coefficient, `numerics.batch.group_fn`) and
@@ -104,7 +104,10 @@ def main() -> int:
     p.add_argument("--lanes", type=int, default=16, help="members of a scan group (default 16)")
     p.add_argument("--run", action="store_true", help="also time a second call (the run alone)")
     p.add_argument("--out", default=None, help="folder for compile_phases.txt (optional)")
+    p.add_argument("--quick", action="store_true", help="the scan group only, 1 s, 11 saved times, 2 lanes")
     a = p.parse_args()
+    if a.quick:  # a smoke check that the script runs: its numbers are not the programs'
+        a.program, a.t1, a.n_save, a.lanes = ["scan"], 1.0, 11, 2
     head = (
         f"{'program':<18} {'trace':>13} {'lower':>13} {'compile':>15} {'lines':>7} {'fusions':>8} {'run':>15}"
     )
