@@ -96,13 +96,10 @@ def test_identify_pieces_have_no_host_callback(tiny):
 
 # ------------------------------------------------------------------------------------ across processes
 
-_SOLVE_SCRIPT = r"""
-import json, logging, sys
-import equinox as eqx, jax, numpy as np
-jax.config.update("jax_enable_x64", True)
-import jaxhoist as jh
-
-seen = {"hits": [], "misses": [], "warnings": []}
+# The scripts' first lines: JAX's log of persistent-cache hits and misses collected in `seen` by program name.
+_CACHE_LOG = r"""
+import logging
+seen = {"hits": [], "misses": []}
 
 class Record(logging.Handler):
     def emit(self, record):
@@ -116,6 +113,17 @@ log = logging.getLogger("jax._src.compiler")
 log.addHandler(Record())
 log.setLevel(logging.DEBUG)
 log.propagate = False
+"""
+
+_SOLVE_SCRIPT = (
+    _CACHE_LOG
+    + r"""
+import json, sys
+import equinox as eqx, jax, numpy as np
+jax.config.update("jax_enable_x64", True)
+import jaxhoist as jh
+
+seen["warnings"] = []
 import warnings
 warnings.simplefilter("always")
 with warnings.catch_warnings(record=True) as caught:
@@ -136,6 +144,7 @@ seen["warnings"] = [str(w.message) for w in caught]
 np.savez(sys.argv[2], **out)
 print(json.dumps(seen))
 """
+)
 
 
 def _cold_env() -> dict[str, str]:
@@ -148,18 +157,25 @@ def _cold_env() -> dict[str, str]:
     }
 
 
-def _run_solve(cache: Path, out: Path, *mus: str) -> dict:
+def run_script(script: str, *args: object, timeout: float = 600) -> dict:
+    """Run `script` (Python source) in a fresh process with a cold environment (`_cold_env`, no
+    `JAXHOIST_CACHE_DIR`: the script names its cache folder) and `args` as its arguments; **returns** the JSON
+    object its last line of output prints."""
     env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
     env.pop(pc.ENV_VAR, None)
     proc = subprocess.run(
-        [sys.executable, "-c", _SOLVE_SCRIPT, str(cache), str(out), *mus],
+        [sys.executable, "-c", script, *map(str, args)],
         env=env,
         capture_output=True,
         text=True,
-        timeout=600,
+        timeout=timeout,
     )
     assert proc.returncode == 0, proc.stderr[-3000:]
     return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def _run_solve(cache: Path, out: Path, *mus: str) -> dict:
+    return run_script(_SOLVE_SCRIPT, cache, out, *mus)
 
 
 def _entries(folder: Path) -> list[Path]:
@@ -196,26 +212,14 @@ def test_second_process_loads_the_program_and_returns_the_same_bits(tmp_path):
         np.testing.assert_array_equal(a[k], c[k], err_msg=k)
 
 
-_IDENTIFY_SCRIPT = r"""
-import json, logging, sys
+_IDENTIFY_SCRIPT = (
+    _CACHE_LOG
+    + r"""
+import json, sys
 import jax, numpy as np
 jax.config.update("jax_enable_x64", True)
 import jaxhoist as jh
 
-seen = {"hits": [], "misses": []}
-
-class Record(logging.Handler):
-    def emit(self, record):
-        m = record.getMessage()
-        if m.startswith("Persistent compilation cache hit for"):
-            seen["hits"].append(m.split("'")[1])
-        elif m.startswith("PERSISTENT COMPILATION CACHE MISS for"):
-            seen["misses"].append(m.split("'")[1])
-
-log = logging.getLogger("jax._src.compiler")
-log.addHandler(Record())
-log.setLevel(logging.DEBUG)
-log.propagate = False
 jh.enable_compilation_cache(sys.argv[1])
 sc = jh.load_scenario("paper-4.2")
 m = jh.synthetic_measurement(sc, np.linspace(0.0, 0.4, 21), ["position"])
@@ -223,24 +227,12 @@ res = jh.identify(sc, m, ["mu"], start={"mu": 0.3}, noise={"position": 0.005})
 seen["estimate"], seen["cost"], seen["iterations"] = res.values[0].hex(), res.cost.hex(), res.iterations
 print(json.dumps(seen))
 """
+)
 
 
 def test_second_process_loads_the_identify_programs_and_fits_the_same_bits(tmp_path):
     # the tests' one-parameter problem (tests/test_identify.py: μ from the mass-centre path, 21 samples)
-    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
-    env.pop(pc.ENV_VAR, None)
-    runs = []
-    for _ in range(2):
-        proc = subprocess.run(
-            [sys.executable, "-c", _IDENTIFY_SCRIPT, str(tmp_path / "cache")],
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=900,
-        )
-        assert proc.returncode == 0, proc.stderr[-3000:]
-        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
-    first, second = runs
+    first, second = (run_script(_IDENTIFY_SCRIPT, tmp_path / "cache", timeout=900) for _ in range(2))
     pieces = {"jit__lm_init", "jit__lm_step"}
     assert pieces <= set(first["misses"]) and not pieces & set(first["hits"])
     assert pieces <= set(second["hits"]) and not pieces & set(second["misses"])  # loaded, not compiled

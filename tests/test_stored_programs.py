@@ -5,14 +5,11 @@ bits; a damaged stored file is compiled again with a warning; programs whose key
 user's lambda observable) are not stored. Short horizons and few members: the compile is what is tested,
 not the physics."""
 
-import json
-import subprocess
-import sys
 from pathlib import Path
 
 import jax
 import numpy as np
-from test_compilation_cache import _cold_env
+from test_compilation_cache import run_script
 
 import jaxhoist as jh
 from jaxhoist._numerics import batch
@@ -20,7 +17,6 @@ from jaxhoist._numerics import observables as obs_mod
 from jaxhoist._numerics import persistent_cache as pc
 from jaxhoist._numerics import stored_programs as sp
 
-ROOT = Path(__file__).resolve().parents[1]
 MU = "foundation.friction_coefficient"
 
 
@@ -61,12 +57,7 @@ print(json.dumps({
 def test_scan_group_programs_have_a_stable_key_unless_an_observable_is_the_users():
     """In a plain process (pytest's jaxtyping hook wraps jaxhoist's closures in checkers the key does not
     cover, so that there they are not stored)."""
-    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
-    proc = subprocess.run(
-        [sys.executable, "-c", _KEY_SCRIPT], env=env, capture_output=True, text=True, timeout=600
-    )
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    keys = json.loads(proc.stdout.strip().splitlines()[-1])
+    keys = run_script(_KEY_SCRIPT)
     plain, derivatives = keys["builtin"]
     assert plain is not None and derivatives is not None and plain != derivatives
     assert "lambda" in plain and "detachment_time_difference" in plain
@@ -113,17 +104,7 @@ print(json.dumps({"how": how, "traced": len(traced), "warnings": [str(w.message)
 
 
 def _run_scan(cache: Path, out: Path, cases: str) -> dict:
-    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
-    env.pop(pc.ENV_VAR, None)
-    proc = subprocess.run(
-        [sys.executable, "-c", _SCAN_SCRIPT, str(cache), str(out), cases],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=900,
-    )
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return run_script(_SCAN_SCRIPT, cache, out, cases, timeout=900)
 
 
 def _assert_same_bits(a: Path, b: Path, prefix: str = "") -> None:
@@ -209,17 +190,7 @@ print(json.dumps({"traced": len(traced), "programs": compile_cache.count("simula
 
 
 def _run_simulate(cache: Path, out: Path, *mus: str) -> dict:
-    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
-    env.pop(pc.ENV_VAR, None)
-    proc = subprocess.run(
-        [sys.executable, "-c", _SIMULATE_SCRIPT, str(cache), str(out), *mus],
-        env=env,
-        capture_output=True,
-        text=True,
-        timeout=600,
-    )
-    assert proc.returncode == 0, proc.stderr[-3000:]
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    return run_script(_SIMULATE_SCRIPT, cache, out, *mus)
 
 
 def test_a_second_process_loads_simulates_solve_core_untraced_with_the_same_bits(tmp_path, paper42):
@@ -277,19 +248,7 @@ print(json.dumps({"values": [y, y2, dy], "traced": len(traced)}))
 
 
 def test_a_second_process_loads_the_locators_solves_untraced_with_the_same_bits(tmp_path):
-    env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu"}
-    env.pop(pc.ENV_VAR, None)
-    runs = []
-    for _ in range(2):
-        proc = subprocess.run(
-            [sys.executable, "-c", _LOCATOR_SCRIPT, str(tmp_path / "cache")],
-            env=env,
-            capture_output=True,
-            text=True,
-            timeout=600,
-        )
-        assert proc.returncode == 0, proc.stderr[-3000:]
-        runs.append(json.loads(proc.stdout.strip().splitlines()[-1]))
+    runs = [run_script(_LOCATOR_SCRIPT, tmp_path / "cache") for _ in range(2)]
     assert runs[0]["traced"] > 0 and runs[1]["traced"] == 0
     assert runs[0]["values"] == runs[1]["values"]  # bit for bit (JSON keeps every digit of a float)
     names = sorted(p.name.rsplit("-", 2)[0] for p in (tmp_path / "cache" / sp.SUBFOLDER).glob("*-cache"))
