@@ -76,15 +76,7 @@ def program(
         with step("compiling (cached in this process)"):
             return _CACHE[full], 0.0, False
     t0 = time.perf_counter()
-    folder = persistent_cache.enabled_folder()
-    exe = None
-    if folder is not None and stored_programs.is_stored(folder, name, args):
-        with step("loading the compiled program"):
-            exe = stored_programs.load(folder, name, args)
-    loaded = exe is not None
-    if exe is None:
-        with step("compiling"):
-            exe = stored_programs.compile_and_store(folder, name, fn, args)
+    exe, loaded = stored_programs.load_or_compile(persistent_cache.enabled_folder(), name, fn, args, step)
     _CACHE[full] = exe
     return exe, time.perf_counter() - t0, loaded
 

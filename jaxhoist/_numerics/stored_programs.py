@@ -205,13 +205,6 @@ def program_path(folder: Path, name: str, key: str) -> Path:
     return Path(folder) / SUBFOLDER / f"{name}-{hashlib.sha256(key.encode()).hexdigest()[:40]}-cache"
 
 
-def is_stored(folder: Path, name: str, args: tuple) -> bool:
-    """Whether a file for the program `name` called with `args` exists under `folder` (whether it is good
-    is known only when `load` reads it)."""
-    key = program_key(name, args)
-    return key is not None and program_path(folder, name, key).is_file()
-
-
 class StoredProgram:
     """A compiled program called like the traced function: `program(*args)` with the arrays of `args` as
     inputs (its static parts must be those it was compiled for) returns the function's output pytree."""
@@ -379,11 +372,25 @@ def _store(path: Path, key: str, exe, out_def) -> None:
     os.replace(tmp, path)  # atomic: a reader sees the old file or the whole new one
 
 
-def load_or_compile(folder: Path | None, name: str, fn: Callable[..., Any], args: tuple):
+def load_or_compile(
+    folder: Path | None,
+    name: str,
+    fn: Callable[..., Any],
+    args: tuple,
+    step: Callable[[str], contextlib.AbstractContextManager] | None = None,
+):
     """`(program, loaded)`: the stored program for `args` from `folder` if there is a good one (`loaded`
-    True), else `fn` compiled for `args` and stored (`loaded` False). `folder` None: compiled, not stored."""
+    True), else `fn` compiled for `args` and stored (`loaded` False). `folder` None: compiled, not stored.
+    `step`, if given, is called with what is done now ("loading the compiled program" where a file is
+    stored for `args`, "compiling") and returns a context manager around it."""
+    if step is None:
+        step = lambda label: contextlib.nullcontext()  # noqa: E731
     if folder is not None:
-        program = load(folder, name, args)
-        if program is not None:
-            return program, True
-    return compile_and_store(folder, name, fn, args), False
+        key = program_key(name, args)
+        if key is not None and program_path(folder, name, key).is_file():
+            with step("loading the compiled program"):
+                program = load(folder, name, args)
+            if program is not None:
+                return program, True
+    with step("compiling"):
+        return compile_and_store(folder, name, fn, args), False
