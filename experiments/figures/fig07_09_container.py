@@ -50,6 +50,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="short horizon (6 s) and few saved times")
     p.add_argument("--dpi", type=int, default=100)
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jaxhoist.enable_compilation_cache()
     out = Path(args.out)
     t1, n_save = (6.0, 121) if args.quick else (25.0, 1001)
 

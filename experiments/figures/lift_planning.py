@@ -90,6 +90,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="2 s, 2 x 2 tips, 4 samples, 1 iteration (smoke run)")
     p.add_argument("--grid", type=int, default=None, help="grid-search points per design axis (5 axes)")
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     cfg = settings(args.quick)
