@@ -7,9 +7,10 @@ compilation cache), cold (an empty cache folder) and warm (the same folder again
 
 Prints one line per case and temperature: the import time, the first call's wall time (compile included),
 a second call's wall time in the same process (other parameter values: the run alone) and, for the scans,
-the second call's time per trajectory. `--quick` runs each case once (cold), over 2 s with fewer
-members (a smoke check). With `--out`, the table also goes to `DIR/first_call.txt`. The user's cache is
-never touched.
+the second call's time per trajectory. `--quick` runs each case once, over 2 s with fewer members (a smoke
+check), in `$JAXHOIST_CACHE_DIR` where it is set (CI's folder, shared by every smoke run: "cold" is then
+only as cold as that folder), else in a fresh folder. With `--out`, the table also goes to
+`DIR/first_call.txt`. The user's cache is never touched.
 """
 
 from __future__ import annotations
