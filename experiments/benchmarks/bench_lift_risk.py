@@ -58,7 +58,8 @@ def main(argv=None) -> int:
     p.add_argument("--quick", action="store_true", help="2 x 2 tips x 16 samples over 2 s, brute force at 1")
     p.add_argument("--out", default=None, help="folder for bench_lift_risk.json")
     args = p.parse_args(argv)
-    if args.quick:
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
         args.nx, args.ny, args.samples, args.replicates, args.t1 = 2, 2, 16, 4, 2.0
         args.brute_force = max(args.brute_force, 1)
 
@@ -68,6 +69,8 @@ def main(argv=None) -> int:
     hazards = [jh.slide(0.5), jh.tilt(degrees=70.0), jh.strike(), jh.overload(1.2 * weight)]
     xs, ys = np.linspace(0.0, 4.0, args.nx), np.linspace(0.0, 6.0, args.ny)
     times = jh.Times(args.t1)
+    # quick: the map and the plain Monte Carlo in groups of 16 lanes, so that they share one compiled program
+    batch = jh.BatchOptions(lanes=16) if args.quick else None
     n_solves = args.nx * args.ny * args.samples
     print(
         f"lift_risk: paper-4.2, {args.nx} x {args.ny} tips x {args.samples} samples = {n_solves} solves over "
@@ -87,6 +90,7 @@ def main(argv=None) -> int:
             times=times,
             seed=0,
             progress=True,
+            batch=batch,
         )
         return r, time.perf_counter() - t0
 
@@ -114,7 +118,7 @@ def main(argv=None) -> int:
     print(risk.summary())
 
     if args.brute_force:
-        report["brute_force"] = brute_force(sc, risk, hazards, uncertain, xs, ys, times, args)
+        report["brute_force"] = brute_force(sc, risk, hazards, uncertain, xs, ys, times, args, batch)
 
     if args.out:
         out = Path(args.out)
@@ -124,7 +128,7 @@ def main(argv=None) -> int:
     return 0
 
 
-def brute_force(sc, risk, hazards, uncertain, xs, ys, times, args) -> dict:
+def brute_force(sc, risk, hazards, uncertain, xs, ys, times, args, batch=None) -> dict:
     """Plain Monte Carlo of 10 x samples independent draws at K tips along the grid's diagonal, against the
     map's estimates and intervals there."""
     k = min(args.brute_force, min(len(xs), len(ys)))
@@ -142,7 +146,7 @@ def brute_force(sc, risk, hazards, uncertain, xs, ys, times, args) -> dict:
     }
     obs = {h.observable_name: h.observable for h in hazards}
     t0 = time.perf_counter()
-    mc = jh.scan(sc, jh.Points(cols), times, observables=obs, progress=True)
+    mc = jh.scan(sc, jh.Points(cols), times, observables=obs, progress=True, batch=batch)
     wall = time.perf_counter() - t0
     ok = np.asarray(mc.ok).reshape(k, n)
     rows, inside, within = [], 0, 0

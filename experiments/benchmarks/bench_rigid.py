@@ -43,7 +43,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", default=None, help="folder for bench_rigid.json (optional)")
     p.add_argument("--quick", action="store_true", help="smoke check: paper-2.3 over 1 s, 101 saved times")
     args = p.parse_args(argv)
-    if args.quick:
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jaxhoist.enable_compilation_cache()
         args.preset, args.t1, args.n_save = "paper-2.3", 1.0, 101
     durations: dict[str, float] = {}
 

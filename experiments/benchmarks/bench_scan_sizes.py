@@ -138,6 +138,8 @@ def main(argv=None):
     p.add_argument("--deriv-n", type=int, default=None, help="members of the derivative scan (16; quick 4)")
     p.add_argument("--deriv-t1", type=float, default=None, help="its horizon [s] (default 2; quick 0.5)")
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     q = args.quick
     sizes = [int(s) for s in (args.sizes or ("16,32" if q else "64,256,512,4096")).split(",") if int(s) > 0]
     t1 = args.t1 if args.t1 is not None else (1.0 if q else 25.0)

@@ -46,6 +46,8 @@ def main(argv=None):
     p.add_argument("--scipy", action="store_true")
     p.add_argument("--repeats", type=int, default=3)
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     sc = jh.load_scenario(args.scenario)
     t1 = 5.0 if args.quick else sc.t1
     t0 = time.perf_counter()

@@ -231,6 +231,8 @@ def main(argv=None):
     )
     p.add_argument("--baseline-rev", default=None, help="git revision whose vector field to compare")
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     B = args.lanes

@@ -114,7 +114,8 @@ def main(argv=None):
     p.add_argument("--out", default=None, help="folder for bench_w_step.json (optional)")
     p.add_argument("--quick", action="store_true", help="smoke check: 8 lanes, 20 steps, 1 round")
     args = p.parse_args(argv)
-    if args.quick:
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
         args.lanes, args.steps, args.rounds = "8", 20, 1
     records = []
     sc = jh.load_scenario("paper-4.2")

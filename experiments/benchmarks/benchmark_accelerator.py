@@ -275,7 +275,8 @@ def main(argv=None) -> None:
     p.add_argument("--ref-n", type=int, default=512, help="members checked against the reference (--check)")
     p.add_argument("--quick", action="store_true", help="smoke check: 16 members, 2 s, 4 checked")
     args = p.parse_args(argv)
-    if args.quick:
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
         if not args.out:
             p.error("--quick needs --out DIR")
         args.runs, args.t1, args.ref_n = "16", 2.0, 4

@@ -165,6 +165,8 @@ def main(argv=None):
     p.add_argument("--deriv-n", type=int, default=None, help="sensitivity members (all; quick 0)")
     p.add_argument("--no-expert-row", action="store_true", help="skip the ε = 1e-2 fixed-step Bosh3 row")
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

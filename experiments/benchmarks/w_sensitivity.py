@@ -50,7 +50,8 @@ def main(argv=None) -> int:
     p.add_argument("--discrete", action="store_true", help="also the earlier Tsit5 forward mode")
     p.add_argument("--quick", action="store_true", help="smoke check: 4 members, 1 s, weight 0.1")
     args = p.parse_args(argv)
-    if args.quick:
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
         args.n, args.t1, args.ref, args.weights = 4, 1.0, 2, "0.1"
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

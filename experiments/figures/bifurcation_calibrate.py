@@ -153,6 +153,8 @@ def main(argv=None) -> int:
     )
     p.add_argument("--skip", default="", help="comma-separated steps to skip: fit,trace,slopes,eps,classify")
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     skip = set(filter(None, args.skip.split(",")))
     if args.quick:  # one locate on a coarse tolerance and grid (the full run's code path, one compile)
         KW["times"] = jh.Times(25.0, n=251)

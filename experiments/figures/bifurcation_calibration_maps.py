@@ -198,7 +198,8 @@ def main(argv=None) -> int:
     )
     p.add_argument("--quick", action="store_true", help="smoke check: xi-theta, 4 x 3 members, 2 s")
     args = p.parse_args(argv)
-    if args.quick:
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
         args.maps = "xi-theta"
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

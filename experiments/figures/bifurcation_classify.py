@@ -40,6 +40,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", required=True)
     p.add_argument("--quick", action="store_true", help="smoke check: the first case, 9 samples over 2 s")
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     cases = CASES[:1] if args.quick else CASES
     times = jh.Times(2.0, n=201) if args.quick else jh.Times(25.0, n=2501)
     out = Path(args.out)

@@ -287,6 +287,8 @@ def main(argv=None):
         help="no solves: recompute the ε -> 0 fits and mu_star_vs_eps.png from DIR/bifurcation_eps.json",
     )
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     if args.refit:
         path = Path(args.out) / "bifurcation_eps.json"
         rec = json.loads(path.read_text())

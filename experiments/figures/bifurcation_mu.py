@@ -168,6 +168,8 @@ def main(argv=None):
     p.add_argument("--rtol", type=float, default=1e-6)
     p.add_argument("--atol", type=float, default=1e-8)
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     q = args.quick
     n = args.n or (48 if q else 4000)
     t1 = args.t1 or (4.0 if q else 25.0)
@@ -345,7 +347,9 @@ def main(argv=None):
         zoom = scan(
             sc,
             {MU: np.linspace(b.value - half, b.value + half, 32)},
-            observables=[name],
+            # quick: every observable, as the scan of step 1 (the same saved times and lanes), whose compiled
+            # program the zooms then share; the full run: the one observable
+            observables=OBSERVABLES if q else [name],
             **_scan_kw(refine_kw, t1, 16),
         )
         fig, ax = plt.subplots(figsize=(7, 4))

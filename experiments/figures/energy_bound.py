@@ -67,6 +67,8 @@ def main(argv=None) -> None:
     ap.add_argument("--seed", type=int, default=0, help="seed of the random scenarios")
     ap.add_argument("--out", default=None, help="folder for energy_bound.json (optional)")
     args = ap.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     horizons, n_rand, t_rand = ((0.3,), 4, 2.0) if args.quick else ((0.3, 5.0, None), 48, 8.0)
     rows: list[dict] = []
     configs = {

@@ -87,6 +87,8 @@ def main(argv=None) -> int:
     p.add_argument("--out", required=True, help="output folder")
     p.add_argument("--quick", action="store_true", help="5 s instead of the preset's 70 s")
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jaxhoist.enable_compilation_cache()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sc = jaxhoist.load_scenario("paper-4.1")

@@ -77,7 +77,8 @@ def main(argv=None) -> int:
     p.add_argument("--dpi", type=int, default=90)
     p.add_argument("--quick", action="store_true", help="smoke check: 3 s, 151 saved times")
     args = p.parse_args(argv)
-    if args.quick:
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
         args.t1, args.n_save = 3.0, 151
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)

@@ -37,6 +37,8 @@ def main(argv=None):
     p.add_argument("--out", default="out/friction_hold")
     p.add_argument("--quick", action="store_true")
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     t1 = 6.0 if args.quick else 10.0
     ts = np.linspace(0.0, t1, int(t1 * 20) + 1)
     lines = [

@@ -40,6 +40,8 @@ def main(argv=None):
     p.add_argument("--quick", action="store_true")
     p.add_argument("--scenario", default="paper-4.2")
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     sc = jh.load_scenario(args.scenario)

@@ -100,6 +100,8 @@ def main(argv=None):
     )
     p.add_argument("--no-scipy", action="store_true")
     args = p.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     truth_sc = jh.load_scenario("paper-4.2")

@@ -123,6 +123,8 @@ def main(argv=None) -> None:
         help="a folder for the reference's paths: a second run with the same members reads them from there",
     )
     args = ap.parse_args(argv)
+    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+        jh.enable_compilation_cache()
     seeds, n, t1 = (
         ((0,), 6, 2.0)
         if args.quick
