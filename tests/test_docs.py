@@ -96,6 +96,9 @@ jaxhoist risk drag-box.toml --uncertain "foundation.friction_coefficient=uniform
     --hazard slide=0.25 --hazard tilt=3deg --hazard strike --hazard "late:last_contact_time>2.5" \
     --samples 16 --t1 3 --n-save 151 --out out/risk
 """,
+    # Simulated and animated over 1 s instead of 6 s: 20 frames instead of 120, D's detachment at 0.12 s
+    # among them.
+    "cli-animate": "jaxhoist simulate paper-4.2 --t1 1 --out out/anim --animate\n",
     # The full runs take minutes to hours: their --quick lines.
     "rigid-convergence": (
         "python experiments/figures/rigid_convergence.py --out out/rigid_convergence --quick\n"

@@ -1,7 +1,8 @@
 """Scans that report their own accuracy (`AccuracyCheck`): the report agrees with an independent tight solve
 of the same members, is on by default only for big scans, flags a deliberately loose scan, and reaches
-scan.json and the command line. One small scan of paper-4.2 over 1 s; the default, the loose and the
-reference programs are each compiled once and shared."""
+scan.json and the command line. One small scan of paper-4.2 over 1 s, on 21 saved times with the position
+history kept (the member made inaccurate on purpose shows only in its history); the default, the loose and
+the reference programs are each compiled once and shared by every test."""
 
 from __future__ import annotations
 
@@ -20,6 +21,8 @@ from jaxhoist._apps.scan import accuracy as acc
 T1 = 1.0
 MU = np.linspace(0.2, 0.6, 8)
 CHECK = jh.AccuracyCheck(members=4, seed=0)
+TIMES = jh.Times(T1, n=21)  # every scan here: one program each for the default, loose and reference options
+HISTORIES = ("position",)
 
 
 @pytest.fixture(scope="module")
@@ -29,7 +32,9 @@ def scenario():
 
 @pytest.fixture(scope="module")
 def checked(scenario):
-    return jh.scan(scenario, jh.Sweep("foundation.friction_coefficient", MU), T1, accuracy=CHECK)
+    return jh.scan(
+        scenario, jh.Sweep("foundation.friction_coefficient", MU), TIMES, histories=HISTORIES, accuracy=CHECK
+    )
 
 
 class References(dict):
@@ -94,10 +99,11 @@ def test_on_by_default_only_for_big_scans():
 def test_small_scan_is_not_checked_by_default(scenario, checked, monkeypatch):
     calls = []
     monkeypatch.setattr(acc, "check_accuracy", lambda *a, **k: calls.append(1) or {})
-    res = jh.scan(scenario, jh.Sweep("foundation.friction_coefficient", MU), T1)  # the compiled program
+    sweep = jh.Sweep("foundation.friction_coefficient", MU)
+    res = jh.scan(scenario, sweep, TIMES, histories=HISTORIES)  # the compiled program
     assert res.accuracy is None and not calls
     monkeypatch.setattr(acc, "AUTO_MIN_MEMBERS", len(MU))  # as if 8 members were a big scan
-    res = jh.scan(scenario, jh.Sweep("foundation.friction_coefficient", MU), T1)
+    res = jh.scan(scenario, sweep, TIMES, histories=HISTORIES)
     assert calls == [1] and res.accuracy == {}
     # the check only reads the result: the members' values are those of the checked scan, bit for bit
     for name, v in checked.data.items():
@@ -109,7 +115,12 @@ def test_loose_scan_is_flagged(scenario, references):
     loose = jh.SolverOptions(rtol=3e-2, atol=6e-4)
     check = jh.AccuracyCheck(members=4, seed=0, length_target=1e-3)
     res = jh.scan(
-        scenario, jh.Sweep("foundation.friction_coefficient", MU), T1, options=loose, accuracy=check
+        scenario,
+        jh.Sweep("foundation.friction_coefficient", MU),
+        TIMES,
+        histories=HISTORIES,
+        options=loose,
+        accuracy=check,
     )
     assert res.ok.all()  # the status does not see it: only the accuracy report does
     rep = res.accuracy
@@ -143,8 +154,7 @@ def test_the_member_with_the_most_steps_is_chosen_and_reported(scenario):
     (the final position alone would not show it); a random check of 1 member (`most_steps=0`) misses it
     for some seed."""
     sweep = jh.Sweep("foundation.friction_coefficient", MU)
-    times = jh.Times(T1, n=21)
-    res = jh.scan(scenario, sweep, times, histories=("position",), accuracy=False)
+    res = jh.scan(scenario, sweep, TIMES, histories=HISTORIES, accuracy=False)  # the checked scan's program
     bad = 5
     res.histories["position"] = res.histories["position"].copy()
     res.histories["position"][bad, 10, 0] += 0.02
@@ -198,7 +208,8 @@ def test_differences_near_the_target_re_solve_more_by_steps(checked):
     def run_scan(sc, sw, t, *, observables, options, histories):
         rows = [int(np.flatnonzero(MU == m)[0]) for m in sw.values["foundation.friction_coefficient"]]
         data = {k: v[rows] for k, v in clean.data.items()}
-        return types.SimpleNamespace(ok=np.ones(len(rows), dtype=bool), data=data, histories={})
+        histories = {k: v[rows] for k, v in clean.histories.items()}  # the result's own: no difference
+        return types.SimpleNamespace(ok=np.ones(len(rows), dtype=bool), data=data, histories=histories)
 
     def report(result, **kw):
         check = jh.AccuracyCheck(members=2, seed=0, **kw)
@@ -226,7 +237,8 @@ def test_differences_near_the_target_re_solve_more_by_steps(checked):
 def test_cli_prints_the_line_and_scan_json_carries_it(checked, tmp_path, capsys):
     out = tmp_path / "scan"
     argv = ["scan", "paper-4.2", "--param", "foundation.friction_coefficient", "--values", "0.2:0.6:8"]
-    rc = main([*argv, "--t1", str(T1), "--accuracy-members", "4", "--out", str(out), "--quiet", "--no-plots"])
+    argv += ["--t1", str(T1), "--n-save", "21", "--history", "position", "--accuracy-members", "4"]
+    rc = main([*argv, "--out", str(out), "--quiet", "--no-plots"])
     assert rc == 0
     lines = [s for s in capsys.readouterr().out.splitlines() if s.startswith("accuracy")]
     assert len(lines) == 1

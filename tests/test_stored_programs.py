@@ -1,12 +1,14 @@
 """Compiled programs stored whole (`stored_programs`, through `compile_cache.program`): a second process with
 the same cache folder loads the scan's group program (plain and with forward-mode sensitivities) and
 `simulate`'s solve core and the bifurcation locator's solves without tracing them, and returns the same
-bits; a damaged stored file is compiled again with a warning; programs whose key has no stable text (a
-user's lambda observable) are not stored. Short horizons and few members: the compile is what is tested,
-not the physics."""
+bits; programs whose key has no stable text (a user's lambda observable) are not stored. (A damaged stored
+file, compiled again with a warning, is tested once, on a small program, on the route every program here
+takes, `stored_programs.load_or_compile`: tests/test_compilation_cache.py.) Short horizons and few members:
+the compile is what is tested, not the physics."""
 
 from pathlib import Path
 
+import diffrax
 import jax
 import numpy as np
 from test_compilation_cache import run_script
@@ -71,7 +73,7 @@ def test_scan_group_programs_have_a_stable_key_unless_an_observable_is_the_users
 
 _SCAN_SCRIPT = r"""
 import json, sys, warnings
-import jax, numpy as np
+import diffrax, jax, numpy as np
 jax.config.update("jax_enable_x64", True)
 jax.config.update("jax_num_cpu_devices", 2)
 import jaxhoist as jh
@@ -93,7 +95,8 @@ with warnings.catch_warnings(record=True) as caught:
     observables = ["final_psi", "max_tilt", obs_mod.detachment_time_difference("E", "D")]
     for case in sys.argv[3].split(","):
         res = jh.scan(sc, {"foundation.friction_coefficient": np.linspace(0.2, 0.5, 4)}, jh.Times(0.5, n=6),
-                      observables=observables, histories=["position"], derivatives=case == "derivatives")
+                      observables=observables, histories=["position"], derivatives=case == "derivatives",
+                      options=jh.SolverOptions(diffrax.Tsit5()))
         how[case] = res.attrs["group_program"]
         for k in [*res.data, *res.histories]:
             out[f"{case}:{k}"] = res[k]
@@ -120,6 +123,9 @@ def _group_files(cache: Path) -> list[Path]:
 
 
 def test_a_second_process_loads_the_scan_group_programs_untraced_with_the_same_bits(tmp_path, monkeypatch):
+    """With Tsit5, whose group programs (plain and derivatives) compile in 40 % of the CPU time of the default
+    solver's (Rosenbrock-W) on the same route; a stored program of the default solver is tested below
+    (`simulate`'s solve core)."""
     cache = tmp_path / "cache"
     first = _run_scan(cache, tmp_path / "a.npz", "plain,derivatives")
     assert first["how"] == {"plain": "compiled", "derivatives": "compiled"} and first["traced"] > 0
@@ -142,21 +148,11 @@ def test_a_second_process_loads_the_scan_group_programs_untraced_with_the_same_b
         jh.Times(0.5, n=6),
         observables=["final_psi", "max_tilt", obs_mod.detachment_time_difference("E", "D")],
         histories=["position"],
+        options=jh.SolverOptions(diffrax.Tsit5()),
     )
     a = np.load(tmp_path / "a.npz")
     for k in [*res.data, *res.histories]:
         np.testing.assert_array_equal(res[k], a[f"plain:{k}"], err_msg=k, strict=True)
-
-    # a damaged file is not run: a warning, the program compiled again (the same bits) and stored anew
-    for p in stored:
-        data = bytearray(p.read_bytes())
-        data[len(data) // 2] ^= 0xFF
-        p.write_bytes(bytes(data))
-    third = _run_scan(cache, tmp_path / "c.npz", "plain")
-    assert third["how"] == {"plain": "compiled"} and third["traced"] > 0
-    assert any("not used" in w and "compiling it again" in w for w in third["warnings"])
-    _assert_same_bits(tmp_path / "c.npz", tmp_path / "a.npz", "plain:")
-    assert _run_scan(cache, tmp_path / "d.npz", "plain")["how"] == {"plain": "loaded"}  # rewritten whole
 
 
 _SIMULATE_SCRIPT = r"""
@@ -215,7 +211,7 @@ def test_simulate_under_a_callers_trace_stores_nothing(tmp_path, monkeypatch, pa
     core into the caller's program: nothing is compiled apart, nothing stored, and the values are those of
     the untraced call."""
     monkeypatch.setattr(pc, "_ENABLED", [tmp_path])
-    ts = jh.Times(0.1, n=3)
+    ts = jh.Times(0.3, n=7)  # the test above's saved times: its in-process `simulate` program, shared
     got = jax.jit(lambda mu: jh.simulate(paper42.replace(**{MU: mu}), ts, throw=False).position)(0.25)
     assert not (tmp_path / sp.SUBFOLDER).exists()
     monkeypatch.setattr(pc, "_ENABLED", [None])
