@@ -376,6 +376,23 @@ def test_vmap_equals_single_solves(paper42):
         np.testing.assert_allclose(batched[k], final(mu), rtol=0, atol=1e-6)
 
 
+# Forward mode at rtol 1e-7 over 0.5 s on 11 saved times, with tangents on μ and on the saved times: one
+# compiled jvp program serves the derivative in μ (tangents (1, 0), with its primal the solve for the central
+# differences) and the derivative in the saved times (tangents (0, 1)).
+TS_HALF = jnp.asarray(np.linspace(0.0, 0.5, 11))
+OPTS_F = jh.SolverOptions(rtol=1e-7, atol=1e-9, adjoint=diffrax.ForwardMode())
+
+
+def _forward(paper42, mu, d_mu, d_ts):
+    """The solve of paper-4.2 at μ = `mu` on `TS_HALF` and its forward derivative along (d_mu, d_ts)."""
+
+    def traj(m, ts):
+        sc = eqx.tree_at(lambda s: s.foundation.friction_coefficient, paper42, m)
+        return jh.simulate(sc, jh.Times(ts=ts), options=OPTS_F)
+
+    return jax.jvp(traj, (mu, TS_HALF), (d_mu, d_ts))
+
+
 def test_forward_and_reverse_derivatives_match_central_differences(paper42):
     """d x_C(0.5 s)/dμ, forward (jacfwd: the sensitivity ODE) and reverse (grad: through the Rosenbrock-W
     steps), against central differences of the same solver at a tight tolerance (so both sides are smooth
@@ -386,24 +403,23 @@ def test_forward_and_reverse_derivatives_match_central_differences(paper42):
     1e-13; one step's acceptance can then flip (seen at t = 0.1169 s here) and the gradient belongs to
     another step sequence than the solution's (4.9e-3 relative off, where all-step checkpoints or
     `DirectAdjoint` agree with forward mode to 4e-8). See RosenbrockW's docstring."""
-    ts = jnp.asarray(np.linspace(0.0, 0.5, 11))
-    opts_f = jh.SolverOptions(rtol=1e-7, atol=1e-9, adjoint=diffrax.ForwardMode())
     opts_r = jh.SolverOptions(
         rtol=1e-7, atol=1e-9, max_steps=4096, adjoint=diffrax.RecursiveCheckpointAdjoint(checkpoints=4096)
     )
 
-    def x_end(mu, opts):
+    def x_end(mu):
         sc = eqx.tree_at(lambda s: s.foundation.friction_coefficient, paper42, mu)
-        return jh.simulate(sc, jh.Times(ts=ts), options=opts).position[-1, 0]
+        return jh.simulate(sc, jh.Times(ts=TS_HALF), options=opts_r).position[-1, 0]
 
     def fwd(mu):
         # one jvp along dμ = 1 is the derivative (jacfwd of a scalar, which compiled a batched program: 49 s
         # against 19 s); its primal is the plain solve's (test_forward_sensitivities_through_stick_slip)
-        return jax.jvp(lambda m: x_end(m, opts_f), (mu,), (jnp.ones_like(mu),))
+        traj, d_traj = _forward(paper42, mu, jnp.ones_like(mu), jnp.zeros_like(TS_HALF))
+        return traj.position[-1, 0], d_traj.position[-1, 0]
 
     mu0 = jnp.asarray(0.3)
     x0_fwd, d_fwd = fwd(mu0)
-    x0_rev, d_rev = jax.value_and_grad(lambda m: x_end(m, opts_r))(mu0)
+    x0_rev, d_rev = jax.value_and_grad(x_end)(mu0)
     # the forward and the reverse set-ups solve the same steps (only the step budget and the adjoint differ),
     # so the central differences are taken from the primals of the jvp already compiled (measured equal bit
     # for bit to those of the plain opts_r solve, which compiled a third program of the same solve). The two
@@ -425,12 +441,13 @@ def test_forward_sensitivities_through_stick_slip(paper42):
     sensitivity is solved as its own error-controlled ODE (`_numerics/sensitivity.py`), so it stays the
     derivative of the solution. Differentiating the steps instead gave |dx_C/dμ| = 3.2 m against 0.77 m by
     central differences at 12.5 s, and 1e125 m at 19 s (docs/performance.md). Reference: central differences
-    of Tsit5 at rtol 1e-9 (smooth in μ to far below the tolerance here)."""
+    of Tsit5 at the shared SOLVE_OPTIONS' rtol 1e-8 (smooth in μ to far below the tolerance here: within
+    1e-5 relative of those at rtol 1e-9, measured), the program of
+    `test_default_agrees_with_tight_reference`'s reference solve."""
     # N_SAVE saved times (their number does not change the steps of either solver, whose dense output is
     # their own): the plain solve below is then default_run's compiled core
     ts = jnp.asarray(np.linspace(0.0, 12.0, N_SAVE))
     opts_f = jh.SolverOptions(adjoint=diffrax.ForwardMode())
-    tight = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-9, atol=1e-11, max_steps=2_000_000)
 
     def x_end(mu, opts):
         sc = eqx.tree_at(lambda s: s.foundation.friction_coefficient, paper42, mu)
@@ -442,7 +459,7 @@ def test_forward_sensitivities_through_stick_slip(paper42):
     primal, d_fwd = jax.jvp(lambda m: x_end(m, opts_f), (mu0,), (jnp.ones_like(mu0),))
     d_fwd = np.asarray(d_fwd)
     dm = 1e-4
-    d_fd = np.asarray((x_end(mu0 + dm, tight) - x_end(mu0 - dm, tight)) / (2 * dm))
+    d_fd = np.asarray((x_end(mu0 + dm, SOLVE_OPTIONS) - x_end(mu0 - dm, SOLVE_OPTIONS)) / (2 * dm))
     assert np.linalg.norm(d_fd) > 0.1
     np.testing.assert_array_equal(np.asarray(primal), np.asarray(x_end(mu0, jh.SolverOptions())))
     assert np.linalg.norm(d_fwd - d_fd) < 0.1 * np.linalg.norm(d_fd)
@@ -450,15 +467,12 @@ def test_forward_sensitivities_through_stick_slip(paper42):
 
 def test_forward_derivative_in_the_saved_times_is_the_rate(paper42):
     """Moving the saved times moves the saved state at its rate: the forward-mode derivative of the solve
-    along dt_k = 1 (no parameter moved) is f(t_k, y_k), so the positions' tangent is the velocity and the
-    Euler angles' stays finite. The tangent solve holds the undifferentiated leaves fixed (symbolic zeros)
-    and adds the rate only when the saved times carry a tangent."""
-    from jaxhoist._numerics.solve import as_float64_leaves, solve
-
-    ts = jnp.asarray(np.linspace(0.0, 0.5, 11))
-    sc = as_float64_leaves(paper42).unlabelled()
-    opts = jh.SolverOptions(adjoint=diffrax.ForwardMode())
-    traj, dtraj = jax.jvp(lambda t: solve(sc, t, opts), (ts,), (jnp.ones_like(ts),))
+    along dt_k = 1 (no parameter moved: dμ = 0) is f(t_k, y_k), so the positions' tangent is the velocity
+    and the Euler angles' stays finite. The tangent solve adds the rate only when the saved times carry a
+    tangent. The jvp program is `test_forward_and_reverse_derivatives_match_central_differences`'s (rtol
+    1e-7, tangents on μ and the saved times)."""
+    mu = jnp.asarray(paper42.foundation.friction_coefficient, dtype=jnp.float64)
+    traj, dtraj = _forward(paper42, mu, jnp.zeros_like(mu), jnp.ones_like(TS_HALF))
     assert int(traj.status) == 0
     v = np.asarray(traj.velocity)
     assert np.max(np.abs(v)) > 0.01

@@ -5,6 +5,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import N_SAVE, SOLVE_OPTIONS
 
 import jaxhoist as jh
 from jaxhoist._numerics.times import as_times
@@ -100,12 +101,13 @@ def test_traced_t1_stays_traced_under_jit(sc):
 
     np.testing.assert_array_equal(grid(3.0), jh.Times(3.0, n=4).resolve(sc, 501, jnp)[1])
     # and through simulate: one solve to a traced end time (XLA fuses the outer jit differently: equal to
-    # round-off, not bit for bit)
-    opts = jh.SolverOptions(rtol=1e-4, atol=1e-6)
+    # round-off, not bit for bit). The shared solver settings and number of saved times of tests/conftest.py:
+    # the concrete solve is the session's shared compiled core, and Tsit5 compiles faster than the default
+    # Rosenbrock-W solver inside the outer jit.
 
     @jax.jit
     def final_x(t1):
-        return jh.simulate(sc, jh.Times(t1, n=3), options=opts).position[-1, 0]
+        return jh.simulate(sc, jh.Times(t1, n=N_SAVE), options=SOLVE_OPTIONS).position[-1, 0]
 
-    tr = jh.simulate(sc, jh.Times(0.05, n=3), options=opts)
+    tr = jh.simulate(sc, jh.Times(0.05, n=N_SAVE), options=SOLVE_OPTIONS)
     assert float(final_x(0.05)) == pytest.approx(float(tr.position[-1, 0]), rel=1e-14)
