@@ -110,11 +110,10 @@ def _run_scan(cache: Path, out: Path, cases: str) -> dict:
     return run_script(_SCAN_SCRIPT, cache, out, cases, timeout=900)
 
 
-def _assert_same_bits(a: Path, b: Path, prefix: str = "") -> None:
+def _assert_same_bits(a: Path, b: Path) -> None:
     x, y = np.load(a), np.load(b)
-    keys = [k for k in x.files if k.startswith(prefix)]
-    assert keys and all(k in y.files for k in keys)
-    for k in keys:
+    assert x.files and all(k in y.files for k in x.files)
+    for k in x.files:
         np.testing.assert_array_equal(x[k], y[k], err_msg=k, strict=True)
 
 
