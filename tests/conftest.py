@@ -175,3 +175,16 @@ def pytest_xdist_make_scheduler(config, log):
             return file
 
     return FileOrPageScheduling(config, log)
+
+
+# --- shared settings: solve2 ---
+#: Tsit5 with a step budget of 10 000: `stiff_member` over 1 s needs about 13 000 steps of it, so it stops at
+#: the budget (test_rosenbrock.py's stiff member, test_transforms.py's max_steps test: one compiled program).
+TSIT5_CAPPED = jh.SolverOptions(diffrax.Tsit5(), max_steps=10_000)
+
+
+def stiff_member(scenario: jh.Scenario) -> jh.Scenario:
+    """`scenario` with ε = 1e-5 m/s and k = 1.5e9 N/m: friction slope and foundation 100x stiffer than
+    paper-4.2's (the same pytree structure)."""
+    stiff = scenario.replace(**{"foundation.stiffness": 1.5e9})
+    return eqx.tree_at(lambda s: s.foundation.friction, stiff, jh.RegularisedCoulomb(1e-5))

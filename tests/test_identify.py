@@ -19,6 +19,7 @@ jax.config.update("jax_enable_x64", True)
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 import scipy.stats  # noqa: E402
+from conftest import N_SAVE, TSIT5_CAPPED  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist._apps.identify import core as identify_core  # noqa: E402
@@ -34,6 +35,19 @@ SIGMA = 0.005  # position noise [m]
 TSIT5 = jh.SolverOptions(diffrax.Tsit5())  # rtol 1e-6, atol 1e-8
 
 
+def _synthetic(scenario, t, tsit5=False):
+    """`synthetic_measurement` of the noise-free mass-centre path at the 21 times `t` [s], sampled from a
+    solve on N_SAVE equally spaced times over the same span (every tenth of them): that solve is the
+    compiled core of other tests (default options: test_rosenbrock.py's `default_run`; with `tsit5`,
+    `TSIT5_CAPPED`: its stiff member's Tsit5 solve, whose step budget of 10 000 is far above the few hundred
+    steps of 0.4 s here, and whose steps are those of `TSIT5`, the same rtol 1e-6, atol 1e-8), instead of
+    one of its own for 21 times. Neither solver's steps depend on the saved times (dense output)."""
+    assert t.size == 21 and t[0] == 0.0
+    fine = np.linspace(0.0, t[-1], N_SAVE)
+    m = synthetic_measurement(scenario, fine, ["position"], options=TSIT5_CAPPED if tsit5 else None)
+    return Measurement(t, {k: v[::10] for k, v in m.signals.items()}, m.noise, m.source)
+
+
 @pytest.fixture(scope="session")
 def scenario():
     return jh.load_scenario("paper-4.2")
@@ -43,7 +57,7 @@ def scenario():
 def clean(scenario):
     """Noise-free mass-centre path of paper-4.2 (the same solver settings as `identify`'s defaults: the
     Rosenbrock-W solver at rtol 5e-4)."""
-    return synthetic_measurement(scenario, T, ["position"])
+    return _synthetic(scenario, T)
 
 
 def _noisy(clean, seed):
@@ -64,7 +78,7 @@ def test_mu_recovered_noise_free(scenario):
     the data and of the fit, which Tsit5 at rtol 1e-6 gives; the default W solver at rtol 5e-4 gives μ̂
     4.6e-4 off (the data's plain solve and the fit's augmented solve take different steps), 0.01 standard
     errors at this test's noise (the other fits here use the default)."""
-    clean = synthetic_measurement(scenario, T, ["position"], options=TSIT5)
+    clean = _synthetic(scenario, T, tsit5=True)
     res = identify(
         scenario,
         clean,
@@ -228,10 +242,7 @@ def test_default_w_fit_agrees_with_tsit5_and_central_differences(scenario, clean
     # to 3e-5 (those of the default W solve are 0.35 % off them, measured at μ = 0.2512).
     h = 3e-3 * w.values[0]
     mu_path = "foundation.friction_coefficient"
-    paths = [
-        synthetic_measurement(jh.set_param(scenario, mu_path, w.values[0] + s), T, m.names, options=TSIT5)
-        for s in (h, -h)
-    ]
+    paths = [_synthetic(jh.set_param(scenario, mu_path, w.values[0] + s), T, tsit5=True) for s in (h, -h)]
     j_cd = np.concatenate([(paths[0].signals[n] - paths[1].signals[n]) / (2 * h * SIGMA) for n in m.names])
     err = np.linalg.norm(w.jacobian[:, 0] - j_cd) / np.linalg.norm(j_cd)
     assert err < 0.01, err
@@ -240,7 +251,7 @@ def test_default_w_fit_agrees_with_tsit5_and_central_differences(scenario, clean
 def test_unidentifiable_parameter_reported(scenario, clean):
     """Over the first 20 ms the load has barely moved, so the path cannot tell μ: the result says so."""
     t = np.linspace(0.0, 0.02, T.size)  # same sizes: the compiled core is reused
-    m = synthetic_measurement(scenario, t, ["position"])
+    m = _synthetic(scenario, t)
     res = identify(scenario, m, ["mu"], noise={"position": SIGMA})
     assert not res.identifiable
     assert res.std_errors[0] > MU  # relative standard error above 100 %

@@ -15,6 +15,7 @@ from unittest import mock
 import equinox as eqx
 import numpy as np
 import pytest
+from conftest import N_SAVE
 
 import jaxhoist as jh
 import jaxhoist._numerics.solve as solve_mod
@@ -25,7 +26,11 @@ from jaxhoist._physics.checks import PLAUSIBLE
 from jaxhoist._physics.paths import get_leaf
 
 BROKEN = {"rope.stiffness": 1e16}
-TIMES = jh.Times(1.0, n=51)
+# N_SAVE saved times with the default options: the compiled core of test_rosenbrock.py's `default_run` (the
+# labels and `allow_implausible` are not part of the program)
+TIMES = jh.Times(1.0, n=N_SAVE)
+# The scan's saved times (its group program is this file's own)
+SCAN_TIMES = jh.Times(1.0, n=51)
 
 
 def _core_must_not_run(*args, **kwargs):
@@ -113,7 +118,7 @@ def test_scan_marks_exactly_the_broken_member(paper42):
     to a scan without it (they are never averaged with it)."""
     ks = np.array([1.4e7, 1e16, 2e7, 3e7])
     kw = dict(observables=["final_position"], batch=jh.BatchOptions(lanes=2, sort=False))
-    res = jh.scan(paper42.replace(allow_implausible=True), {"rope.stiffness": ks}, TIMES, **kw)
+    res = jh.scan(paper42.replace(allow_implausible=True), {"rope.stiffness": ks}, SCAN_TIMES, **kw)
     assert list(res.status) == [0, jh.ScanStatus.ENERGY_BALANCE, 0, 0]
     assert [f["index"] for f in res.failures()] == [1]
     assert res.failures()[0]["status"] == "energy_balance"
@@ -122,10 +127,10 @@ def test_scan_marks_exactly_the_broken_member(paper42):
     assert res.status_counts() == {"ok": 3, "energy_balance": 1}
     ks_clean = ks.copy()
     ks_clean[1] = 1.4e7
-    clean = jh.scan(paper42, {"rope.stiffness": ks_clean}, TIMES, **kw)
+    clean = jh.scan(paper42, {"rope.stiffness": ks_clean}, SCAN_TIMES, **kw)
     np.testing.assert_array_equal(res["final_position"][[0, 2, 3]], clean["final_position"][[0, 2, 3]])
     # without the opt-in, the implausible member is refused on the host, not solved
-    refused = jh.scan(paper42, {"rope.stiffness": ks}, TIMES, **kw)
+    refused = jh.scan(paper42, {"rope.stiffness": ks}, SCAN_TIMES, **kw)
     assert refused.status[1] == jh.ScanStatus.INVALID_PARAMETER and "plausible range" in refused.reason(1)
     np.testing.assert_array_equal(refused["final_position"][[0, 2, 3]], clean["final_position"][[0, 2, 3]])
 
@@ -340,7 +345,8 @@ def _cli(argv):
 def test_cli_refuses_the_typo_and_marks_the_opted_in_solve(tmp_path):
     """`simulate --set rope.stiffness=1e16` exits 2 with one line naming the field and the flag; with
     `--allow-implausible` it is solved and exits 1, its summary saying energy_balance."""
-    base = ["simulate", "paper-4.2", "--t1", "1", "--n-save", "51", "--quiet", "--no-plots"]
+    # 11 saved times: the short command of tests/test_cli.py and test_cli_messages.py (one compiled core)
+    base = ["simulate", "paper-4.2", "--t1", "1", "--n-save", "11", "--quiet", "--no-plots"]
     code, _, err = _cli([*base, "--out", str(tmp_path / "a"), "--set", "rope.stiffness=1e16"])
     lines = [ln for ln in err.splitlines() if ln.strip()]
     assert code == 2 and len(lines) == 1, (code, lines)
