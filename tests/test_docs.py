@@ -135,6 +135,19 @@ res = jh.optimise_lift(
 )
 print(res.summary())
 """,
+    # The phases of the first 10 s instead of 70 s, with 101 saved times: the programs of the --quick runs of
+    # paper-4.1 in "rigid-sweep" and "rigid-convergence" below, which it loads.
+    "rigid-model-phases": """\
+import jax
+
+jax.config.update("jax_enable_x64", True)
+import jaxhoist
+
+sc = jaxhoist.load_scenario("paper-4.1")
+tr = jaxhoist.simulate_rigid(sc, jaxhoist.Times(10.0, n=101))
+print(tr.phase_log())
+jaxhoist.first_failure(sc, [3.0, 4.0, 7.5])
+""",
     # The full runs take minutes to hours: their --quick lines.
     "rigid-convergence": (
         "python experiments/figures/rigid_convergence.py --out out/rigid_convergence --quick\n"
