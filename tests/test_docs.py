@@ -99,6 +99,55 @@ jaxhoist risk drag-box.toml --uncertain "foundation.friction_coefficient=uniform
     # Simulated and animated over 1 s instead of 6 s: 20 frames instead of 120, D's detachment at 0.12 s
     # among them.
     "cli-animate": "jaxhoist simulate paper-4.2 --t1 1 --out out/anim --animate\n",
+    # The same optimisation with the sample sizes and group widths of tests/test_optimise.py (a check of 32
+    # samples in 4 replicates instead of 64 in 8; groups of 8 members), whose programs it then loads.
+    "optimise-drag-box": """\
+import jax
+
+jax.config.update("jax_enable_x64", True)
+import jaxhoist as jh
+
+box = jh.Scenario(
+    load=jh.Load([2.0, 2.0, 0.5], 1000.0),
+    foundation=jh.Foundation(1.5e7, 2.0e5, 0.3, jh.RegularisedCoulomb(1e-3)),
+    rope=jh.Rope(3e4, 3e3, [1.0, 1.0, 0.5]),
+    hoist=jh.ConstantSpeedHoist(0.3),
+    boom=jh.Boom([1.6, 1.0, 8.5], 500.0, 5.0e6, 5.0e3),
+    name="drag-box",
+    t1=3.0,
+)
+uncertain = {
+    "foundation.friction_coefficient": jh.Uniform(0.2, 0.4),
+    "load.mass_centre[0]": jh.Normal(1.0, 0.05),
+}
+res = jh.optimise_lift(
+    box,
+    uncertain,
+    {"max_rope_tension": 1 / 9810.0, "max_tilt": 1.0, "hoist_time": 0.1},
+    {"boom.tip_position[0]": (1.0, 1.6), "hoist.speed": (0.2, 0.5)},
+    hazard_limits={jh.slide(0.25): 0.5, jh.tilt(degrees=20.0): 0.5},
+    hoist_distance=1.0,
+    samples=16,
+    times=jh.Times(3.0, n=301),
+    check_samples=32,
+    check_replicates=4,
+    batch=jh.BatchOptions(lanes=8, chunk_size=64),
+)
+print(res.summary())
+""",
+    # The phases of the first 10 s instead of 70 s, with 101 saved times: the programs of the --quick runs of
+    # paper-4.1 in "rigid-sweep" and "rigid-convergence" below, which it loads.
+    "rigid-model-phases": """\
+import jax
+
+jax.config.update("jax_enable_x64", True)
+import jaxhoist
+
+sc = jaxhoist.load_scenario("paper-4.1")
+tr = jaxhoist.simulate_rigid(sc, jaxhoist.Times(10.0, n=101))
+print(tr.phase_log())
+jaxhoist.first_failure(sc, [3.0, 4.0, 7.5])
+""",
     # The full runs take minutes to hours: their --quick lines.
     "rigid-convergence": (
         "python experiments/figures/rigid_convergence.py --out out/rigid_convergence --quick\n"
