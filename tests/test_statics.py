@@ -195,7 +195,13 @@ def _socp_rho(F, M, pts, loads, mu):
 def test_friction_utilisation_hand_cases_and_socp():
     a, b, mu = 2.0, 4.0, 0.5
     pts = jnp.array([[0, 0], [a, 0], [a, b], [0, b]], dtype=jnp.float64)
-    fu = jax.jit(statics.friction_utilisation)
+    jitted = jax.jit(statics.friction_utilisation)
+
+    def fu(F, M, pts, loads, mu, scale):
+        # every argument a float64 array, so that the three cases share one compiled program
+        f64 = lambda x: jnp.asarray(x, dtype=jnp.float64)  # noqa: E731
+        return jitted(f64(F), f64(M), pts, f64(loads), f64(mu), f64(scale))
+
     eq = jnp.full(4, 250.0)
     # Pure translation through the friction centre: ρ = |F| / (μ N).
     F = jnp.array([60.0, -80.0])

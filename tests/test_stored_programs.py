@@ -11,6 +11,7 @@ from pathlib import Path
 import diffrax
 import jax
 import numpy as np
+from conftest import N_SAVE
 from test_compilation_cache import run_script
 
 import jaxhoist as jh
@@ -172,10 +173,10 @@ warnings.simplefilter("always")
 out = {}
 with warnings.catch_warnings(record=True) as caught:
     jh.enable_compilation_cache(sys.argv[1])
-    for mu in sys.argv[3:]:
+    for mu in sys.argv[4:]:
         sc = jh.load_scenario("paper-4.2")
         sc = eqx.tree_at(lambda s: s.foundation.friction_coefficient, sc, float(mu))
-        traj = jh.simulate(sc, jh.Times(0.3, n=7))
+        traj = jh.simulate(sc, jh.Times(0.3, n=int(sys.argv[3])))
         for k in ("position", "euler", "rope_tension", "normal_forces"):
             out[f"{k}@{mu}"] = np.asarray(getattr(traj, k))
 np.savez(sys.argv[2], **out)
@@ -185,10 +186,12 @@ print(json.dumps({"traced": len(traced), "programs": compile_cache.count("simula
 
 
 def _run_simulate(cache: Path, out: Path, *mus: str) -> dict:
-    return run_script(_SIMULATE_SCRIPT, cache, out, *mus)
+    return run_script(_SIMULATE_SCRIPT, cache, out, N_SAVE, *mus)
 
 
 def test_a_second_process_loads_simulates_solve_core_untraced_with_the_same_bits(tmp_path, paper42):
+    """With the default solver (Rosenbrock-W) and N_SAVE saved times: the in-process solve below is the
+    program of the default solver that tests/test_rosenbrock.py compiles (`default_run`), shared."""
     cache = tmp_path / "cache"
     first = _run_simulate(cache, tmp_path / "a.npz", "0.25")  # paper-4.2's own μ
     assert first["traced"] > 0 and first["programs"] == 1
@@ -200,7 +203,7 @@ def test_a_second_process_loads_simulates_solve_core_untraced_with_the_same_bits
         np.testing.assert_array_equal(a[k], b[k], err_msg=k, strict=True)
     assert not np.array_equal(b["position@0.25"], b["position@0.3"])
     # the bits of the plain `jax.jit` core in this process (the cache off)
-    traj = jh.simulate(paper42, jh.Times(0.3, n=7))
+    traj = jh.simulate(paper42, jh.Times(0.3, n=N_SAVE))
     np.testing.assert_array_equal(np.asarray(traj.position), a["position@0.25"], strict=True)
     assert sorted((cache / sp.SUBFOLDER).glob("*-cache")) == [stored]
 
@@ -210,7 +213,7 @@ def test_simulate_under_a_callers_trace_stores_nothing(tmp_path, monkeypatch, pa
     core into the caller's program: nothing is compiled apart, nothing stored, and the values are those of
     the untraced call."""
     monkeypatch.setattr(pc, "_ENABLED", [tmp_path])
-    ts = jh.Times(0.3, n=7)  # the test above's saved times: its in-process `simulate` program, shared
+    ts = jh.Times(0.3, n=N_SAVE)  # the test above's saved times: its in-process `simulate` program, shared
     got = jax.jit(lambda mu: jh.simulate(paper42.replace(**{MU: mu}), ts, throw=False).position)(0.25)
     assert not (tmp_path / sp.SUBFOLDER).exists()
     monkeypatch.setattr(pc, "_ENABLED", [None])
@@ -219,7 +222,7 @@ def test_simulate_under_a_callers_trace_stores_nothing(tmp_path, monkeypatch, pa
 
 _LOCATOR_SCRIPT = r"""
 import json, sys
-import jax, jax.numpy as jnp
+import diffrax, jax, jax.numpy as jnp
 jax.config.update("jax_enable_x64", True)
 import jaxhoist as jh
 from jaxhoist._apps.bifurcation import eval as eval_mod
@@ -234,8 +237,9 @@ eval_mod._value = counting
 
 jh.enable_compilation_cache(sys.argv[1])
 sc = jh.load_scenario("paper-4.3").unlabelled()
+# Tsit5: the route is what is tested, not the solver (the default solver's compiles take longer)
 ev = eval_mod.Evaluator(sc, "foundation.friction_coefficient", obs_mod.get("final_theta"),
-                        jnp.linspace(0.0, 0.5, 6), jh.SolverOptions())
+                        jnp.linspace(0.0, 0.5, 6), jh.SolverOptions(diffrax.Tsit5()))
 y = ev.value(0.36)
 y2, dy = ev.value_and_slope(0.365)
 print(json.dumps({"values": [y, y2, dy], "traced": len(traced)}))
