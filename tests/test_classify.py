@@ -11,7 +11,7 @@ jax.config.update("jax_enable_x64", True)  # tests/conftest.py also does this
 import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
-from _inputs import BIFURCATION_MU  # noqa: E402
+from _inputs import SYMMETRIC_LIFT  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
 from jaxhoist._apps.bifurcation.classify import classify_change, classify_samples, ramp_width  # noqa: E402
@@ -136,7 +136,9 @@ def test_last_down_crossing():
 def test_classify_change_real_case():
     """A cheap real case: the corner-order swap of the symmetric lift (tests/test_bifurcation.py) at
     ξ_C* = 0.5 m is a continuous crossing of t_E - t_D; over 0.2 s the final state and event times move
-    smoothly, nothing jumps, and the last contact is not before the first all-off instant."""
+    smoothly, nothing jumps, and the last contact is not before the first all-off instant. The window's
+    41 points (42 members: groups of 32) and the 101 saved times are those of the classification in
+    `test_cli_bifurcation_classify` of the same change, so the two share one compiled scan."""
     sc = jh.Scenario(
         load=jh.Load([1.0, 1.0, 1.0], 1000.0, mass_centre=[0.5, 0.5, 0.5]),
         foundation=jh.Foundation(1.5e7, 2.0e5, 0.3, jh.RegularisedCoulomb(1e-3)),
@@ -151,12 +153,12 @@ def test_classify_change_real_case():
         bracket=(0.4999995, 0.5000005),
         observable="final_x",
         half_window=0.02,
-        n_window=9,
-        times=jh.Times(0.2, n=201),
+        n_window=41,
+        times=jh.Times(0.2, n=101),
     )
     assert c.kind == "continuous crossing", c.summary()
-    # 9 window points less the midpoint (inside the bracket), plus the bracket's two ends
-    assert c.n_samples == 10 and c.window == pytest.approx((0.48, 0.52))
+    # 41 window points less the midpoint (inside the bracket), plus the bracket's two ends
+    assert c.n_samples == 42 and c.window == pytest.approx((0.48, 0.52))
     # fractions of coordinates that are even in ξ_C - 0.5 (y, φ) are ratios of two tiny numbers: only the
     # odd, materially changing ones say anything; none changes by 1 cm / 1° inside the bracket
     assert not any("jumping" in n for n in c.notes)
@@ -220,38 +222,27 @@ def test_paper_43_preset_is_paper_42_with_the_fitted_mass_centre():
 
 def test_cli_bifurcation_classify(tmp_path, capsys):
     """`jaxhoist bifurcation ... --classify` names the located change and records it in bifurcation.json:
-    the level crossing of the mass centre's x after 0.3 s of paper-4.2 is a continuous crossing."""
+    the corner-order swap of the symmetric lift (the sign change of t_E - t_D at ξ_C* = a/2), located by
+    the command of tests/test_bifurcation.py's `test_scan_and_bifurcation_commands` (the same flags: its
+    compiled locator is loaded), is a continuous crossing, as `test_classify_change_real_case` finds in
+    Python on the same window scan."""
     import json
 
     from jaxhoist._apps.cli import app as cli
 
+    xi = "load.mass_centre[0]"
     out = tmp_path / "bif"
-    code = cli.main(
-        [
-            *BIFURCATION_MU,
-            "--observable",
-            "final_x",
-            "--t1",
-            "0.3",
-            "--n-save",
-            "31",
-            "--method",
-            "bisection",
-            "--tol",
-            "1e-3",
-            "--classify",
-            "--quiet",
-            "--no-plots",
-            "--out",
-            str(out),
-        ]
-    )
+    args = ["bifurcation", str(SYMMETRIC_LIFT), "--param", xi, "--bracket", "0.46", "0.57", "--observable",
+            "detach:E-D", "--level", "0", "--method", "bisection", "--tol", "1e-4", "--t1", "0.2",
+            "--n-save", "101", "--set", "hoist.speed=0.05"]  # fmt: skip
+    code = cli.main([*args, "--classify", "--quiet", "--no-plots", "--out", str(out)])
     assert code == 0
     assert "continuous crossing" in capsys.readouterr().out
     rec = json.loads((out / "bifurcation.json").read_text())
     c = rec["bifurcations"][0]["classification"]
-    assert c["kind"] == "continuous crossing" and c["param"] == "foundation.friction_coefficient"
+    assert c["kind"] == "continuous crossing" and c["param"] == xi
     assert c["bracket"] == rec["bifurcations"][0]["bracket"]
+    assert abs(rec["bifurcations"][0]["value"] - 0.5) <= 1e-4
 
 
 def test_a_jump_just_outside_the_bracket_is_found_and_noted():
