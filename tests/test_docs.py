@@ -99,8 +99,9 @@ jaxhoist risk drag-box.toml --uncertain "foundation.friction_coefficient=uniform
     # Simulated and animated over 1 s instead of 6 s: 20 frames instead of 120, D's detachment at 0.12 s
     # among them.
     "cli-animate": "jaxhoist simulate paper-4.2 --t1 1 --out out/anim --animate\n",
-    # The same optimisation with the sample sizes and group widths of tests/test_optimise.py (a check of 32
-    # samples in 4 replicates instead of 64 in 8; groups of 8 members), whose programs it then loads.
+    # The same optimisation with the check sample and group width of tests/test_optimise.py (a check of 32
+    # samples in 4 replicates instead of 64 in 8; 16 members in one group of 16, the example's own width), so
+    # that the twin and that test share one compiled scan with derivatives and one without.
     "optimise-drag-box": """\
 import jax
 
@@ -131,7 +132,7 @@ res = jh.optimise_lift(
     times=jh.Times(3.0, n=301),
     check_samples=32,
     check_replicates=4,
-    batch=jh.BatchOptions(lanes=8, chunk_size=64),
+    batch=jh.BatchOptions(lanes=16, chunk_size=64),
 )
 print(res.summary())
 """,

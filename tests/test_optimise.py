@@ -9,9 +9,9 @@ within 3 s); μ ~ U(0.2, 0.4), ξ_C ~ N(1 m, 0.05 m). The objective weighs the p
 the weight), the largest tilt [rad] and the time to hoist 1 m (0.1 per s): faster hoisting raises the first
 two and shortens the third. Every run below uses the same paths, observables, saved times and group width,
 so they share one compiled scan with derivatives and one without. The setting is docs/lift-optimisation.md's
-example, whose evaluations (16 members, in one group of 16: the default width for 16 members on two devices)
-compile the scan with derivatives first in the suite (its pages run first): with groups of 16 here too, the
-tests load that program instead of compiling their own.
+example (16 members, in one group of 16: the default width for 16 members on two devices), whose shortened
+twin in tests/test_docs.py also checks on this file's sample (32 members in 4 replicates): the documented
+pages run first in the suite, so these tests load both programs instead of compiling their own.
 """
 
 import jax
