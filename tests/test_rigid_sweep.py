@@ -3,9 +3,9 @@
 impact resolved by the documented fallback (recorded in the phase log), and the energy balance closed.
 
 The full sweep (μ = 0.10-0.50, both presets, both ropes, v_l and the rope point varied) is
-`experiments/figures/rigid_sweep.py`; these are its fast subset. Every preset run here carries paper-2.3's
-static labels (`_preset`), saves `N_SAVE` times and, but for the stall test's run without the rule, uses
-`RigidOptions()`, so one compiled phase solve (and one compliant-phase chunk solve) serves them all.
+`experiments/figures/rigid_sweep.py`; these are its fast subset. Every preset run here saves `N_SAVE` times
+and, but for the stall test's run without the rule, uses `RigidOptions()`, so one compiled phase solve (and
+one compliant-phase chunk solve) serves them all (`simulate_rigid` compiles for any preset's labels alike).
 """
 
 from pathlib import Path
@@ -19,26 +19,8 @@ from jaxhoist._numerics.rigid.solve import simulate_rigid
 N_SAVE = 201
 
 
-def _preset(name: str) -> jh.Scenario:
-    """The preset `name` with paper-2.3's static labels (`name`, `t1`, `description`), every leaf its own.
-    The labels are static fields: each preset would compile the phase solve again, though no run here reads
-    them (every run gives its end time and saved times)."""
-    sc, like = jh.load_scenario(name), jh.load_scenario("paper-2.3")
-    return jh.Scenario(
-        sc.load,
-        sc.foundation,
-        sc.rope,
-        sc.hoist,
-        sc.boom,
-        sc.gravity,
-        name=like.name,
-        t1=like.t1,
-        description=like.description,
-    )
-
-
 def _run(mu: float, t1: float):
-    sc = _preset("paper-2.3").replace(**{"foundation.friction_coefficient": mu})
+    sc = jh.load_scenario("paper-2.3").replace(**{"foundation.friction_coefficient": mu})
     return simulate_rigid(sc, jh.Times(t1, n=N_SAVE))
 
 
@@ -193,7 +175,7 @@ def test_stall_rule_finds_a_stalled_phase_after_thousands_of_steps():
     the same sample for sample and only the steps spent differ. The run with the rule has the default
     `max_steps`, which changes nothing there (its one stall note is the rule's, so no phase of it reaches
     12 000 steps): it is the phase solve of the other tests here."""
-    sc = _preset("paper-4.2")
+    sc = jh.load_scenario("paper-4.2")
     t1 = 0.1
     n = 12_000  # max_steps of the run without the rule
     fast = simulate_rigid(sc, jh.Times(t1, n=N_SAVE))
@@ -236,7 +218,7 @@ def _edge_run(chatter, max_phases: int, span: float):
     from jaxhoist._physics import rigid
     from jaxhoist._physics.elastic import State
 
-    sc = _preset("paper-4.1").replace(**{"rope.attachment": [0.25, 0.0, 2.5]})
+    sc = jh.load_scenario("paper-4.1").replace(**{"rope.attachment": [0.25, 0.0, 2.5]})
     with np.load(EDGE_STATE) as z:
         t0 = float(z["t"])
         y0 = State(**{k: jnp.asarray(z[k]) for k in z.files if k != "t"})

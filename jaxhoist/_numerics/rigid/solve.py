@@ -141,6 +141,7 @@ def simulate_rigid(
         stall_window=0 if stall is None else int(stall.window),
         stall_step=0.0 if stall is None else float(stall.min_step),
     )
+    scenario = scenario.unlabelled()  # one compiled program per phase kernel for any scenario's labels
     y0, c = rigid.initial_state(scenario)
     drv = Driver(scenario, c, settings, phase_options, float(model.restitution), dict(DRIVER_TOLERANCES))
     drv.debug = verbose == "debug"
