@@ -177,7 +177,7 @@ def pytest_xdist_make_scheduler(config, log):
     return FileOrPageScheduling(config, log)
 
 
-# --- shared settings: solve2 ---
+# Shared by several test files: the stiff member and its capped Tsit5 solve (one compiled program)
 #: Tsit5 with a step budget of 10 000: `stiff_member` over 1 s needs about 13 000 steps of it, so it stops at
 #: the budget (test_rosenbrock.py's stiff member, test_transforms.py's max_steps test: one compiled program).
 TSIT5_CAPPED = jh.SolverOptions(diffrax.Tsit5(), max_steps=10_000)
