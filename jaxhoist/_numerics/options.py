@@ -63,7 +63,9 @@ class SolverOptions(eqx.Module):
       `diffrax.ConstantStepSize()` for constant steps of `dt0` (no error control; every member of a vmapped
       batch takes the same steps).
     - `adjoint`: how derivatives are taken: `diffrax.RecursiveCheckpointAdjoint()` (default; `jax.grad`) or
-      `diffrax.ForwardMode()` (`jax.jacfwd`/`jax.jvp`, cheaper for a few parameters).
+      `diffrax.ForwardMode()` (`jax.jacfwd`/`jax.jvp`, cheaper for a few parameters). With the default
+      solver, forward mode solves the derivatives under error control; `jax.grad` differentiates the steps
+      and can be far off at the default tolerances (`RosenbrockW`): use it at tight tolerances.
     - `dt0`: first step [s] (None: chosen by the controller); the constant step with `ConstantStepSize`.
     - `max_steps`: the step budget; reaching it is reported as `SolveStatus.MAX_STEPS`.
     - `progress_meter`: a diffrax progress meter (default `diffrax.NoProgressMeter()`).
