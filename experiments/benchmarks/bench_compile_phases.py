@@ -7,7 +7,11 @@ compiled.
 
 Programs: `simulate` (the elastic core of `jaxhoist simulate` / `jh.simulate`, default solver),
 `scan` (one lock-step group of `jh.scan` of the friction coefficient, `numerics.batch.group_fn`) and
-`scan-derivatives` (the same group with `derivatives=True`: forward-mode sensitivities). Each program is
+`scan-derivatives` (the same group with `derivatives=True`: forward-mode sensitivities); on request
+`scan-member` and `scan-derivatives-member`, one member of those groups alone, unbatched
+(`numerics.batch.member`): a group's trace less its member's is what `jax.vmap`'s batching of the traced
+member adds (JAX batches each while loop's body several times: once per pass of its search for the batched
+carry, then once more). Each program is
 traced, lowered and compiled in a fresh Python process (JAX caches the traces of inner jitted functions, so
 a second program in one process would trace faster than a first call does), without the persistent
 compilation cache. Prints one line per program: each phase's wall time and, in brackets, its CPU time
@@ -51,7 +55,7 @@ if program == "simulate":
     f = jax.jit(lambda dyn, ts: solve.solve(eqx.combine(dyn, static), ts, opts))
     args = (dyn, ts)
 else:
-    derivatives = program == "scan-derivatives"
+    derivatives = program.startswith("scan-derivatives")
     spec = batch.BatchSpec(
         paths=("foundation.friction_coefficient",),
         observables=observables.resolve(None),
@@ -62,8 +66,13 @@ else:
         derivatives=derivatives,
     )
     dyn, static = eqx.partition(jh.load_scenario("paper-4.2").unlabelled(), eqx.is_array)
-    f = jax.jit(lambda dyn, ts, v: batch.group_fn(eqx.combine(dyn, static), ts, v, spec))
-    args = (dyn, ts, jnp.linspace(0.1, 0.6, lanes).reshape(lanes, 1))
+    values = jnp.linspace(0.1, 0.6, lanes).reshape(lanes, 1)
+    if program.endswith("-member"):
+        f = jax.jit(lambda dyn, ts, row: batch.member(eqx.combine(dyn, static), ts, row, spec))
+        args = (dyn, ts, values[0])
+    else:
+        f = jax.jit(lambda dyn, ts, v: batch.group_fn(eqx.combine(dyn, static), ts, v, spec))
+        args = (dyn, ts, values)
 res = {}
 def timed(name, fn):
     c0, t0 = time.process_time(), time.perf_counter()
@@ -82,7 +91,8 @@ if do_run:
 print("RESULT " + json.dumps(res))
 """
 
-PROGRAMS = ("simulate", "scan", "scan-derivatives")
+PROGRAMS = ("simulate", "scan", "scan-derivatives")  # the default set
+MEMBERS = ("scan-member", "scan-derivatives-member")  # on request (--program)
 
 
 def run_program(name: str, t1: float, n_save: int, lanes: int, run: bool) -> dict:
@@ -98,7 +108,7 @@ def run_program(name: str, t1: float, n_save: int, lanes: int, run: bool) -> dic
 
 def main() -> int:
     p = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    p.add_argument("--program", action="append", choices=PROGRAMS, help="only these programs")
+    p.add_argument("--program", action="append", choices=PROGRAMS + MEMBERS, help="only these programs")
     p.add_argument("--t1", type=float, default=25.0, help="last saved time [s] (default 25)")
     p.add_argument("--n-save", type=int, default=501, help="saved times (default 501)")
     p.add_argument("--lanes", type=int, default=16, help="members of a scan group (default 16)")
