@@ -278,11 +278,12 @@ class RosenbrockW(diffrax.AbstractAdaptiveSolver):
     every step is checkpointed (tests/test_rosenbrock.py, rtol 1e-7); at the default tolerances it can be far
     off: d x_C(1 s)/dμ of paper-4.2 at μ = 0.3 is 0.398 m by `jax.grad`, with or without every step
     checkpointed, against 0.337 m by forward mode and 0.339 m by central differences of Tsit5 solves at rtol
-    1e-10. With fewer checkpoints than steps (the default) diffrax also recomputes steps in the backward pass,
-    in a differently compiled program that rounds differently; where that flips a step's acceptance, the
-    gradient belongs to a slightly different step sequence (0.5 % off over 0.5 s of paper-4.2 at rtol 1e-7,
-    against all-step checkpoints, `adjoint=diffrax.RecursiveCheckpointAdjoint(checkpoints=max_steps)`). For
-    derivatives use forward mode, or reverse mode at tight tolerances checked against it. Dense output
+    1e-10 (`python experiments/figures/derivative_modes.py`). With fewer checkpoints than steps (the
+    default) diffrax also recomputes steps in the backward pass, in a differently compiled program that
+    rounds differently; where that flips a step's acceptance, the gradient belongs to a slightly different
+    step sequence (0.5 % off over 0.5 s of paper-4.2 at rtol 1e-7, against all-step checkpoints,
+    `adjoint=diffrax.RecursiveCheckpointAdjoint(checkpoints=max_steps)`). For derivatives use forward mode,
+    or reverse mode at tight tolerances checked against it. Dense output
     between steps is the cubic Hermite interpolant of y and f at the step's ends (order 3, like the method;
     f at both ends is computed anyway), so steps need not land on the saved times: with 201 saved times
     over 25 s of paper-4.2 that saves the 3.6 % of steps that landing on them would cost.
