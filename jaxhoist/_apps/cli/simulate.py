@@ -288,9 +288,10 @@ def _summary_lines(
         f"steps         {int(arrays['num_accepted_steps'])} accepted, "
         f"{int(arrays['num_rejected_steps'])} rejected",
         f"wall time     solve {wall_solve:.3g} s, total {wall_total:.3g} s",
-        f"wrote         {', '.join(map(str, written))}"
+        f"wrote         {', '.join(p.name for p in written)}"
         + (f", {len(pngs)} PNGs" if pngs else "")
-        + "".join(f", {p.name}" for p in animation),
+        + "".join(f", {p.name}" for p in animation)
+        + f" in {written[0].parent}",
     ]
 
 
@@ -385,7 +386,7 @@ def configure_simulate(subparsers) -> None:
 
 
 def _write_results(args, out_dir: Path, traj, scenario, options, t1, overrides, progress):
-    """The result files of `jaxhoist simulate`. **Returns** `(arrays, [npz, json, csv name, nc name])`."""
+    """The result files of `jaxhoist simulate`. **Returns** `(arrays, [npz, json, csv, nc])`, paths."""
     from ..._io.results import (
         load_metadata,
         save_trajectory,
@@ -426,4 +427,4 @@ def _write_results(args, out_dir: Path, traj, scenario, options, t1, overrides, 
         nc_path = save_trajectory_netcdf(
             out_dir / "trajectory.nc", arrays, {k: md[k] for k in ("command", "scenario", "solver", "status")}
         )
-    return arrays, [npz, meta, csv_path.name, nc_path.name]
+    return arrays, [npz, meta, csv_path, nc_path]
