@@ -176,14 +176,17 @@ def test_screened_starts(optimised):
     """`starts=4`: J is screened (without derivatives) at the start and 3 Sobol points of the box, L-BFGS-B
     starts at the best of them, and the solves are counted: (screened + evaluations) x samples + the
     check's; the result is no worse than the best screened point nor than the run from x0 alone (both end
-    in the one basin within these bounds)."""
+    in the one basin within these bounds, each where an iteration gains less than the stopping tolerance,
+    1e-4 of |J(x0)|: the valley is flat, and the two ends can lie a few such gains apart, as on an AMD EPYC
+    with AVX2, whose rounding takes other steps: 5.2e-4 of J, at a tip of 1.067 m and 0.375 m/s against
+    1.075 m and 0.401 m/s)."""
     r = jh.optimise_lift(drag_box(), UNCERTAIN, OBJECTIVE, BOUNDS, starts=4, **KW)
     assert len(r.screened) == 4
     assert r.screened[0]["design"] == [r.start[TIP], r.start[SPEED]]
     best = min(r.screened, key=lambda e: e["value"])
     assert r.history[0]["design"] == best["design"]
     assert r.value <= best["value"]
-    assert r.value <= optimised.value + 1e-4 * abs(optimised.value)
+    assert r.value <= optimised.value + 1e-3 * abs(optimised.value)
     for e in r.screened:
         for k, (lo, hi) in enumerate(BOUNDS.values()):
             assert lo <= e["design"][k] <= hi
