@@ -80,9 +80,14 @@ def machine() -> str:
     return "-".join(part for part in (platform.machine(), vendor, isa) if part)
 
 
+def own_path() -> Path:
+    """This kind of machine's own reference file, `reference_results.<machine>.npz`."""
+    return OUT.with_name(f"reference_results.{machine()}.npz")
+
+
 def reference_path() -> Path:
     """This machine's own reference file where one is recorded, else `reference_results.npz`."""
-    own = OUT.with_name(f"reference_results.{machine()}.npz")
+    own = own_path()
     return own if own.exists() else OUT
 
 
@@ -159,7 +164,7 @@ def _setup() -> None:
 
 if __name__ == "__main__":
     _setup()
-    path = OUT.with_name(f"reference_results.{machine()}.npz") if "--this-machine" in sys.argv[1:] else OUT
+    path = own_path() if "--this-machine" in sys.argv[1:] else OUT
     arrays = compute()
     np.savez_compressed(path, **arrays)
     print(f"{path}: {len(arrays)} arrays, {path.stat().st_size} bytes")
