@@ -175,18 +175,21 @@ def test_limits_are_checked_on_a_fresh_sample(problem, optimised):
 def test_screened_starts(optimised):
     """`starts=4`: J is screened (without derivatives) at the start and 3 Sobol points of the box, L-BFGS-B
     starts at the best of them, and the solves are counted: (screened + evaluations) x samples + the
-    check's; the result is no worse than the best screened point nor than the run from x0 alone (both end
-    in the one basin within these bounds, each where an iteration gains less than the stopping tolerance,
-    1e-4 of |J(x0)|: the valley is flat, and the two ends can lie a few such gains apart, as on an AMD EPYC
-    with AVX2, whose rounding takes other steps: 5.2e-4 of J, at a tip of 1.067 m and 0.375 m/s against
-    1.075 m and 0.401 m/s)."""
+    check's; the result is no worse than the best screened point, and it reaches the floor of the valley the
+    run from x0 ends in. Not necessarily as low: each run stops where an iteration gains less than the
+    stopping tolerance, 1e-4 of |J(x0)|, and along this flat floor (tips 1.0-1.12 m, 0.37-0.40 m/s) J varies
+    by about 1e-3 of itself. Measured: the screened run ended 5.2e-4 of J above the run from x0 on an AMD
+    EPYC with AVX2, and 1.1e-3 above it (1.67453 at 1.121 m, 0.370 m/s against 1.67265 at 1.011 m,
+    0.399 m/s) once the sensitivity scans reported the values of their own solves. The slack, 2e-3 of J,
+    is a quarter of the best screened point's distance above the floor (7.4e-3 of J), so a run that made no
+    progress from there still fails."""
     r = jh.optimise_lift(drag_box(), UNCERTAIN, OBJECTIVE, BOUNDS, starts=4, **KW)
     assert len(r.screened) == 4
     assert r.screened[0]["design"] == [r.start[TIP], r.start[SPEED]]
     best = min(r.screened, key=lambda e: e["value"])
     assert r.history[0]["design"] == best["design"]
     assert r.value <= best["value"]
-    assert r.value <= optimised.value + 1e-3 * abs(optimised.value)
+    assert r.value <= optimised.value + 2e-3 * abs(optimised.value)
     for e in r.screened:
         for k, (lo, hi) in enumerate(BOUNDS.values()):
             assert lo <= e["design"][k] <= hi

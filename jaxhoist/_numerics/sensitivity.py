@@ -23,11 +23,18 @@ tolerances, against central differences (h = 1e-4) of Tsit5 solves at rtol 1e-10
 experiments/benchmarks/w_sensitivity.py`): see docs/performance.md.
 
 `solve_forward` wraps the solve in `jax.custom_jvp`, so `jax.jvp`, `jax.jacfwd` and everything built on
-them (`scan(derivatives=True)`, `locate_bifurcation`) get these sensitivities. The values under
-differentiation are those of the plain solve, bit for bit (the primal is solved as usual, the augmented
-system only for the tangent: a tangent must not change the primal, and `jax.jacfwd` needs the primal to be
-the same for every direction). Reverse mode (`jax.grad`) is not available on this path: use
-`adjoint=diffrax.RecursiveCheckpointAdjoint()` (the default) for it.
+them (`locate_bifurcation`) get these sensitivities. The values under differentiation are those of the
+plain solve, bit for bit (the primal is solved as usual, the augmented system only for the tangent: a
+tangent must not change the primal, and `jax.jacfwd` needs the primal to be the same for every direction).
+Reverse mode (`jax.grad`) is not available on this path: use `adjoint=diffrax.RecursiveCheckpointAdjoint()`
+(the default) for it.
+
+With `joint=True` (`solve.solve_joint`, what `scan(derivatives=True)` differentiates) the primal under
+`jax.jvp` is the augmented solve's own state instead: one solve gives the values and their sensitivities,
+and the program holds no plain solve beside the augmented one. The values then agree with the plain solve's
+to the solver's tolerance, not bit for bit (the step-size control also watches the sensitivities), and
+depend on the direction, so such a solve is differentiated along one direction at a time (`jax.jvp`, or
+`jax.vmap` of it over directions), never by `jax.jacfwd`.
 """
 
 from __future__ import annotations
@@ -138,11 +145,15 @@ def augmented_solver(solver: RosenbrockW, many: bool = False) -> RosenbrockW:
     )
 
 
-def solve_forward(solve_plain: Callable, controller: Callable, outputs: Callable, status_of: Callable):
+def solve_forward(
+    solve_plain: Callable, controller: Callable, outputs: Callable, status_of: Callable, joint: bool = False
+):
     """`solve(scenario, ts, options)` whose forward-mode derivative is the augmented solve (module
     docstring). The arguments are the plain core and its helpers from `solve.py` (passed in, so that this
     module does not import it back): `solve_plain(scenario, ts, options) -> Trajectory`,
-    `controller(options, ts)`, `outputs(ts, ys, scenario, c, status, stats)`, `status_of(result, y1)`."""
+    `controller(options, ts)`, `outputs(ts, ys, scenario, c, status, stats)`, `status_of(result, y1)`.
+    `joint`: under `jax.jvp` the primal is the augmented solve's, not the plain solve's (module
+    docstring)."""
 
     def solve(scenario: Scenario, ts, options: SolverOptions):
         dyn, static = eqx.partition(scenario, eqx.is_inexact_array)
@@ -157,8 +168,14 @@ def solve_forward(solve_plain: Callable, controller: Callable, outputs: Callable
         def run_jvp(primals, tangents):
             dyn, ts = primals
             ddyn, dts = tangents
+
+            def augmented():
+                return _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, status_of)
+
+            if joint:
+                return augmented()
             primal = solve_plain(eqx.combine(dyn, static), ts, options)
-            return primal, _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, status_of)
+            return primal, augmented()[1]
 
         return run(dyn, ts)
 
@@ -170,8 +187,9 @@ def _is_zero(x) -> bool:
 
 
 def _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, status_of):
-    """The tangent of the solve along (`ddyn`, `dts`), whose leaves may be `SymbolicZero`: those are held
-    fixed (no tangent is traced for them), the others differentiated."""
+    """The augmented solve along (`ddyn`, `dts`), whose leaves may be `SymbolicZero`: those are held fixed
+    (no tangent is traced for them), the others differentiated. **Returns** `(primal, tangent)`: the
+    `Trajectory` of the augmented solve's own state and its tangent."""
     solver = options.solver
     assert isinstance(solver, RosenbrockW)
     moving = jax.tree_util.tree_map(lambda x: not _is_zero(x), ddyn, is_leaf=_is_zero)
@@ -231,4 +249,4 @@ def _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, sta
     primals, tangents = (ys, d_mov, c), (ss, ddyn, dc)
     if not _is_zero(dts):
         primals, tangents = (*primals, ts), (*tangents, dts)
-    return jax.jvp(out, primals, tangents)[1]
+    return jax.jvp(out, primals, tangents)

@@ -128,6 +128,22 @@ def _solve_plain(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOp
 
 
 _solve_forward = solve_forward(_solve_plain, step_size_controller, outputs, _status)
+_solve_forward_joint = solve_forward(_solve_plain, step_size_controller, outputs, _status, joint=True)
+
+
+@callback_free
+def solve_joint(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOptions) -> Trajectory:
+    """`solve`, for differentiation along one direction (`jax.jvp`) as a scan with derivatives does: with
+    the Rosenbrock-W solver in forward mode, the trajectory and its tangent both come from the augmented
+    solve (`sensitivity.solve_forward` with `joint=True`), one solve instead of the plain one and the
+    augmented one, so the values agree with `solve`'s to the solver's tolerance, not bit for bit. Not for
+    `jax.jacfwd` (the primal depends on the direction). Undifferentiated, and with any other solver, the
+    same as `solve`."""
+    if uses_tangent_solve(options):
+        return _solve_forward_joint(scenario, ts, options)
+    return _solve_plain(scenario, ts, options)
+
+
 _solve_jit = eqx.filter_jit(solve)
 
 

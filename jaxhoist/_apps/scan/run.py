@@ -136,12 +136,13 @@ def scan(
       solve (`experiments/benchmarks/benchmark_scan.py` does; see docs/performance.md).
     - `histories`: `Trajectory` fields to keep at every saved time, e.g. `("position", "euler")`.
     - `derivatives`: also compute forward-mode sensitivities of every observable with respect to the swept
-      parameters (`jax.jacfwd`, through `diffrax.ForwardMode` or the fixed-step loop), stored as `d_<name>`
+      parameters (forward mode, through `diffrax.ForwardMode` or the fixed-step loop), stored as `d_<name>`
       with a last axis over the parameters [unit of the observable per unit of the parameter]. Through the
-      default Rosenbrock-W solver they are solved as their own error-controlled ODE beside the state
-      (`numerics/sensitivity.py`): 8.9x the plain scan's time for one parameter on paper-4.2 over 25 s
-      (`experiments/benchmarks/w_sensitivity.py`, docs/performance.md); with fixed steps the steps are
-      differentiated.
+      default Rosenbrock-W solver each member's state and its sensitivities are solved together, as one
+      error-controlled system (`numerics/sensitivity.py`), and the values are that solve's: they agree with
+      a scan without derivatives to the solver's tolerance, not bit for bit (with several parameters, one
+      such solve per parameter, the values from the first). With fixed steps, or another solver, the steps
+      are differentiated and the values are the plain scan's.
     - `batch`: `BatchOptions` (lanes, chunk size, memory cap [B], devices, sort order, wait for other
       processes [s]); default `BatchOptions()`.
     - `out_dir`: write each finished chunk there (`chunk_#####.npz` + `manifest.json`) and the final
