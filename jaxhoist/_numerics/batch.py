@@ -97,15 +97,16 @@ def member(scenario, ts, row, spec: BatchSpec):
     """One member's outputs. With `spec.derivatives` and the Rosenbrock-W solver in forward mode, its values
     and sensitivities come from one augmented solve per parameter (`solve_joint`), the values from the first
     parameter's: they agree with a scan without derivatives to the solver's tolerance, not bit for bit."""
-    o = spec.options
-    joint = spec.derivatives and uses_tangent_solve(o)
+    opts = spec.options
+    joint = spec.derivatives and uses_tangent_solve(opts)
+    core = solve_joint if joint else solve
 
     def run(row):
         sc = scenario
         for k, p in enumerate(spec.paths):
             sc = set_param(sc, p, row[k])
-        lean = o.fixed_step and fixed_mod.supports(o.solver)
-        traj = fixed_mod.solve_fixed(sc, ts, o) if lean else (solve_joint if joint else solve)(sc, ts, o)
+        lean = opts.fixed_step and fixed_mod.supports(opts.solver)
+        traj = fixed_mod.solve_fixed(sc, ts, opts) if lean else core(sc, ts, opts)
         obs = {o.name: o(traj, sc) for o in spec.observables}
         return obs, (obs, traj)
 
