@@ -98,15 +98,15 @@ def member(scenario, ts, row, spec: BatchSpec):
     and sensitivities come from one augmented solve per parameter (`solve_joint`), the values from the first
     parameter's: they agree with a scan without derivatives to the solver's tolerance, not bit for bit."""
     opts = spec.options
-    joint = spec.derivatives and uses_tangent_solve(opts)
-    core = solve_joint if joint else solve
+    joint = spec.derivatives and uses_tangent_solve(opts)  # Rosenbrock-W: never the lean loop's explicit RK
+    lean = opts.fixed_step and fixed_mod.supports(opts.solver)
+    core = fixed_mod.solve_fixed if lean else solve_joint if joint else solve
 
     def run(row):
         sc = scenario
         for k, p in enumerate(spec.paths):
             sc = set_param(sc, p, row[k])
-        lean = opts.fixed_step and fixed_mod.supports(opts.solver)
-        traj = fixed_mod.solve_fixed(sc, ts, opts) if lean else core(sc, ts, opts)
+        traj = core(sc, ts, opts)
         obs = {o.name: o(traj, sc) for o in spec.observables}
         return obs, (obs, traj)
 
