@@ -214,6 +214,26 @@ def test_a_member_is_the_same_whatever_the_member_count_and_the_group_width(pape
     np.testing.assert_array_equal(wide.num_accepted_steps, four.num_accepted_steps)
 
 
+def test_a_lock_step_group_takes_the_steps_of_a_solve_alone(paper42):
+    """A scan group without derivatives is one while loop over its lanes running diffrax's step, step-size
+    control and dense output (`numerics.lockstep`), not a `jax.vmap` of `diffeqsolve`: on paper-4.2 over
+    0.5 s with the default solver, each of four members takes the accepted and rejected steps that
+    `jh.simulate` takes for it, and ends within 1e-9 relative of it (the two programs are compiled apart
+    and may round differently). The scan is the `alone` scan of the test above (one compiled group)."""
+    mus = {k: v[::2] for k, v in paper42_members(paper42).items()}
+    options = jh.SolverOptions(max_steps=2000)
+    times = jh.Times(0.5, n=11)
+    kw = dict(observables=["final_position", "final_euler"], options=options)
+    group = scan(paper42, jh.Points(mus), times, batch=jh.BatchOptions(lanes=4, sort=False), **kw)
+    assert np.all(group.ok)
+    for i, mu in enumerate(mus[MU]):
+        alone = jh.simulate(set_param(paper42, MU, mu), times, options=options)
+        assert group.num_accepted_steps[i] == int(alone.num_accepted_steps), i
+        assert group.num_rejected_steps[i] == int(alone.num_rejected_steps), i
+        np.testing.assert_allclose(group["final_position"][i], alone.position[-1], rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(group["final_euler"][i], alone.euler[-1], rtol=1e-9, atol=1e-12)
+
+
 def test_poisoned_members_are_marked_and_the_rest_unchanged(box, clean):
     """μ = NaN is refused on the host (not solved); μ = 1e4 makes the regularised friction so stiff that
     the solve runs out of steps. Both are marked with their reason; every other member is bit-for-bit the

@@ -82,11 +82,11 @@ from jaxhoist._numerics import batch
 from jaxhoist._numerics import observables as obs_mod
 
 traced = []
-_member = batch.member
-def counting_member(*args, **kwargs):  # every trace of the group program calls it
+_checked_outputs = batch.checked_outputs
+def counting_checked_outputs(*args, **kwargs):  # every trace of a group program calls it
     traced.append(1)
-    return _member(*args, **kwargs)
-batch.member = counting_member
+    return _checked_outputs(*args, **kwargs)
+batch.checked_outputs = counting_checked_outputs
 
 warnings.simplefilter("always")
 out, how = {}, {}

@@ -6,12 +6,13 @@ compiled.
         [--lanes 16] [--run] [--out DIR] [--quick]
 
 Programs: `simulate` (the elastic core of `jaxhoist simulate` / `jh.simulate`, default solver),
-`scan` (one lock-step group of `jh.scan` of the friction coefficient, `numerics.batch.group_fn`) and
-`scan-derivatives` (the same group with `derivatives=True`: forward-mode sensitivities); on request
-`scan-member` and `scan-derivatives-member`, one member of those groups alone, unbatched
-(`numerics.batch.member`): a group's trace less its member's is what `jax.vmap`'s batching of the traced
-member adds (JAX batches each while loop's body several times: once per pass of its search for the batched
-carry, then once more). Each program is
+`scan` (one lock-step group of `jh.scan` of the friction coefficient, `numerics.batch.group_fn`: one while
+loop over its lanes, `numerics.lockstep`) and `scan-derivatives` (the same group with `derivatives=True`:
+forward-mode sensitivities, a `jax.vmap` of members); on request `scan-member` and
+`scan-derivatives-member`, one member of those groups alone, unbatched (`numerics.batch.member`): a group's
+trace less its member's is what batching the group adds (JAX batches a vmapped while loop's body several
+times: once per pass of its search for the batched carry, then once more; the lock-step group batches its
+step once). Each program is
 traced, lowered and compiled in a fresh Python process (JAX caches the traces of inner jitted functions, so
 a second program in one process would trace faster than a first call does), without the persistent
 compilation cache. Prints one line per program: each phase's wall time and, in brackets, its CPU time

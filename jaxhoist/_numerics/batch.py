@@ -1,4 +1,4 @@
-"""The batch core of a scan: one member's solve and observables, a vmapped lock-step group of members (the
+"""The batch core of a scan: one member's solve and observables, a lock-step group of members (the
 one compiled program, the same for any member count, chunk size and device count), the groups of a chunk
 on each device one after another, and the devices in parallel (failing group mates isolated:
 `CompiledChunk`). Pure: no I/O, no
@@ -20,12 +20,13 @@ import jax.numpy as jnp
 import numpy as np
 
 from .._errors import SolveStatus
+from .._physics.equilibrium import initial_state
 from .._physics.paths import set_param
-from . import compile_cache
+from . import compile_cache, lockstep
 from . import fixed_step as fixed_mod
 from .options import SolverOptions
 from .sensitivity import uses_tangent_solve
-from .solve import solve, solve_joint
+from .solve import outputs, solve, solve_joint, solve_status, step_size_controller
 
 
 class ScanStatus(enum.IntEnum):
@@ -125,9 +126,14 @@ def member(scenario, ts, row, spec: BatchSpec):
     else:
         _, (obs, traj) = run(row)
         jac = {}
+    return checked_outputs(obs, jac, traj, spec)
+
+
+def checked_outputs(obs: dict, jac: dict, traj, spec: BatchSpec) -> dict:
+    """A member's outputs from its observables, their sensitivities (`jac`, maybe empty) and its
+    `Trajectory`: the member's status (a NaN observable or a non-finite sensitivity of a solve that succeeded
+    is `NAN_OBSERVABLE`, never silent; the values are kept), and NaN values for a failed member."""
     ok = traj.status == SolveStatus.OK
-    # a NaN observable, or a NaN or infinite sensitivity, of a solve that succeeded is flagged, never silent
-    # (values are kept)
     checked = [jnp.isnan(v) for v in obs.values()] + [~jnp.isfinite(v) for v in jac.values()]
     nan_obs = jnp.any(jnp.stack([jnp.any(v) for v in checked])) if checked else False
     status = jnp.where(ok & nan_obs, ScanStatus.NAN_OBSERVABLE, traj.status).astype(jnp.int32)
@@ -143,8 +149,52 @@ def member(scenario, ts, row, spec: BatchSpec):
     }
 
 
+def in_lock_step(spec: BatchSpec, ts) -> bool:
+    """Whether `group_fn` solves the group with `lockstep.solve_group` (one while loop over the lanes): a
+    scan without derivatives, with an adaptive solver under diffrax's PID controller (the default; constant
+    steps take the lean fixed-step loop or `solve`)."""
+    opts = spec.options
+    controller = step_size_controller(opts, ts)
+    return not spec.derivatives and lockstep.supports(opts.solver, controller, opts.progress_meter)
+
+
+def _lock_step_group(scenario, ts, values, spec: BatchSpec):
+    """`group_fn` for `in_lock_step` specs: each member's scenario and initial state (batched), one
+    `lockstep.solve_group` for the group, then each member's outputs and observables as `member` makes
+    them."""
+    opts = spec.options
+
+    def prepare(row):
+        sc = scenario
+        for k, p in enumerate(spec.paths):
+            sc = set_param(sc, p, row[k])
+        y0, c = initial_state(sc)
+        return sc, y0, c
+
+    scs, y0s, cs = eqx.filter_vmap(prepare)(values)
+    sol = lockstep.solve_group(
+        opts.solver, step_size_controller(opts, ts), ts, y0s, (scs, cs), opts.dt0, opts.max_steps
+    )
+
+    def finish(sc, c, ys, result, accepted, rejected):
+        y1 = jax.tree_util.tree_map(lambda x: x[-1], ys)
+        stats = {"num_accepted_steps": accepted, "num_rejected_steps": rejected}
+        traj = outputs(ts, ys, sc, c, solve_status(result, y1), stats)
+        obs = {o.name: o(traj, sc) for o in spec.observables}
+        return checked_outputs(obs, {}, traj, spec)
+
+    return eqx.filter_vmap(finish)(
+        scs, cs, sol.ys, sol.result, sol.num_accepted_steps, sol.num_rejected_steps
+    )
+
+
 def group_fn(scenario, ts, values, spec: BatchSpec):
-    """values (L, P) -> outputs with leading (L,): one lock-step group, a `jax.vmap` of `member`."""
+    """values (L, P) -> outputs with leading (L,): one lock-step group. Without derivatives, with the
+    default adaptive solve, one while loop over the lanes (`lockstep.solve_group`, `in_lock_step`): a
+    `jax.vmap` of `member` would batch the solve's while loop several times in tracing. Otherwise a
+    `jax.vmap` of `member`."""
+    if in_lock_step(spec, ts):
+        return _lock_step_group(scenario, ts, values, spec)
     return jax.vmap(lambda row: member(scenario, ts, row, spec))(values)
 
 
@@ -190,7 +240,7 @@ class CompiledChunk:
     solver on paper-4.2 after 3 s): with one single-device program, a member's result does not depend on
     how many devices share the scan, nor on the chunk size.
 
-    **Failing group mates are isolated**. A lock-step group is one vmapped solve; a member that
+    **Failing group mates are isolated**. A lock-step group is one solve of all its lanes; a member that
     fails (exhausts its steps, blows up) can perturb its healthy group mates through the vectorised
     arithmetic they share (seen with Tsit5: 3e-8 rad and one step more for a group mate of a rope of
     stiffness 1e16 N/m on a tip of 1e-12 kg). So every group with both failed and healthy members is solved

@@ -25,7 +25,9 @@ from .times import Times, is_tracer
 from .trajectory import Trajectory as Trajectory
 
 
-def _status(result, y1: State) -> Int[Array, ""]:
+def solve_status(result, y1: State) -> Int[Array, ""]:
+    """The `SolveStatus` of a solve from diffrax's `result` and the last saved state `y1` (not finite:
+    `NONFINITE`)."""
     finite = jnp.all(jnp.stack([jnp.all(jnp.isfinite(x)) for x in jax.tree_util.tree_leaves(y1)]))
     return jnp.where(
         result == diffrax.RESULTS.successful,
@@ -124,11 +126,11 @@ def _solve_plain(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOp
         throw=False,
     )
     y1 = jax.tree_util.tree_map(lambda x: x[-1], sol.ys)
-    return outputs(ts, sol.ys, scenario, c, _status(sol.result, y1), sol.stats)  # pyright: ignore[reportArgumentType]  # sol.ys is the saved State with SaveAt(ts=...)
+    return outputs(ts, sol.ys, scenario, c, solve_status(sol.result, y1), sol.stats)  # pyright: ignore[reportArgumentType]  # sol.ys is the saved State with SaveAt(ts=...)
 
 
-_solve_forward = solve_forward(_solve_plain, step_size_controller, outputs, _status)
-_solve_forward_joint = solve_forward(_solve_plain, step_size_controller, outputs, _status, joint=True)
+_solve_forward = solve_forward(_solve_plain, step_size_controller, outputs, solve_status)
+_solve_forward_joint = solve_forward(_solve_plain, step_size_controller, outputs, solve_status, joint=True)
 
 
 @callback_free

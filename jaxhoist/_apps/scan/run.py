@@ -7,7 +7,7 @@ sharded computation per chunk, with per-member status, resumable chunk files and
                   observables=["final_psi", "liftoff_time"], out_dir="out/mu-scan", progress=True)
     res["final_psi"], res.status, res.coords["foundation.friction_coefficient"]
 
-Where the parts live: the members (`scan.sweep`), the pure batch core (`numerics.batch`: a vmapped group of
+Where the parts live: the members (`scan.sweep`), the pure batch core (`numerics.batch`: a lock-step group of
 `lanes` members, the groups of a chunk on each device, the devices in parallel), the chunk loop and the
 assembly of the `ScanResult` (this module, `scan.result`), the files in `out_dir` (`io.scan_store`),
 progress reports (`apps.scan.progress`).
