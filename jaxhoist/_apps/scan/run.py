@@ -16,8 +16,10 @@ How the work is laid out (and why results do not depend on the chunk size or the
 
 - members (parameter points) are sorted by their values, so that neighbours take similar numbers of
   steps, and split into *groups* of `lanes` consecutive members (the last one padded by repeating its
-  last member). A group is solved by one `jax.vmap` of the traceable core `numerics.solve.solve`, in lock
-  step: it costs what its slowest member costs, which sorting keeps close to the others;
+  last member). A group is solved in lock step, one while loop over its members that runs diffrax's step
+  and step-size control for each (`numerics.lockstep`; with derivatives, one `jax.vmap` of the traceable
+  core `numerics.solve.solve`): it costs what its slowest member costs, which sorting keeps close to the
+  others;
 - a *chunk* is a whole number of groups per device; on each device the chunk's groups run one after the
   other (calls of the one compiled group program), and the devices' shares run in parallel, one host
   thread each, so a slow group on one device does not hold up the other (`numerics.batch.CompiledChunk`);
