@@ -5,9 +5,10 @@ Each lane runs the loop of `diffrax.diffeqsolve` with `SaveAt(ts=...)`: the solv
 controller's `adapt_step_size`, the last step clipped to t1 as diffrax clips it, the first failure kept as
 the lane's result, and the saved times that an accepted step passes filled from the solver's dense output
 (`solver.interpolation_cls`). A lane that has reached t1, failed, or used its `max_steps` steps stays as it
-is while the others go on. The steps are diffrax's arithmetic, not a copy of it, so a lane takes the steps
-its solve alone takes, up to rounding: XLA compiles the two programs differently, and in stick-slip a
-rounding that flips a step's acceptance moves the rest of the solution by up to the solver's tolerance.
+is while the others go on. The step and its control are diffrax's own functions, only the loop around
+them is written here, so a lane takes the steps its solve alone takes, up to rounding: XLA compiles the
+two programs differently, and in stick-slip a rounding that flips a step's acceptance moves the rest of
+the solution by up to the solver's tolerance.
 
 Why this design: a group written as `jax.vmap` of `diffeqsolve` batches the solve's while loop, and JAX
 batches a while loop's body once per pass of its search for which parts of the loop's state are batched,
@@ -77,8 +78,8 @@ def solve_group(
     - `solver`, `controller`: a diffrax adaptive solver and PID controller (`supports`).
     - `ts`: the saved times [s], the same for every lane; the first is t0 = 0 as in `solve`.
     - `y0s`, `args`: each lane's initial state and arguments, every array leaf with a leading lane axis.
-    - `dt0`: the first step [s], or None (the controller chooses it, per lane); `max_steps`: each lane's
-      step budget (accepted and rejected steps, as `diffeqsolve` counts them).
+    - `dt0`: the first step [s], or None (0.01 s, where `diffeqsolve` with diffrax's PID controller starts);
+      `max_steps`: each lane's step budget (accepted and rejected steps, as `diffeqsolve` counts them).
     """
     terms = diffrax.ODETerm(vector_field)  # pyright: ignore[reportArgumentType]  # jaxtyping Scalar vs diffrax RealScalarLike
     # `diffeqsolve` hands the controller its term wrapped (for the direction of time), and diffrax's PID
