@@ -94,6 +94,13 @@ class BatchSpec:
     derivatives: bool = False
 
 
+def member_scenario(scenario, row, spec: BatchSpec):
+    """The scenario of one member: `scenario` with each of `spec.paths` set to its value in `row`."""
+    for k, p in enumerate(spec.paths):
+        scenario = set_param(scenario, p, row[k])
+    return scenario
+
+
 def member(scenario, ts, row, spec: BatchSpec):
     """One member's outputs. With `spec.derivatives` and the Rosenbrock-W solver in forward mode, its values
     and sensitivities come from one augmented solve per parameter (`solve_joint`), the values from the first
@@ -104,9 +111,7 @@ def member(scenario, ts, row, spec: BatchSpec):
     core = fixed_mod.solve_fixed if lean else solve_joint if joint else solve
 
     def run(row):
-        sc = scenario
-        for k, p in enumerate(spec.paths):
-            sc = set_param(sc, p, row[k])
+        sc = member_scenario(scenario, row, spec)
         traj = core(sc, ts, opts)
         obs = {o.name: o(traj, sc) for o in spec.observables}
         return obs, (obs, traj)
@@ -165,9 +170,7 @@ def _lock_step_group(scenario, ts, values, spec: BatchSpec):
     opts = spec.options
 
     def prepare(row):
-        sc = scenario
-        for k, p in enumerate(spec.paths):
-            sc = set_param(sc, p, row[k])
+        sc = member_scenario(scenario, row, spec)
         y0, c = initial_state(sc)
         return sc, y0, c
 
