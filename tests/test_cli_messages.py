@@ -48,6 +48,27 @@ def _error(capsys) -> str:
     return lines[-1]
 
 
+def test_the_command_exits_with_main_s_code_and_its_message(tmp_path):
+    """`python -m jaxhoist` (`cli.run`: `main()`, then `os._exit` with its code) exits 2 on invalid input,
+    with main's one-line message on stderr and nothing written (no compiling: a fresh process, no cache)."""
+    import subprocess
+    import sys
+
+    out = tmp_path / "out"
+    proc = subprocess.run(
+        [sys.executable, "-m", "jaxhoist", "simulate", "paper-4.2", "--no-cache", "--out", str(out)]
+        + ["--set", "foundation.friction_coefficient=-0.1"],
+        capture_output=True,
+        text=True,
+        timeout=300,
+    )
+    assert proc.returncode == 2, proc.stderr[-3000:]
+    lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    assert "Traceback" not in proc.stderr and lines[-1].startswith("jaxhoist: error:"), proc.stderr[-3000:]
+    assert "friction_coefficient" in lines[-1] and "compiling" not in proc.stderr
+    assert not out.exists()
+
+
 # ------------------------------------------------------------------------------------- output folders
 
 

@@ -255,6 +255,7 @@ def _cli(
     tmp_path: Path, out: str, *extra: str, cache: str, quiet: bool = True
 ) -> subprocess.CompletedProcess:
     env = {**_cold_env(), "PYTHONPATH": str(ROOT), "JAX_PLATFORMS": "cpu", pc.ENV_VAR: cache}
+    env.pop("PYTHONUNBUFFERED", None)  # stdout block-buffered into the pipe, as a user's `cmd > file` gets it
     args = ["simulate", "paper-4.2", "--out", str(tmp_path / out), "--t1", "0.2", "--n-save", "5"]
     proc = subprocess.run(
         [sys.executable, "-m", "jaxhoist", *args, "--no-plots", *(["--quiet"] if quiet else []), *extra],
@@ -274,6 +275,8 @@ def test_cli_no_cache_writes_nothing_and_the_default_writes_the_cache(tmp_path):
     assert not cache.exists()
     first = _cli(tmp_path, "b", cache=str(cache), quiet=False)
     assert "compiling" in first.stderr and "loading the compiled program" not in first.stderr
+    # the command ends with `os._exit` (`cli.run`): its summary on the piped (block-buffered) stdout is whole
+    assert first.stdout.splitlines()[-1].startswith("wrote "), first.stdout[-3000:]
     stored = _entries(cache / sp.SUBFOLDER)
     assert [p.name.split("-")[0] for p in stored] == ["solve"]
 

@@ -3,3 +3,4 @@
 library's callbacks (`progress`). It imports the library; nothing in the library imports it."""
 
 from .app import main as main
+from .app import run as run
