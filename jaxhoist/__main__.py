@@ -1,5 +1,5 @@
 """`python -m jaxhoist ...`: the same as the `jaxhoist` command."""
 
-from jaxhoist._apps.cli.app import run
+from jaxhoist._apps.cli.app import entry_point
 
-run()
+entry_point()

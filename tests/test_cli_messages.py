@@ -12,7 +12,10 @@ jax.config.update("jax_enable_x64", True)
 import inspect  # noqa: E402
 import io  # noqa: E402
 import os  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
 from importlib import resources  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
@@ -48,19 +51,44 @@ def _error(capsys) -> str:
     return lines[-1]
 
 
-def test_the_command_exits_with_main_s_code_and_its_message(tmp_path):
-    """`python -m jaxhoist` (`cli.run`: `main()`, then `os._exit` with its code) exits 2 on invalid input,
-    with main's one-line message on stderr and nothing written (no compiling: a fresh process, no cache)."""
-    import subprocess
-    import sys
+_ROOT = str(Path(__file__).resolve().parents[1])
 
+# `entry_point` with `main` replaced by one that writes to stdout without a newline and returns 3, and an exit
+# handler that writes to stderr: the exit must run the handler, flush the stdout left in its buffer and
+# keep main's code
+_ENTRY_POINT_SCRIPT = """
+import atexit, sys
+from jaxhoist._apps.cli import app
+atexit.register(lambda: sys.stderr.write("handler ran"))
+app.main = lambda: (sys.stdout.write("buffered, no newline"), 3)[1]
+app.entry_point()
+"""
+
+
+def _python(args: list[str]) -> subprocess.CompletedProcess:
+    env = {k: v for k, v in os.environ.items() if k != "PYTHONUNBUFFERED"}  # stdout block-buffered
+    env.update(PYTHONPATH=_ROOT, JAX_PLATFORMS="cpu")
+    return subprocess.run(
+        [sys.executable, *args], env=env, capture_output=True, text=True, timeout=300, cwd=_ROOT
+    )
+
+
+def test_the_command_s_exit_runs_the_handlers_flushes_and_keeps_main_s_code():
+    """`entry_point` (the `jaxhoist` command, `python -m jaxhoist`) ends with `os._exit`: before it, the exit
+    handlers run and the standard streams are flushed, and the exit code is `main()`'s."""
+    proc = _python(["-c", _ENTRY_POINT_SCRIPT])
+    assert proc.returncode == 3, proc.stderr[-3000:]
+    assert proc.stdout == "buffered, no newline"
+    assert proc.stderr.endswith("handler ran"), proc.stderr[-3000:]
+
+
+def test_the_command_exits_with_main_s_code_and_its_message(tmp_path):
+    """`python -m jaxhoist` exits 2 on invalid input, with main's one-line message on stderr and nothing
+    written (no compiling: a fresh process, no cache)."""
     out = tmp_path / "out"
-    proc = subprocess.run(
-        [sys.executable, "-m", "jaxhoist", "simulate", "paper-4.2", "--no-cache", "--out", str(out)]
-        + ["--set", "foundation.friction_coefficient=-0.1"],
-        capture_output=True,
-        text=True,
-        timeout=300,
+    proc = _python(
+        ["-m", "jaxhoist", "simulate", "paper-4.2", "--no-cache", "--out", str(out)]
+        + ["--set", "foundation.friction_coefficient=-0.1"]
     )
     assert proc.returncode == 2, proc.stderr[-3000:]
     lines = [ln for ln in proc.stderr.splitlines() if ln.strip()]

@@ -275,7 +275,7 @@ def test_cli_no_cache_writes_nothing_and_the_default_writes_the_cache(tmp_path):
     assert not cache.exists()
     first = _cli(tmp_path, "b", cache=str(cache), quiet=False)
     assert "compiling" in first.stderr and "loading the compiled program" not in first.stderr
-    # the command ends with `os._exit` (`cli.run`): its summary on the piped (block-buffered) stdout is whole
+    # the command ends with `os._exit` (`cli.entry_point`): its summary on the piped stdout is whole
     assert first.stdout.splitlines()[-1].startswith("wrote "), first.stdout[-3000:]
     stored = _entries(cache / sp.SUBFOLDER)
     assert [p.name.split("-")[0] for p in stored] == ["solve"]

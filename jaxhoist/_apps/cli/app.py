@@ -217,8 +217,10 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
-    """Entry point of `jaxhoist` and `python -m jaxhoist`. Returns the exit code: 0 ok, 1 the solve failed
-    (status not ok), 2 invalid input (one-line message on stderr, no traceback)."""
+    """The command line on `argv` (default: the process's arguments), in this process: what the `jaxhoist`
+    command runs (through `entry_point`, which then exits), and what in-process callers (the tests) call.
+    Returns the exit code: 0 ok, 1 the solve failed (status not ok), 2 invalid input (one-line message on
+    stderr, no traceback)."""
     enable_x64()
     from ..._errors import Float64Error, ScenarioError, one_line
 
@@ -260,26 +262,30 @@ def main(argv: Sequence[str] | None = None) -> int:
     return 0 if code is None else int(code)
 
 
-def run() -> NoReturn:
+def entry_point() -> NoReturn:
     """The `jaxhoist` command and `python -m jaxhoist`: `main()` on the process's arguments, then the exit
     with its code.
 
     Once `main()` has returned (every file it wrote is closed), the exit handlers run (logging's flush among
-    them), the standard streams are flushed and the process ends at once (`os._exit`), without the
-    interpreter tearing down jax's, jaxlib's and matplotlib's modules and objects one by one, which takes
-    about 0.5 s after a `simulate` on a 2-core machine, a seventh of a warm run. An exception that escapes
-    `main()` (a traceback) exits the usual way."""
+    them), stdout and stderr are flushed and the process ends at once (`os._exit`), without the
+    interpreter tearing down jax's, jaxlib's and matplotlib's modules and objects one by one, about 0.3 s
+    of a warm `simulate` with plots on a 2-core machine, a tenth of it. As at a normal exit, a failed flush
+    of stdout (a full disk, a closed pipe) turns exit code 0 into 120. An exception that escapes `main()` (a
+    traceback, argparse's `--help` and usage errors) exits the usual way."""
     import atexit
 
     code = main()
     atexit._run_exitfuncs()  # what a normal exit runs before the teardown
     for stream in (sys.stdout, sys.stderr):
+        if stream is None:  # started with that descriptor closed: Python made it None, prints went nowhere
+            continue
         try:
             stream.flush()
-        except (OSError, ValueError):  # a closed pipe or stream: nothing more can be written to it
-            pass
+        except (OSError, ValueError):  # what is left cannot be written (broken pipe, full disk)
+            if stream is sys.stdout and code == 0:
+                code = 120  # CPython's exit code when flushing stdout at exit fails
     os._exit(code)
 
 
 if __name__ == "__main__":
-    run()
+    entry_point()
