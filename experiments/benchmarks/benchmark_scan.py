@@ -168,6 +168,8 @@ def main(argv=None):
     p.add_argument("--deriv-n", type=int, default=None, help="sensitivity members (all; quick 0)")
     p.add_argument("--no-expert-row", action="store_true", help="skip the ε = 1e-2 fixed-step Bosh3 row")
     args = p.parse_args(argv)
+    if args.eps_lanes is not None and (args.eps_lanes < 1 or args.eps_n == 0 or args.quick):
+        p.error("--eps-lanes takes a width >= 1 and the ε = 1e-4 row (--eps-n > 0, not --quick)")
     if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
         jh.enable_compilation_cache()
 

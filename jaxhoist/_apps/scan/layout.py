@@ -96,14 +96,16 @@ def adaptive_lanes(n: int, n_devices: int = 1, accelerator: bool = False) -> int
     per-member systems is shared), but a group takes as many steps as its slowest member, and a group runs
     on one device, so a scan of fewer groups than devices leaves devices idle. The width that keeps every
     device busy with the widest groups wins: 256 members of paper-4.2 over 25 s on two CPU devices cost
-    0.92x the CPU time per trajectory of 4096 members in 2 groups of 128, against 1.57x in 16 groups of 16
+    0.97x the CPU time per trajectory of 4096 members in 2 groups of 128, against 1.57x in 16 groups of 16
     (`experiments/benchmarks/bench_scan_sizes.py`, docs/performance.md). The lock-step waste of wide groups
     is small where neighbours take about the same steps, as in a sorted scan of one parameter; a sparse
     scan of few, far-apart members loses some of the gain (64 members over μ = 0.1-0.6 in one group of 64:
     1.25x the cost of groups of 16 at a lock-step efficiency of 0.39, with an earlier solver whose steps
-    varied more). The width is a numerical setting (XLA may round differently in a vmap of another width),
-    and the default follows the device count: pin `BatchOptions(lanes=...)` for results that are the same
-    bit for bit on any number of devices.
+    varied more), and so does a stiff friction law, whose members' steps spread (256 members at ε = 1e-4
+    m/s: steps median 1 712, max 6 250; 3.2x the cost per trajectory of ε = 1e-3 in the default groups of
+    128, 1.6x in groups of 32, docs/performance.md). The width is a numerical setting (XLA may round
+    differently in a vmap of another width), and the default follows the device count: pin
+    `BatchOptions(lanes=...)` for results that are the same bit for bit on any number of devices.
     On a GPU a step's kernels cost about the same for a few hundred members as for tens of thousands (they
     are bound by launches, not arithmetic), so groups run one after another waste the chip: one group, even
     at the lock-step efficiency of a whole scan, wins (docs/performance.md, "On a GPU").
