@@ -329,38 +329,35 @@ def main(argv=None):
             flush=True,
         )
 
-    # 5. ε = 1e-4 against the preset's ε on the same members.
+    # 5. ε = 1e-4 against the preset's ε on the same members (default width, then --eps-lanes's).
     if eps_n:
         sub = mus[np.linspace(0, n - 1, eps_n).round().astype(int)]
-        _, base = _timed_scan(sc, sub, times, **obs)
-        r4, stiff = _timed_scan(sc.replace(**{EPS: 1e-4}), sub, times, **obs)
-        rec["eps_1e-4"] = {
-            "preset_eps": base,
-            "eps_1e-4": stiff,
-            "ratio": stiff["compute_s"] / base["compute_s"],
-        }
+
+        def eps_pair(**kw):
+            _, base = _timed_scan(sc, sub, times, **kw, **obs)
+            _, stiff = _timed_scan(sc.replace(**{EPS: 1e-4}), sub, times, **kw, **obs)
+            return {"preset_eps": base, "eps_1e-4": stiff, "ratio": stiff["compute_s"] / base["compute_s"]}
+
+        e = rec["eps_1e-4"] = eps_pair()
+        base, stiff = e["preset_eps"], e["eps_1e-4"]
         print(
             f"  ε = 1e-4 on {eps_n} members: {stiff['ms_per_trajectory']:.2f} vs "
             f"{base['ms_per_trajectory']:.2f} ms "
-            f"per trajectory at 1e-3 ({rec['eps_1e-4']['ratio']:.2f}x; {base['lanes']} lanes, steps median "
+            f"per trajectory at 1e-3 ({e['ratio']:.2f}x; {base['lanes']} lanes, steps median "
             f"{stiff['steps_median']}, max {stiff['steps_max']} against {base['steps_median']}, "
             f"{base['steps_max']}), failed {stiff['failed']}",
             flush=True,
         )
         if args.eps_lanes:
-            batch = jh.BatchOptions(lanes=args.eps_lanes)
-            _, base_w = _timed_scan(sc, sub, times, batch=batch, **obs)
-            _, stiff_w = _timed_scan(sc.replace(**{EPS: 1e-4}), sub, times, batch=batch, **obs)
-            rec["eps_1e-4_lanes"] = {
+            e = rec["eps_1e-4_lanes"] = {
                 "lanes": args.eps_lanes,
-                "preset_eps": base_w,
-                "eps_1e-4": stiff_w,
-                "ratio": stiff_w["compute_s"] / base_w["compute_s"],
+                **eps_pair(batch=jh.BatchOptions(lanes=args.eps_lanes)),
             }
+            base, stiff = e["preset_eps"], e["eps_1e-4"]
             print(
-                f"  the same in groups of {args.eps_lanes} lanes: {stiff_w['ms_per_trajectory']:.2f} vs "
-                f"{base_w['ms_per_trajectory']:.2f} ms per trajectory "
-                f"({rec['eps_1e-4_lanes']['ratio']:.2f}x), failed {stiff_w['failed']}",
+                f"  the same in groups of {args.eps_lanes} lanes: {stiff['ms_per_trajectory']:.2f} vs "
+                f"{base['ms_per_trajectory']:.2f} ms per trajectory ({e['ratio']:.2f}x), "
+                f"failed {stiff['failed']}",
                 flush=True,
             )
 
