@@ -142,6 +142,26 @@ def test_a_renamed_scenario_reuses_the_compiled_chunk(box, clean):
         np.testing.assert_array_equal(again[k], clean[k], err_msg=k)
 
 
+def test_another_swept_parameter_reuses_the_compiled_group(box, clean):
+    """The lock-step group program takes the members' scenarios, not their values (`batch.group_spec`): a
+    scan of the foundation's stiffness instead of μ, and a scan of μ on a stiffer box, run the group program
+    of `clean` without compiling it again, and the member that the two share (μ = 0.3, the box's own, at
+    k = 2e7 N/m) is bit for bit the same, whichever parameter was swept."""
+    assert clean.attrs["group_program"] == "compiled"
+    stiffnesses = np.array([1.0e7, 1.5e7, 2.0e7, 2.5e7])
+    by_k = scan(box, {"foundation.stiffness": stiffnesses}, TIMES, **kw(chunk_size=4))
+    stiffer = box.replace(**{"foundation.stiffness": 2.0e7})
+    by_mu = scan(stiffer, {MU: MUS}, TIMES, **kw(chunk_size=4))
+    assert by_k.attrs["group_program"] == by_mu.attrs["group_program"] == "reused"
+    assert np.all(by_k.ok) and np.all(by_mu.ok)
+    assert float(get_param(box, MU)) == MUS[2]
+    for k in clean.data:
+        np.testing.assert_array_equal(by_k[k][2], by_mu[k][2], err_msg=k)
+    assert by_k.num_accepted_steps[2] == by_mu.num_accepted_steps[2]
+    # the stiffness matters: the stiffer foundation gives other results than the box's 1.5e7 N/m
+    assert not np.array_equal(by_k["final_position"][2], by_k["final_position"][1])
+
+
 @pytest.mark.parametrize("solver", [None, diffrax.Tsit5()], ids=["default", "tsit5"])
 def test_layout_independent_and_failing_group_mate_isolated(paper42, solver):
     """On paper-4.2 over 0.5 s in groups of 4, with the default solver (Rosenbrock-W) and Tsit5:

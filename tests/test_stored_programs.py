@@ -119,7 +119,10 @@ def _assert_same_bits(a: Path, b: Path) -> None:
 
 
 def _group_files(cache: Path) -> list[Path]:
-    return sorted((cache / sp.SUBFOLDER).glob("scan-group-*-cache"))
+    """The stored group programs: the lock-step group (a scan without derivatives) and the vmapped one (with
+    derivatives), beside which the small program of the lock-step members' scenarios is stored."""
+    folder = cache / sp.SUBFOLDER
+    return sorted([*folder.glob("scan-group-*-cache"), *folder.glob("scan-lock-step-group-*-cache")])
 
 
 def test_a_second_process_loads_the_scan_group_programs_untraced_with_the_same_bits(tmp_path, monkeypatch):
@@ -131,6 +134,7 @@ def test_a_second_process_loads_the_scan_group_programs_untraced_with_the_same_b
     assert first["how"] == {"plain": "compiled", "derivatives": "compiled"} and first["traced"] > 0
     stored = _group_files(cache)
     assert len(stored) == 2  # one program each, stored whole
+    assert len(list((cache / sp.SUBFOLDER).glob("scan-members-*-cache"))) == 1
 
     second = _run_scan(cache, tmp_path / "b.npz", "plain,derivatives")
     assert second["how"] == {"plain": "loaded", "derivatives": "loaded"}

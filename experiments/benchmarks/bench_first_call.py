@@ -1,16 +1,18 @@
-"""Time to first result of the Python API: the first call of `scan` (256 values of μ), `scan` with
-derivatives (16 values), `identify` (the docs' five-parameter fit) and `locate_bifurcation` (paper-4.3's μ*),
-each in a fresh Python process with the README's set-up lines (float64, every core, the persistent
-compilation cache), cold (an empty cache folder) and warm (the same folder again, a new process).
+"""Time to first result of the Python API: the first call of `scan` (256 values of μ, then in the same
+process 256 values of the foundation's stiffness), `scan` with derivatives (16 values), `identify` (the
+docs' five-parameter fit) and `locate_bifurcation` (paper-4.3's μ*), each in a fresh Python process with
+the README's set-up lines (float64, every core, the persistent compilation cache), cold (an empty cache
+folder) and warm (the same folder again, a new process).
 
     python experiments/benchmarks/bench_first_call.py [--out DIR] [--quick] [--case NAME ...]
 
 Prints one line per case and temperature: the import time, the first call's wall time (compile included),
-a second call's wall time in the same process (other parameter values: the run alone) and, for the scans,
-the second call's time per trajectory. `--quick` runs each case once, over 2 s with fewer members (a smoke
-check), in `$JAXHOIST_CACHE_DIR` where it is set (CI's folder, shared by every smoke run: "cold" is then
-only as cold as that folder), else in a fresh folder. With `--out`, the table also goes to
-`DIR/first_call.txt`. The user's cache is never touched.
+a second call's wall time in the same process (other parameter values: the run alone; for
+`scan-256-another-param` a scan of another parameter) and, for the scans, the second call's time per
+trajectory. `--quick` runs each case once, over 2 s with fewer members (a smoke check), in
+`$JAXHOIST_CACHE_DIR` where it is set (CI's folder, shared by every smoke run: "cold" is then only as cold
+as that folder), else in a fresh folder. With `--out`, the table also goes to `DIR/first_call.txt`. The
+user's cache is never touched.
 """
 
 from __future__ import annotations
@@ -48,6 +50,14 @@ def first():
     jh.scan(sc, {MU: np.linspace(0.1, 0.6, n)}, jh.Times(T1))
 def again():
     jh.scan(sc, {MU: np.linspace(0.15, 0.65, n)}, jh.Times(T1))
+""",
+    "scan-256-another-param": """\
+sc = jh.load_scenario("paper-4.2")
+n = 256 if T1 >= 25.0 else 16
+def first():
+    jh.scan(sc, {MU: np.linspace(0.1, 0.6, n)}, jh.Times(T1))
+def again():  # another swept parameter: the same group program (batch.group_spec)
+    jh.scan(sc, {"foundation.stiffness": np.linspace(1.0e7, 3.0e7, n)}, jh.Times(T1))
 """,
     "scan-derivatives-16": """\
 sc = jh.load_scenario("paper-4.2")

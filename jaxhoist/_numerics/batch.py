@@ -1,9 +1,8 @@
 """The batch core of a scan: one member's solve and observables, a lock-step group of members (the
-one compiled program, the same for any member count, chunk size and device count), the groups of a chunk
-on each device one after another, and the devices in parallel (failing group mates isolated:
-`CompiledChunk`). Pure: no I/O, no
-printing; a member's failure is its status, never an exception. `apps.scan` lays the members out and
-runs the chunks.
+one compiled program, the same for any member count, chunk size and device count, and without derivatives
+for any swept parameters: `group_spec`), the groups of a chunk on each device one after another, and the
+devices in parallel (failing group mates isolated: `CompiledChunk`). Pure: no I/O, no printing; a member's
+failure is its status, never an exception. `apps.scan` lays the members out and runs the chunks.
 """
 
 from __future__ import annotations
@@ -94,11 +93,17 @@ class BatchSpec:
     derivatives: bool = False
 
 
-def member_scenario(scenario, row, spec: BatchSpec):
-    """The scenario of one member: `scenario` with each of `spec.paths` set to its value in `row`."""
-    for k, p in enumerate(spec.paths):
+def member_scenario(scenario, row, paths: tuple[str, ...]):
+    """The scenario of one member: `scenario` with each of `paths` set to its value in `row`."""
+    for k, p in enumerate(paths):
         scenario = set_param(scenario, p, row[k])
     return scenario
+
+
+def member_scenarios(scenario, values, paths: tuple[str, ...]):
+    """The scenarios of a group's members, `values` (L, P): `member_scenario` of each row, every array leaf
+    with a leading member axis (the leaves no path sets repeated), as `lock_step_group` takes them."""
+    return eqx.filter_vmap(lambda row: member_scenario(scenario, row, paths))(values)
 
 
 def member(scenario, ts, row, spec: BatchSpec):
@@ -111,7 +116,7 @@ def member(scenario, ts, row, spec: BatchSpec):
     core = fixed_mod.solve_fixed if lean else solve_joint if joint else solve
 
     def run(row):
-        sc = member_scenario(scenario, row, spec)
+        sc = member_scenario(scenario, row, spec.paths)
         traj = core(sc, ts, opts)
         obs = {o.name: o(traj, sc) for o in spec.observables}
         return obs, (obs, traj)
@@ -163,20 +168,23 @@ def in_lock_step(spec: BatchSpec, ts) -> bool:
     return not spec.derivatives and lockstep.supports(opts.solver, controller, opts.progress_meter)
 
 
-def _lock_step_group(scenario, ts, values, spec: BatchSpec):
-    """`group_fn` for `in_lock_step` specs: each member's scenario and initial state (batched), one
-    `lockstep.solve_group` for the group, then each member's outputs and observables as `member` makes
-    them."""
+def group_spec(spec: BatchSpec, ts) -> BatchSpec:
+    """The spec that the group program of `spec` is compiled for: for `in_lock_step` specs without the swept
+    paths, since that program takes the members' scenarios (`member_scenarios`, a small program of its own),
+    not their values. So a scan of another parameter, or of several, with the same observables, options,
+    group width and saved times runs the same compiled group program (in this process, or loaded from the
+    cache folder)."""
+    return dataclasses.replace(spec, paths=()) if in_lock_step(spec, ts) else spec
+
+
+def lock_step_group(scenarios, ts, spec: BatchSpec):
+    """The group program of `in_lock_step` specs: from the members' scenarios (`member_scenarios`: every
+    array leaf with a leading member axis) each member's initial state, one `lockstep.solve_group` for the
+    group, then each member's outputs and observables as `member` makes them. `spec.paths` is not used."""
     opts = spec.options
-
-    def prepare(row):
-        sc = member_scenario(scenario, row, spec)
-        y0, c = initial_state(sc)
-        return sc, y0, c
-
-    scs, y0s, cs = eqx.filter_vmap(prepare)(values)
+    y0s, cs = eqx.filter_vmap(initial_state)(scenarios)
     sol = lockstep.solve_group(
-        opts.solver, step_size_controller(opts, ts), ts, y0s, (scs, cs), opts.dt0, opts.max_steps
+        opts.solver, step_size_controller(opts, ts), ts, y0s, (scenarios, cs), opts.dt0, opts.max_steps
     )
 
     def finish(sc, c, ys, result, accepted, rejected):
@@ -187,17 +195,19 @@ def _lock_step_group(scenario, ts, values, spec: BatchSpec):
         return checked_outputs(obs, {}, traj, spec)
 
     return eqx.filter_vmap(finish)(
-        scs, cs, sol.ys, sol.result, sol.num_accepted_steps, sol.num_rejected_steps
+        scenarios, cs, sol.ys, sol.result, sol.num_accepted_steps, sol.num_rejected_steps
     )
 
 
 def group_fn(scenario, ts, values, spec: BatchSpec):
     """values (L, P) -> outputs with leading (L,): one lock-step group. Without derivatives, with the
-    default adaptive solve, one while loop over the lanes (`lockstep.solve_group`, `in_lock_step`): a
-    `jax.vmap` of `member` would batch the solve's while loop several times in tracing. Otherwise a
-    `jax.vmap` of `member`."""
+    default adaptive solve, one while loop over the lanes (`lock_step_group` of `member_scenarios`,
+    `in_lock_step`): a `jax.vmap` of `member` would batch the solve's while loop several times in tracing.
+    Otherwise a `jax.vmap` of `member`. (A scan compiles the lock-step route as two programs,
+    `member_scenarios` and `lock_step_group`, so that the large one does not depend on the swept paths:
+    `group_spec`.)"""
     if in_lock_step(spec, ts):
-        return _lock_step_group(scenario, ts, values, spec)
+        return lock_step_group(member_scenarios(scenario, values, spec.paths), ts, spec)
     return jax.vmap(lambda row: member(scenario, ts, row, spec))(values)
 
 
@@ -305,8 +315,8 @@ class CompiledChunk:
 
 
 class _LoweredChunk:
-    def __init__(self, spec: BatchSpec, lowered: dict):
-        self.spec, self.lowered = spec, lowered
+    def __init__(self, spec: BatchSpec, lowered: dict, wrap=None):
+        self.spec, self.lowered, self.wrap = spec, lowered, wrap
 
     def compile(self) -> CompiledChunk:
         items = list(self.lowered.items())
@@ -317,18 +327,23 @@ class _LoweredChunk:
                 exes = dict(
                     zip([d for d, _ in items], pool.map(lambda kv: kv[1].compile(), items), strict=True)
                 )
+        if self.wrap is not None:
+            exes = {d: self.wrap(exe) for d, exe in exes.items()}
         return CompiledChunk(self.spec, exes)
 
 
 class ChunkProgram:
     """The batch core for one `BatchSpec`, with the ahead-of-time interface of a jitted function:
     `chunk_fn(spec).lower(scenario, ts, values, active).compile()` gives a `CompiledChunk` for any number
-    of groups G (what is lowered and compiled is one group, `group_fn`, of the shape of `values[0]`). G (the
-    leading axis of `values`) must be a multiple of the number of devices."""
+    of groups G (what is lowered and compiled is one group, `group_fn`, of the shape of `values[0]`; for
+    `in_lock_step` specs `lock_step_group` of the members' scenarios, `member_scenarios` running before it
+    as a program of its own). G (the leading axis of `values`) must be a multiple of the number of
+    devices."""
 
     def __init__(self, spec: BatchSpec):
         self.spec = spec
         self._fn = eqx.filter_jit(functools.partial(group_fn, spec=spec))
+        self._members = eqx.filter_jit(functools.partial(member_scenarios, paths=spec.paths))
 
     def lower(self, scenario, ts, values, active) -> _LoweredChunk:
         n_dev = len(self.spec.devices)
@@ -336,11 +351,16 @@ class ChunkProgram:
         if n_groups % n_dev:
             raise ValueError(f"{n_groups} groups do not split evenly over {n_dev} devices")
         values = np.asarray(values)
-        lowered = {
-            d: self._fn.lower(*_to_device((scenario, ts, values[0]), d))
-            for d in dict.fromkeys(execution_targets(self.spec.devices))
-        }
-        return _LoweredChunk(self.spec, lowered)
+        targets = dict.fromkeys(execution_targets(self.spec.devices))
+        if not in_lock_step(self.spec, ts):
+            lowered = {d: self._fn.lower(*_to_device((scenario, ts, values[0]), d)) for d in targets}
+            return _LoweredChunk(self.spec, lowered)
+        group = eqx.filter_jit(functools.partial(lock_step_group, spec=group_spec(self.spec, ts)))
+        lowered = {}
+        for d in targets:
+            sc, t, v = _to_device((scenario, ts, values[0]), d)
+            lowered[d] = group.lower(self._members(sc, v), t)
+        return _LoweredChunk(self.spec, lowered, wrap=lambda exe: _LockStepCall(self._members, exe))
 
 
 @functools.lru_cache(maxsize=32)
@@ -360,21 +380,38 @@ def stores_whole(spec: BatchSpec) -> bool:
     return target.platform == "cpu" and target == jax.devices()[0]
 
 
-def compiled_chunk(spec: BatchSpec, scenario, ts, values, active) -> tuple[CompiledChunk, float, bool]:
-    """The `CompiledChunk` of `spec` for chunks shaped like `values` (G, L, P), made once per process.
+def compiled_chunk(spec: BatchSpec, scenario, ts, values, active) -> tuple[CompiledChunk, float, str]:
+    """The `CompiledChunk` of `spec` for chunks shaped like `values` (G, L, P), made once per process (for
+    `in_lock_step` specs the group program once for every `spec` of the same `group_spec`, whatever the
+    swept paths).
 
-    **Returns** `(chunk, seconds spent making its program now, loaded)`: `loaded` True where the group
-    program was loaded from the persistent compilation cache's folder (`compile_cache.program`)."""
+    **Returns** `(chunk, seconds spent making its programs now, how)`: how the group program was had,
+    "compiled", "loaded" (from the persistent compilation cache's folder, `compile_cache.program`) or
+    "reused" (compiled earlier in this process)."""
     if stores_whole(spec):
         (target,) = set(execution_targets(spec.devices))
-        args = (*_to_device((scenario, ts, np.asarray(values)[0]), target), spec)
-        exe, seconds, loaded = compile_cache.program("scan", "scan-group", group_fn, args)
-        return CompiledChunk(spec, {target: _GroupCall(exe, spec)}), seconds, loaded
+        sc, t, v = _to_device((scenario, ts, np.asarray(values)[0]), target)
+        if not in_lock_step(spec, ts):
+            exe, seconds, loaded = compile_cache.program("scan", "scan-group", group_fn, (sc, t, v, spec))
+            return CompiledChunk(spec, {target: _GroupCall(exe, spec)}), seconds, _how(seconds, loaded)
+        members, s_members, _ = compile_cache.program(
+            "scan-members", "scan-members", member_scenarios, (sc, v, spec.paths)
+        )
+        gspec = group_spec(spec, ts)
+        group, s_group, loaded = compile_cache.program(
+            "scan", "scan-lock-step-group", lock_step_group, (members(sc, v, spec.paths), t, gspec)
+        )
+        call = _LockStepCall(lambda sc, v: members(sc, v, spec.paths), lambda scs, t: group(scs, t, gspec))
+        return CompiledChunk(spec, {target: call}), s_members + s_group, _how(s_group, loaded)
     key = (spec, *compile_cache.structure_key(scenario, ts, jnp.asarray(values[0])))
     chunk, seconds = compile_cache.compiled(
         "scan", key, lambda: chunk_fn(spec).lower(scenario, ts, values, active)
     )
-    return chunk, seconds, False
+    return chunk, seconds, _how(seconds, False)
+
+
+def _how(seconds: float, loaded: bool) -> str:
+    return "loaded" if loaded else "compiled" if seconds else "reused"
 
 
 class _GroupCall:
@@ -385,6 +422,17 @@ class _GroupCall:
 
     def __call__(self, scenario, ts, values):
         return self.exe(scenario, ts, values, self.spec)
+
+
+class _LockStepCall:
+    """`call(scenario, ts, values)` for the lock-step route: `members(scenario, values)` gives the members'
+    scenarios (`member_scenarios`), `group(scenarios, ts)` runs the group program (`lock_step_group`)."""
+
+    def __init__(self, members, group):
+        self.members, self.group = members, group
+
+    def __call__(self, scenario, ts, values):
+        return self.group(self.members(scenario, values), ts)
 
 
 def flatten_out(out: Mapping, n: int) -> dict[str, np.ndarray]:

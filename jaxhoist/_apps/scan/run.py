@@ -405,9 +405,9 @@ class _Run:
         vals = rows_p.reshape(groups, lanes, len(self.spec.paths))
         t_start = time.perf_counter()
         # one compiled group serves any number of groups (`numerics.batch.CompiledChunk`)
-        fn, dt, loaded = compiled_chunk(self.spec, self.scenario, self.ts, vals, active)
+        fn, dt, how = compiled_chunk(self.spec, self.scenario, self.ts, vals, active)
         if self.program is None:
-            self.program = "loaded" if loaded else "compiled" if dt else "reused"
+            self.program = how
         if dt:
             self.compile_time += dt
             t_start = time.perf_counter()
