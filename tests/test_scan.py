@@ -145,8 +145,8 @@ def test_a_renamed_scenario_reuses_the_compiled_chunk(box, clean):
 def test_another_swept_parameter_reuses_the_compiled_group(box, clean):
     """The lock-step group program takes the members' scenarios, not their values (`batch.group_spec`): a
     scan of the foundation's stiffness instead of μ, and a scan of μ on a stiffer box, run the group program
-    of `clean` without compiling it again, and the member that the two share (μ = 0.3, the box's own, at
-    k = 2e7 N/m) is bit for bit the same, whichever parameter was swept."""
+    of `clean` without compiling it again, and a member that two of them share is bit for bit the same,
+    whichever parameter was swept (the box's own μ = 0.3 at k = 2e7 N/m, and the box itself)."""
     assert clean.attrs["group_program"] == "compiled"
     stiffnesses = np.array([1.0e7, 1.5e7, 2.0e7, 2.5e7])
     by_k = scan(box, {"foundation.stiffness": stiffnesses}, TIMES, **kw(chunk_size=4))
@@ -155,11 +155,28 @@ def test_another_swept_parameter_reuses_the_compiled_group(box, clean):
     assert by_k.attrs["group_program"] == by_mu.attrs["group_program"] == "reused"
     assert np.all(by_k.ok) and np.all(by_mu.ok)
     assert float(get_param(box, MU)) == MUS[2]
+    assert float(get_param(box, "foundation.stiffness")) == stiffnesses[1]
     for k in clean.data:
         np.testing.assert_array_equal(by_k[k][2], by_mu[k][2], err_msg=k)
+        np.testing.assert_array_equal(by_k[k][1], clean[k][2], err_msg=k)  # the box itself
     assert by_k.num_accepted_steps[2] == by_mu.num_accepted_steps[2]
     # the stiffness matters: the stiffer foundation gives other results than the box's 1.5e7 N/m
     assert not np.array_equal(by_k["final_position"][2], by_k["final_position"][1])
+
+
+def test_another_swept_parameter_reuses_the_group_compiled_as_for_an_accelerator(box, clean, monkeypatch):
+    """The same on the route of accelerators (and of host devices other than the default one), where each
+    device gets its own copy of the group program (`batch.ChunkProgram`): the stiffness scan reuses the μ
+    scan's copy, and both give `clean`'s bits, which come from the stored route."""
+    from jaxhoist._numerics import batch
+
+    monkeypatch.setattr(batch, "stores_whole", lambda spec: False)
+    by_mu = scan(box, {MU: MUS}, TIMES, **kw(chunk_size=4))
+    by_k = scan(box, {"foundation.stiffness": [1.0e7, 1.5e7]}, TIMES, **kw(chunk_size=4))
+    assert by_mu.attrs["group_program"] == "compiled" and by_k.attrs["group_program"] == "reused"
+    for k in clean.data:
+        np.testing.assert_array_equal(by_mu[k], clean[k], err_msg=k)
+        np.testing.assert_array_equal(by_k[k][1], clean[k][2], err_msg=k)  # the box itself
 
 
 @pytest.mark.parametrize("solver", [None, diffrax.Tsit5()], ids=["default", "tsit5"])

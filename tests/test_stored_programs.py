@@ -47,7 +47,19 @@ builtin = [
 ]
 def mine(traj):
     return traj.position[-1, 0]
+
+def lock_step_keys(paths):  # the two stored programs of a scan without derivatives: (group, members)
+    spec = batch.BatchSpec(paths=paths, observables=tuple(builtin), histories=("position",),
+                           options=jh.SolverOptions(), lanes=2, devices=tuple(jax.devices()))
+    sc, ts = jh.load_scenario("paper-4.2").unlabelled(), jnp.linspace(0.0, 0.5, 6)
+    values = jnp.full((2, len(paths)), 0.3)
+    scenarios = batch.member_scenarios(sc, values, paths)
+    return [sp.program_key("scan-lock-step-group", (scenarios, ts, batch.group_spec(spec, ts))),
+            sp.program_key("scan-members", (sc, values, paths))]
+
 print(json.dumps({
+    "lock_step": [lock_step_keys(p) for p in [("foundation.friction_coefficient",), ("foundation.stiffness",),
+                                              ("foundation.friction_coefficient", "hoist.speed")]],
     "builtin": [key(builtin), key(builtin, True)],
     "prefixes": [key(builtin[:k]) for k in range(1, len(builtin) + 1)],
     "closures": [key([obs_mod.detachment_time_difference(c, "D")]) for c in "EF"],
@@ -58,8 +70,9 @@ print(json.dumps({
 
 
 def test_scan_group_programs_have_a_stable_key_unless_an_observable_is_the_users():
-    """In a plain process (pytest's jaxtyping hook wraps jaxhoist's closures in checkers the key does not
-    cover, so that there they are not stored)."""
+    """Without derivatives the group program's key is the same for any swept parameters. In a plain process
+    (pytest's jaxtyping hook wraps jaxhoist's closures in checkers the key does not cover, so that there
+    they are not stored)."""
     keys = run_script(_KEY_SCRIPT)
     plain, derivatives = keys["builtin"]
     assert plain is not None and derivatives is not None and plain != derivatives
@@ -68,6 +81,11 @@ def test_scan_group_programs_have_a_stable_key_unless_an_observable_is_the_users
     e, f = keys["closures"]  # two closures of one factory that differ only in what they captured
     assert e is not None and f is not None and e != f
     assert keys["user"] == [None, None]  # a user's code is not covered by the key: nothing is stored
+    # without derivatives the group program's key does not depend on the swept paths, only the small
+    # members program's does
+    groups, members = zip(*keys["lock_step"], strict=True)
+    assert None not in groups and len(set(groups)) == 1 and groups[0] != plain
+    assert None not in members and len(set(members)) == 3
 
 
 # ------------------------------------------------------------------------------------ across processes

@@ -7,7 +7,8 @@ compiled.
 
 Programs: `simulate` (the elastic core of `jaxhoist simulate` / `jh.simulate`, default solver),
 `scan` (one lock-step group of `jh.scan` of the friction coefficient, `numerics.batch.group_fn`: one while
-loop over its lanes, `numerics.lockstep`) and `scan-derivatives` (the same group with `derivatives=True`:
+loop over its lanes, `numerics.lockstep`; timed as one program with the small one that sets the members'
+values, which a scan compiles apart) and `scan-derivatives` (the same group with `derivatives=True`:
 forward-mode sensitivities, a `jax.vmap` of members); on request `scan-member` and
 `scan-derivatives-member`, one member of those groups alone, unbatched (`numerics.batch.member`): a group's
 trace less its member's is what batching the group adds (JAX batches a vmapped while loop's body several

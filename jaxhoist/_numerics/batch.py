@@ -343,7 +343,7 @@ class ChunkProgram:
     def __init__(self, spec: BatchSpec):
         self.spec = spec
         self._fn = eqx.filter_jit(functools.partial(group_fn, spec=spec))
-        self._members = eqx.filter_jit(functools.partial(member_scenarios, paths=spec.paths))
+        self.members = eqx.filter_jit(functools.partial(member_scenarios, paths=spec.paths))
 
     def lower(self, scenario, ts, values, active) -> _LoweredChunk:
         n_dev = len(self.spec.devices)
@@ -359,8 +359,8 @@ class ChunkProgram:
         lowered = {}
         for d in targets:
             sc, t, v = _to_device((scenario, ts, values[0]), d)
-            lowered[d] = group.lower(self._members(sc, v), t)
-        return _LoweredChunk(self.spec, lowered, wrap=lambda exe: _LockStepCall(self._members, exe))
+            lowered[d] = group.lower(self.members(sc, v), t)
+        return _LoweredChunk(self.spec, lowered, wrap=lambda exe: _LockStepCall(self.members, exe))
 
 
 @functools.lru_cache(maxsize=32)
@@ -399,15 +399,26 @@ def compiled_chunk(spec: BatchSpec, scenario, ts, values, active) -> tuple[Compi
         )
         gspec = group_spec(spec, ts)
         group, s_group, loaded = compile_cache.program(
-            "scan", "scan-lock-step-group", lock_step_group, (members(sc, v, spec.paths), t, gspec)
+            "scan-lock-step", "scan-lock-step-group", lock_step_group, (members(sc, v, spec.paths), t, gspec)
         )
         call = _LockStepCall(lambda sc, v: members(sc, v, spec.paths), lambda scs, t: group(scs, t, gspec))
         return CompiledChunk(spec, {target: call}), s_members + s_group, _how(s_group, loaded)
-    key = (spec, *compile_cache.structure_key(scenario, ts, jnp.asarray(values[0])))
+    program = chunk_fn(spec)
+    if not in_lock_step(spec, ts):
+        key = (spec, *compile_cache.structure_key(scenario, ts, jnp.asarray(values[0])))
+        chunk, seconds = compile_cache.compiled(
+            "scan", key, lambda: program.lower(scenario, ts, values, active)
+        )
+        return chunk, seconds, _how(seconds, False)
+    # the group programs, keyed by what they are compiled for (not the paths), each device's wrapped with this
+    # spec's members program
+    scenarios = eqx.filter_eval_shape(program.members, scenario, np.asarray(values)[0])
+    key = (group_spec(spec, ts), *compile_cache.structure_key(scenarios, ts))
     chunk, seconds = compile_cache.compiled(
-        "scan", key, lambda: chunk_fn(spec).lower(scenario, ts, values, active)
+        "scan-lock-step", key, lambda: program.lower(scenario, ts, values, active)
     )
-    return chunk, seconds, _how(seconds, False)
+    calls = {d: _LockStepCall(program.members, call.group) for d, call in chunk.executables.items()}
+    return CompiledChunk(spec, calls), seconds, _how(seconds, False)
 
 
 def _how(seconds: float, loaded: bool) -> str:
