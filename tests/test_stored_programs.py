@@ -113,7 +113,9 @@ with warnings.catch_warnings(record=True) as caught:
     sc = jh.load_scenario("paper-4.2")
     observables = ["final_psi", "max_tilt", obs_mod.detachment_time_difference("E", "D")]
     for case in sys.argv[3].split(","):
-        res = jh.scan(sc, {"foundation.friction_coefficient": np.linspace(0.2, 0.5, 4)}, jh.Times(0.5, n=6),
+        sweep = ({"foundation.stiffness": np.linspace(1.0e7, 2.0e7, 4)} if case == "stiffness"
+                 else {"foundation.friction_coefficient": np.linspace(0.2, 0.5, 4)})
+        res = jh.scan(sc, sweep, jh.Times(0.5, n=6),
                       observables=observables, histories=["position"], derivatives=case == "derivatives",
                       options=jh.SolverOptions(diffrax.Tsit5()))
         how[case] = res.attrs["group_program"]
@@ -160,6 +162,14 @@ def test_a_second_process_loads_the_scan_group_programs_untraced_with_the_same_b
     assert not second["warnings"] and _group_files(cache) == stored
     _assert_same_bits(tmp_path / "a.npz", tmp_path / "b.npz")
     assert np.all(np.isfinite(np.load(tmp_path / "b.npz")["derivatives:d_final_psi"]))
+
+    # another swept parameter in a third process: the group program of the μ scan, loaded untraced; only
+    # the small program that sets the stiffness is new
+    third = _run_scan(cache, tmp_path / "c.npz", "stiffness")
+    assert third["how"] == {"stiffness": "loaded"} and third["traced"] == 0 and not third["warnings"]
+    assert _group_files(cache) == stored
+    assert len(list((cache / sp.SUBFOLDER).glob("scan-members-*-cache"))) == 2
+    assert np.all(np.load(tmp_path / "c.npz")["stiffness:status"] == 0)
 
     # the stored program gives the bits of the program compiled as for an accelerator (`ChunkProgram`), in
     # this process, without the cache

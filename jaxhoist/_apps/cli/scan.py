@@ -198,8 +198,10 @@ def run_cli(args) -> int:
         f"steps         median {int(np.median(res.num_accepted_steps))}, "
         f"max {int(res.num_accepted_steps.max())}"
     )
+    # "load" where the group program came from the cache folder (the seconds are then mostly the load)
+    making = "load" if res.attrs.get("group_program") == "loaded" else "compile"
     print(
-        f"wall time     compile {t['compile']:.3g} s, solve {t['compute']:.3g} s "
+        f"wall time     {making} {t['compile']:.3g} s, solve {t['compute']:.3g} s "
         f"({1e3 * t['compute'] / max(1, t['members_computed']):.3g} ms per member), total {t['total']:.3g} s"
     )
     if res.accuracy is not None:
