@@ -1,10 +1,10 @@
 """Compiled programs stored whole (`stored_programs`, through `compile_cache.program`): a second process with
-the same cache folder loads the scan's group program (plain and with forward-mode sensitivities) and
-`simulate`'s solve core and the bifurcation locator's solves without tracing them, and returns the same
-bits; programs whose key has no stable text (a user's lambda observable) are not stored. (A damaged stored
-file, compiled again with a warning, is tested once, on a small program, on the route every program here
-takes, `stored_programs.load_or_compile`: tests/test_compilation_cache.py.) Short horizons and few members:
-the compile is what is tested, not the physics."""
+the same cache folder loads the scan's group program (plain and with forward-mode sensitivities),
+`simulate`'s solve core, the bifurcation locator's solves and the rigid model's phase-driver pieces without
+tracing them, and returns the same bits; programs whose key has no stable text (a user's lambda observable)
+are not stored. (A damaged stored file, compiled again with a warning, is tested once, on a small program,
+on the route every program here takes, `stored_programs.load_or_compile`: tests/test_compilation_cache.py.)
+Short horizons and few members: the compile is what is tested, not the physics."""
 
 from pathlib import Path
 
@@ -284,3 +284,43 @@ def test_a_second_process_loads_the_locators_solves_untraced_with_the_same_bits(
     assert runs[0]["values"] == runs[1]["values"]  # bit for bit (JSON keeps every digit of a float)
     names = sorted(p.name.rsplit("-", 2)[0] for p in (tmp_path / "cache" / sp.SUBFOLDER).glob("*-cache"))
     assert names == ["bifurcation-jvp", "bifurcation-value"]
+
+
+_RIGID_SCRIPT = r"""
+import collections, json, sys, warnings
+import jax, numpy as np
+jax.config.update("jax_enable_x64", True)
+import jaxhoist as jh
+from jaxhoist._numerics import compile_cache
+
+traced = collections.Counter()
+def listen(event, duration, **kwargs):  # JAX reports each trace of a program compiled apart, by name
+    if event == "/jax/core/compile/jaxpr_trace_duration":
+        traced[kwargs.get("fun_name", "?")] += 1
+jax.monitoring.register_event_duration_secs_listener(listen)
+
+warnings.simplefilter("always")
+with warnings.catch_warnings(record=True) as caught:
+    jh.enable_compilation_cache(sys.argv[1])
+    tr = jh.simulate_rigid(jh.load_scenario("paper-4.1"), jh.Times(1.0, n=11))
+np.savez(sys.argv[2], position=np.asarray(tr.position), euler=np.asarray(tr.euler),
+         normal_forces=np.asarray(tr.normal_forces))
+print(json.dumps({"traced": dict(traced), "warnings": [str(w.message) for w in caught],
+                  "pieces": sorted(k for k, _ in compile_cache._CACHE if k.startswith("rigid-"))}))
+"""
+
+
+def test_a_second_process_loads_the_rigid_models_pieces_untraced_with_the_same_bits(tmp_path):
+    """The rigid model's phase driver (`numerics.rigid.compiled`): the phase solve and the guards, contact
+    matrices, candidate configurations, forces and outputs it evaluates on the host between phases, each
+    stored whole (`compile_cache.stored_jit`). paper-4.1's first second: its start jerk, a few phases."""
+    first, second = (run_script(_RIGID_SCRIPT, tmp_path / "cache", tmp_path / f"{x}.npz") for x in "ab")
+    pieces = first["pieces"]
+    assert "rigid-phase-solve" in pieces and len(pieces) >= 4, pieces
+    assert first["traced"].get("_phase_solve", 0) == 1
+    stored = sorted(p.name.rsplit("-", 2)[0] for p in (tmp_path / "cache" / sp.SUBFOLDER).glob("*-cache"))
+    assert stored == pieces  # one program each, stored whole
+    assert second["pieces"] == pieces and not second["warnings"]
+    names = {"_phase_solve", "raw_guards", "contact_matrices", "eval_candidates", "forces", "_outputs"}
+    assert not names & set(second["traced"]), f"traced although stored: {second['traced']}"
+    _assert_same_bits(tmp_path / "a.npz", tmp_path / "b.npz")

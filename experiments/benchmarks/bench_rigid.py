@@ -4,6 +4,9 @@ second (solve only), in one process, with JAX's own compile-time counters.
     python experiments/benchmarks/bench_rigid.py  # paper-4.1 over its 70 s, elastic rope
     python experiments/benchmarks/bench_rigid.py --rope inextensible       # the inextensible rope (2.15)
     python experiments/benchmarks/bench_rigid.py --preset paper-2.3 --t1 20
+    # a new process's first call, cold then warm: run twice with one cache folder (the second loads the
+    # phase driver's compiled pieces, stored whole, without tracing them)
+    python experiments/benchmarks/bench_rigid.py --cache out/bench-rigid-cache
     # smoke check: paper-2.3 over 1 s
     python experiments/benchmarks/bench_rigid.py --quick --out out/bench-rigid
 
@@ -42,9 +45,13 @@ def main(argv=None) -> int:
     p.add_argument("--rope", default="elastic", choices=("elastic", "inextensible"))
     p.add_argument("--out", default=None, help="folder for bench_rigid.json (optional)")
     p.add_argument("--quick", action="store_true", help="smoke check: paper-2.3 over 1 s, 101 saved times")
+    p.add_argument("--cache", default=None, help="the compilation-cache folder to use (default: none)")
     args = p.parse_args(argv)
-    if args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
+    if args.cache is not None:
+        jaxhoist.enable_compilation_cache(args.cache)
+    elif args.quick:  # smoke runs share one compilation cache ($JAXHOIST_CACHE_DIR: .ci/experiments sets it)
         jaxhoist.enable_compilation_cache()
+    if args.quick:
         args.preset, args.t1, args.n_save = "paper-2.3", 1.0, 101
     durations: dict[str, float] = {}
 

@@ -5,12 +5,16 @@ stored there). `compiled(kind, key, lower)` lowers and compiles once per `(kind,
 another way (an accelerator's copies of a scan's group program, identification's cores). Either keeps the
 executable for the process's lifetime, so repeated calls (scan chunks, the command line's `main()` called
 again in one process, identification starts) compile once and can time the compilation apart from the run.
-`structure_key` is the usual key: pytree structure, leaf shapes and dtypes.
+`structure_key` is the usual key: pytree structure, leaf shapes and dtypes. `stored_jit(name)` makes a
+function called many times from the host (the rigid model's phase driver) go through `program` on each call,
+as `equinox.filter_jit` would compile it.
 """
 
 from __future__ import annotations
 
 import contextlib
+import functools
+import inspect
 import time
 from collections.abc import Callable, Hashable
 from typing import Any
@@ -79,6 +83,35 @@ def program(
     exe, loaded = stored_programs.load_or_compile(persistent_cache.enabled_folder(), name, fn, args, step)
     _CACHE[full] = exe
     return exe, time.perf_counter() - t0, loaded
+
+
+class _StoredJit:
+    """`fn` called through `program` (kind and stored name `name`): see `stored_jit`."""
+
+    def __init__(self, fn: Callable[..., Any], name: str):
+        self.fn, self.name = fn, name
+        self.signature = inspect.signature(fn)
+        functools.update_wrapper(self, fn)
+
+    def __call__(self, *args, **kwargs):
+        bound = self.signature.bind(*args, **kwargs)
+        bound.apply_defaults()
+        assert not bound.kwargs, f"{self.name}: keyword-only parameters are not supported"
+        return program(self.name, self.name, self.fn, bound.args)[0](*bound.args)
+
+
+def stored_jit(name: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
+    """A decorator: the function compiled as `equinox.filter_jit` compiles it (array leaves of the
+    arguments are the program's inputs, everything else is static), through `program`, so that where the
+    persistent compilation cache is on the executable is stored whole and a later process loads it without
+    tracing or lowering. Keyword arguments are bound to their positions first and defaults filled in, so a
+    call written either way is one program. `name` is the program's kind and stored name: one per
+    function. For functions called from the host only (never under the caller's `jit`, `vmap` or `grad`)."""
+
+    def wrap(fn: Callable[..., Any]) -> Callable[..., Any]:
+        return _StoredJit(fn, name)
+
+    return wrap
 
 
 def count(kind: str) -> int:

@@ -215,7 +215,7 @@ def _solve_rigid(args, scenario, t1, ts, options, progress):
     from ..._numerics.times import Times
     from ..._physics.rigid.model import ElasticRope, InextensibleRope, RigidGround
 
-    label = "solving with the rigid-ground model (each phase compiles on first use)"
+    label = "solving with the rigid-ground model (its compiled pieces made or loaded on first use)"
     with (
         progress(label, bar=True),
         tqdm_bar(

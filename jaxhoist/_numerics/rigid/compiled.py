@@ -17,6 +17,7 @@ import optimistix as optx
 from ..._errors import ScenarioError
 from ..._physics import rigid
 from ..callback_free import callback_free
+from ..compile_cache import stored_jit
 
 
 @dataclasses.dataclass(frozen=True)
@@ -142,11 +143,13 @@ def _controller(options: Options):
     )
 
 
-phase_solve_jit = eqx.filter_jit(callback_free(_phase_solve))  # no host callback: storable on disk
-raw_guards_jit = eqx.filter_jit(rigid.raw_guards)
+# The driver's compiled pieces are stored whole in the cache folder (`compile_cache.stored_jit`): a later
+# process loads them untraced (tracing them took most of a warm run's first call). No host callback.
+phase_solve_jit = stored_jit("rigid-phase-solve")(callback_free(_phase_solve))
+raw_guards_jit = stored_jit("rigid-raw-guards")(rigid.raw_guards)
 
 
-@eqx.filter_jit
+@stored_jit("rigid-eval-candidates")
 def eval_candidates(t, y, scenario, c, settings, contact, hints, rope, inextensible=False):
     """Contact forces, corner accelerations, body accelerations and rope tension for a batch of
     configurations (rope mode `rope`, an integer array)."""
@@ -159,29 +162,29 @@ def eval_candidates(t, y, scenario, c, settings, contact, hints, rope, inextensi
     return jax.vmap(one)(contact, hints)
 
 
-@eqx.filter_jit
+@stored_jit("rigid-eval-rope-impulses")
 def eval_rope_impulses(t, y, scenario, c, modes, slip_dirs, normal_target, rcond):
     return jax.vmap(lambda m, s: rigid.rope_impulse_response(t, y, scenario, c, m, s, normal_target, rcond))(
         modes, slip_dirs
     )
 
 
-@eqx.filter_jit
+@stored_jit("rigid-eval-impulses")
 def eval_impulses(y, scenario, c, modes, slip_dirs, normal_target, rcond):
     return jax.vmap(lambda m, s: rigid.impulse_response(y, scenario, c, m, s, normal_target, rcond))(
         modes, slip_dirs
     )
 
 
-contact_matrices_jit = eqx.filter_jit(rigid.contact_matrices)
+contact_matrices_jit = stored_jit("rigid-contact-matrices")(rigid.contact_matrices)
 
 
-@eqx.filter_jit
+@stored_jit("rigid-rope-direction")
 def rope_direction_jit(t, y, scenario, c):
     return rigid.loads(t, y, scenario, c).rope_direction
 
 
-@eqx.filter_jit
+@stored_jit("rigid-rope-state")
 def rope_state(t, y, scenario, c):
     """|AB| - l(t) [m], d|AB|/dt - dl/dt [m/s] and ds/dt [m/s] of the inextensible rope."""
     ld = rigid.loads(t, y, scenario, c, inextensible=True)
@@ -197,12 +200,12 @@ class RopeWouldPush(Exception):
     """No configuration (or impulse) with the taut inextensible rope has S >= 0: try the slack rope."""
 
 
-@eqx.filter_jit
+@stored_jit("rigid-forces")
 def forces(t, y, scenario, c, phase, settings, inextensible=False):
     return rigid.contact_dynamics(t, y, scenario, c, phase, settings, inextensible).force
 
 
-@eqx.filter_jit
+@stored_jit("rigid-outputs")
 def _outputs(ts, ys, scenario, c, phases, settings, inextensible=False):
     return jax.vmap(lambda t, y, ph: rigid.output(t, y, scenario, c, ph, settings, inextensible))(
         ts, ys, phases

@@ -43,6 +43,7 @@ from ..._physics import elastic, forces, kinematics, rigid
 from ..._physics import energy as energy_mod
 from ..._physics.params import RegularisedCoulomb, Scenario
 from ..callback_free import callback_free
+from ..compile_cache import stored_jit
 from .compiled import rope_state
 from .records import RigidContactError
 
@@ -190,23 +191,24 @@ def _chunk_solve(scenario, c, y0, t0, t1, ts_user, ts_dense, rtol, atol, max_ste
     return ys[0], ys[1], sol.result, sol.stats["num_accepted_steps"], sol.stats["num_rejected_steps"]
 
 
-_chunk_solve_jit = eqx.filter_jit(callback_free(_chunk_solve))  # no host callback: storable on disk
+# stored whole in the cache folder, like the phase driver's pieces (`compiled.py`); no host callback
+_chunk_solve_jit = stored_jit("rigid-compliant-chunk-solve")(callback_free(_chunk_solve))
 
 
-@eqx.filter_jit
+@stored_jit("rigid-compliant-normals")
 def _normals(ts, ys, scenario, c):
     """Normal forces N_i [N] and corner velocities [m/s] at the states `ys` (leading axis)."""
     snaps = jax.vmap(lambda t, y: elastic.snapshot(t, y, scenario, c))(ts, ys)
     return snaps.normal, snaps.corner_velocity
 
 
-@eqx.filter_jit
+@stored_jit("rigid-compliant-mechanical")
 def _mechanical(t, y, scenario, c):
     snap = elastic.snapshot(t, y, scenario, c)
     return energy_mod.energy(y, snap, scenario, c).mechanical
 
 
-@eqx.filter_jit
+@stored_jit("rigid-compliant-elastic-outputs")
 def elastic_outputs(ts, ys, scenario, c):
     """Per saved sample of a compliant phase: corners, normal and friction forces, rope tension, energy
     and Euler angles, as `physics.rigid.Output` fields (a dict)."""
@@ -384,7 +386,7 @@ def handback(drv, sc_c: Scenario, t: float, y: elastic.State, loaded: np.ndarray
     return y, e_before - e_after + work
 
 
-@eqx.filter_jit
+@stored_jit("rigid-compliant-rigid-mechanical")
 def _rigid_mechanical(t, y, scenario, c, inextensible):
     ld = rigid.loads(t, y, scenario, c, inextensible)
     return rigid.energy(y, ld, scenario, c).mechanical
