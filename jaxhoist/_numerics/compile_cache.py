@@ -86,18 +86,31 @@ def program(
 
 
 class _StoredJit:
-    """`fn` called through `program` (kind and stored name `name`): see `stored_jit`."""
+    """`fn` called through `program` (kind and stored name `name`): see `stored_jit`. The executables it
+    got are kept here too, keyed as `program` keys them, so that a repeated call (the rigid driver's
+    pieces are called thousands of times per run) flattens its arguments once."""
 
     def __init__(self, fn: Callable[..., Any], name: str):
         self.fn, self.name = fn, name
         self.signature = inspect.signature(fn)
+        self.positional = len(self.signature.parameters)
+        self.programs: dict[Hashable, Any] = {}
         functools.update_wrapper(self, fn)
 
     def __call__(self, *args, **kwargs):
-        bound = self.signature.bind(*args, **kwargs)
-        bound.apply_defaults()
-        assert not bound.kwargs, f"{self.name}: keyword-only parameters are not supported"
-        return program(self.name, self.name, self.fn, bound.args)[0](*bound.args)
+        if kwargs or len(args) != self.positional:
+            bound = self.signature.bind(*args, **kwargs)
+            bound.apply_defaults()
+            assert not bound.kwargs, f"{self.name}: keyword-only parameters are not supported"
+            args = bound.args
+        leaves, treedef = jax.tree_util.tree_flatten(args)
+        arrays = [eqx.is_array(x) for x in leaves]
+        key = (treedef, tuple((x.shape, x.dtype) if a else x for x, a in zip(leaves, arrays)))
+        exe = self.programs.get(key)
+        if exe is None:  # `program` keys its in-process cache the same way (`structure_key`)
+            exe = self.programs[key] = program(self.name, self.name, self.fn, args)[0]
+        out = exe.executable(*[x for x, a in zip(leaves, arrays) if a])
+        return jax.tree_util.tree_unflatten(exe.out_def, out)
 
 
 def stored_jit(name: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:

@@ -96,9 +96,10 @@ def enable_compilation_cache(path: str | os.PathLike | None = None, *, max_bytes
     """Switch on the persistent compilation cache for this process, so that compiled programs are stored on
     disk and later processes load them instead of compiling. `simulate`'s solve core, a scan's group
     program (where the scan runs on host CPU: plain and `derivatives=True`), `locate_bifurcation`'s
-    solves and the rigid model's phase solve and phase-driver pieces are stored whole in the folder's `programs` subfolder (`stored_programs`): a later process loads
-    the executable without tracing or lowering it (for `simulate`, about 10 s of tracing and compiling on a
-    2-core machine become a load of about half a second). Every other program goes to JAX's own cache in the
+    solves and the rigid model's phase solve and phase-driver pieces are stored whole in the folder's
+    `programs` subfolder (`stored_programs`): a later process loads the executable without tracing or
+    lowering it (for `simulate`, about 10 s of tracing and compiling on a 2-core machine become a load of
+    about half a second). Every other program goes to JAX's own cache in the
     folder, which saves the XLA compile; a later process still traces and lowers it. Call it once, before
     the first compilation.
 
