@@ -140,7 +140,7 @@ def _release_compiled_code():
     yield
     from jaxhoist._numerics import batch, compile_cache, persistent_cache
 
-    compile_cache._CACHE.clear()  # the bifurcation locator's solves among them
+    compile_cache.clear()  # the bifurcation locator's solves and the rigid model's pieces among them
     batch.chunk_fn.cache_clear()
     jax.clear_caches()
     # the command line's `main()`, run in this process, switches the library's cache on (stored programs):

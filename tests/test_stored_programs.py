@@ -306,7 +306,8 @@ with warnings.catch_warnings(record=True) as caught:
 np.savez(sys.argv[2], position=np.asarray(tr.position), euler=np.asarray(tr.euler),
          normal_forces=np.asarray(tr.normal_forces))
 print(json.dumps({"traced": dict(traced), "warnings": [str(w.message) for w in caught],
-                  "pieces": sorted(k for k, _ in compile_cache._CACHE if k.startswith("rigid-"))}))
+                  "pieces": sorted(k.split("~")[0] for k, _ in compile_cache._CACHE
+                                   if k.startswith("rigid-"))}))
 """
 
 

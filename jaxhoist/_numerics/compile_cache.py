@@ -5,9 +5,9 @@ stored there). `compiled(kind, key, lower)` lowers and compiles once per `(kind,
 another way (an accelerator's copies of a scan's group program, identification's cores). Either keeps the
 executable for the process's lifetime, so repeated calls (scan chunks, the command line's `main()` called
 again in one process, identification starts) compile once and can time the compilation apart from the run.
-`structure_key` is the usual key: pytree structure, leaf shapes and dtypes. `stored_jit(name)` makes a
-function called many times from the host (the rigid model's phase driver) go through `program` on each call,
-as `equinox.filter_jit` would compile it.
+`structure_key` is the usual key: pytree structure, leaf shapes and dtypes. `stored_jit(name)` compiles a
+function called many times from the host (the rigid model's phase driver) through `program`, as
+`equinox.filter_jit` would compile it.
 """
 
 from __future__ import annotations
@@ -23,6 +23,7 @@ import equinox as eqx
 import jax
 
 from . import persistent_cache, stored_programs
+from .times import is_tracer
 
 _CACHE: dict[tuple[str, Hashable], Any] = {}
 
@@ -85,30 +86,48 @@ def program(
     return exe, time.perf_counter() - t0, loaded
 
 
+#: Every `stored_jit` function, so that `clear` also forgets the executables each keeps.
+_STORED_JITS: list[_StoredJit] = []
+
+
 class _StoredJit:
     """`fn` called through `program` (kind and stored name `name`): see `stored_jit`. The executables it
-    got are kept here too, keyed as `program` keys them, so that a repeated call (the rigid driver's
-    pieces are called thousands of times per run) flattens its arguments once."""
+    got are kept here too, keyed on the arguments' pytree structure, the array leaves' shapes, dtypes and
+    weak types and the static leaves, so that a repeated call (the rigid driver's pieces are called
+    thousands of times per run) flattens its arguments once."""
 
     def __init__(self, fn: Callable[..., Any], name: str):
         self.fn, self.name = fn, name
         self.signature = inspect.signature(fn)
+        kinds = {p.kind for p in self.signature.parameters.values()}
+        if kinds - {inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD}:
+            raise TypeError(f"stored_jit({name!r}): only positional parameters are supported")
         self.positional = len(self.signature.parameters)
         self.programs: dict[Hashable, Any] = {}
         functools.update_wrapper(self, fn)
+        _STORED_JITS.append(self)
 
     def __call__(self, *args, **kwargs):
         if kwargs or len(args) != self.positional:
             bound = self.signature.bind(*args, **kwargs)
             bound.apply_defaults()
-            assert not bound.kwargs, f"{self.name}: keyword-only parameters are not supported"
             args = bound.args
         leaves, treedef = jax.tree_util.tree_flatten(args)
         arrays = [eqx.is_array(x) for x in leaves]
-        key = (treedef, tuple((x.shape, x.dtype) if a else x for x, a in zip(leaves, arrays)))
+        if any(map(is_tracer, leaves)):  # under a caller's trace: traced inline
+            return self.fn(*args)
+        key = (
+            treedef,
+            tuple(
+                (x.shape, x.dtype, getattr(x, "weak_type", False)) if a else x for x, a in zip(leaves, arrays)
+            ),
+        )
         exe = self.programs.get(key)
-        if exe is None:  # `program` keys its in-process cache the same way (`structure_key`)
-            exe = self.programs[key] = program(self.name, self.name, self.fn, args)[0]
+        if exe is None:
+            # `program`'s own key leaves weak types out: a call that differs only there compiles apart
+            weak = tuple(i for i, x in enumerate(leaves) if getattr(x, "weak_type", False))
+            kind = f"{self.name}~weak{weak}" if weak else self.name
+            exe = self.programs[key] = program(kind, self.name, self.fn, args)[0]
         out = exe.executable(*[x for x, a in zip(leaves, arrays) if a])
         return jax.tree_util.tree_unflatten(exe.out_def, out)
 
@@ -119,7 +138,9 @@ def stored_jit(name: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:
     persistent compilation cache is on the executable is stored whole and a later process loads it without
     tracing or lowering. Keyword arguments are bound to their positions first and defaults filled in, so a
     call written either way is one program. `name` is the program's kind and stored name: one per
-    function. For functions called from the host only (never under the caller's `jit`, `vmap` or `grad`)."""
+    function. Meant for functions called from the host: under a caller's `jit`, `vmap` or `grad` (a tracer
+    among the arguments) the function is traced into the caller's program instead. Positional parameters
+    only."""
 
     def wrap(fn: Callable[..., Any]) -> Callable[..., Any]:
         return _StoredJit(fn, name)
@@ -133,6 +154,9 @@ def count(kind: str) -> int:
 
 
 def clear(kind: str | None = None) -> None:
-    """Forget the executables of `kind` (all if None)."""
-    for k in [k for k in _CACHE if kind is None or k[0] == kind]:
+    """Forget the executables of `kind` (all if None), those `stored_jit` functions keep among them."""
+    for k in [k for k in _CACHE if kind is None or k[0].split("~")[0] == kind]:  # "~": `_StoredJit`
         del _CACHE[k]
+    for f in _STORED_JITS:
+        if kind is None or f.name == kind:
+            f.programs.clear()

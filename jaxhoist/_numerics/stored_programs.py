@@ -1,8 +1,8 @@
 """Compiled programs stored whole on disk, next to JAX's persistent compilation cache: a later process
 loads the executable without tracing or lowering the program first. `compile_cache.program` is the way
 in: `simulate`'s solve core (the Python API with concrete inputs, and the command line), a scan's group
-program where the scan runs on host CPU, and the bifurcation locator's solves (with and without the
-derivative).
+program where the scan runs on host CPU, the bifurcation locator's solves (with and without the
+derivative) and, through `compile_cache.stored_jit`, the rigid model's phase solve and phase-driver pieces.
 
 JAX's persistent cache is keyed by the lowered program's text, so every process still traces the Python
 function into JAX's form and lowers it before it can look the program up (for `simulate`'s solve core that
@@ -294,7 +294,14 @@ def compile_and_store(folder: Path | None, name: str, fn: Callable[..., Any], ar
     if not loaded_from_jax_cache:
         try:
             _store(program_path(folder, name, key), key, exe, out_defs[0])
-        except (OSError, ValueError, NotImplementedError, pickle.PicklingError, TypeError) as e:
+        except (
+            OSError,
+            ValueError,
+            NotImplementedError,
+            pickle.PicklingError,
+            TypeError,
+            AttributeError,
+        ) as e:
             warnings.warn(f"jaxhoist: compiled program {name} not stored: {e}", stacklevel=2)
     return StoredProgram(exe, out_defs[0], in_def)
 

@@ -82,7 +82,9 @@ class Run:
             # A taut inextensible rope and a hoist already running at t = 0+: the start is a rope jerk.
             # The hoist speed just after the start (a jump at t = 0 may leave ds/dt(0) = 0 exactly).
             t_plus = 1e-9
-            stretch, rate_error, _ = map(float, rope_state(jnp.asarray(t_plus), y, drv.sc, drv.c))
+            stretch, rate_error, _ = map(
+                float, rope_state(jnp.asarray(t_plus, jnp.float64), y, drv.sc, drv.c)
+            )
             drv.rope_taut = stretch >= -drv.tol["z"] * drv.L  # rope.slack = 0: just taut
             if drv.rope_taut and rate_error > drv.tol["v"] * drv.V:
                 try:
@@ -245,7 +247,7 @@ class Run:
 
         if 11 in fired:
             # The slack inextensible rope reaches its length: a jerk if it would stretch, then a new phase.
-            _, rate_error, _ = map(float, rope_state(jnp.asarray(t_end), y_end, drv.sc, drv.c))
+            _, rate_error, _ = map(float, rope_state(jnp.asarray(t_end, jnp.float64), y_end, drv.sc, drv.c))
             y_before = y_end
             drv.rope_taut = True
             if rate_error > drv.tol["v"] * drv.V:
