@@ -325,3 +325,38 @@ def test_a_second_process_loads_the_rigid_models_pieces_untraced_with_the_same_b
     names = {"_phase_solve", "raw_guards", "contact_matrices", "eval_candidates", "forces", "_outputs"}
     assert not names & set(second["traced"]), f"traced although stored: {second['traced']}"
     _assert_same_bits(tmp_path / "a.npz", tmp_path / "b.npz")
+
+
+def test_stored_jit_keys_programs_as_filter_jit_does():
+    """One program per argument structure, shape, dtype and weak type; a keyword call shares the positional
+    call's program; under a caller's trace the function is traced inline, compiling nothing of its own."""
+    from jaxhoist._numerics import compile_cache
+
+    @compile_cache.stored_jit("test-stored-jit")
+    def f(x, scale, offset=1.0):
+        return {"y": x * scale + offset}
+
+    def programs():
+        return compile_cache.count("test-stored-jit")
+
+    x = jax.numpy.arange(3.0)
+    assert programs() == 0
+    np.testing.assert_array_equal(f(x, 2.0)["y"], x * 2.0 + 1.0)  # scale and offset static (Python floats)
+    assert programs() == 1
+    np.testing.assert_array_equal(f(x, scale=2.0, offset=1.0)["y"], x * 2.0 + 1.0)
+    assert programs() == 1  # the keyword call is the same program
+    f(x + 1.0, 2.0)
+    assert programs() == 1  # other values, the same program
+    np.testing.assert_array_equal(f(x, 3.0)["y"], x * 3.0 + 1.0)
+    assert programs() == 2  # another static value
+    weak = jax.numpy.asarray(2.0)  # a weakly typed float64 scalar: its own program, as under filter_jit
+    strong = jax.numpy.asarray(2.0, dtype=jax.numpy.float64)
+    assert weak.weak_type and not strong.weak_type
+    f(x, weak)
+    f(x, strong)
+    assert programs() == 4
+    assert f(x, weak)["y"].dtype == f(x, strong)["y"].dtype == x.dtype
+    np.testing.assert_array_equal(jax.jit(lambda v: f(v, strong)["y"])(x), x * 2.0 + 1.0)
+    assert programs() == 4  # traced into the caller's program
+    compile_cache.clear("test-stored-jit")
+    assert programs() == 0

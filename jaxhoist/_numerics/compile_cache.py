@@ -5,9 +5,9 @@ stored there). `compiled(kind, key, lower)` lowers and compiles once per `(kind,
 another way (an accelerator's copies of a scan's group program, identification's cores). Either keeps the
 executable for the process's lifetime, so repeated calls (scan chunks, the command line's `main()` called
 again in one process, identification starts) compile once and can time the compilation apart from the run.
-`structure_key` is the usual key: pytree structure, leaf shapes and dtypes. `stored_jit(name)` compiles a
-function called many times from the host (the rigid model's phase driver) through `program`, as
-`equinox.filter_jit` would compile it.
+`structure_key` is the usual key: pytree structure, leaf shapes, dtypes and weak types. `stored_jit(name)`
+compiles a function called many times from the host (the rigid model's phase driver) through `program`,
+as `equinox.filter_jit` would compile it.
 """
 
 from __future__ import annotations
@@ -29,10 +29,17 @@ _CACHE: dict[tuple[str, Hashable], Any] = {}
 
 
 def structure_key(*trees) -> tuple:
-    """The pytree structure of `trees` with each array leaf as (shape, dtype) and other leaves as they are
-    (hashable static values): what decides whether a compiled executable can be reused."""
+    """The pytree structure of `trees` with each array leaf as (shape, dtype, weak type) and other leaves as
+    they are (hashable static values): what decides whether a compiled executable can be reused."""
     leaves, treedef = jax.tree_util.tree_flatten(trees)
-    return (treedef, tuple((x.shape, str(x.dtype)) if eqx.is_array(x) else x for x in leaves))
+    return _leaves_key(treedef, leaves)
+
+
+def _leaves_key(treedef: Any, leaves: list) -> tuple:
+    return (
+        treedef,
+        tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) if eqx.is_array(x) else x for x in leaves),
+    )
 
 
 def compiled(kind: str, key: Hashable, lower: Callable[[], Any]) -> tuple[Any, float]:
@@ -86,15 +93,10 @@ def program(
     return exe, time.perf_counter() - t0, loaded
 
 
-#: Every `stored_jit` function, so that `clear` also forgets the executables each keeps.
-_STORED_JITS: list[_StoredJit] = []
-
-
 class _StoredJit:
-    """`fn` called through `program` (kind and stored name `name`): see `stored_jit`. The executables it
-    got are kept here too, keyed on the arguments' pytree structure, the array leaves' shapes, dtypes and
-    weak types and the static leaves, so that a repeated call (the rigid driver's pieces are called
-    thousands of times per run) flattens its arguments once."""
+    """`fn` called through `program` (kind and stored name `name`): see `stored_jit`. A repeated call (the
+    rigid driver's pieces are called thousands of times per run) flattens its arguments once and looks
+    its executable up in `program`'s table directly."""
 
     def __init__(self, fn: Callable[..., Any], name: str):
         self.fn, self.name = fn, name
@@ -103,9 +105,7 @@ class _StoredJit:
         if kinds - {inspect.Parameter.POSITIONAL_ONLY, inspect.Parameter.POSITIONAL_OR_KEYWORD}:
             raise TypeError(f"stored_jit({name!r}): only positional parameters are supported")
         self.positional = len(self.signature.parameters)
-        self.programs: dict[Hashable, Any] = {}
         functools.update_wrapper(self, fn)
-        _STORED_JITS.append(self)
 
     def __call__(self, *args, **kwargs):
         if kwargs or len(args) != self.positional:
@@ -113,22 +113,12 @@ class _StoredJit:
             bound.apply_defaults()
             args = bound.args
         leaves, treedef = jax.tree_util.tree_flatten(args)
-        arrays = [eqx.is_array(x) for x in leaves]
         if any(map(is_tracer, leaves)):  # under a caller's trace: traced inline
             return self.fn(*args)
-        key = (
-            treedef,
-            tuple(
-                (x.shape, x.dtype, getattr(x, "weak_type", False)) if a else x for x, a in zip(leaves, arrays)
-            ),
-        )
-        exe = self.programs.get(key)
+        exe = _CACHE.get((self.name, _leaves_key(treedef, leaves)))  # `program`'s key: structure_key(*args)
         if exe is None:
-            # `program`'s own key leaves weak types out: a call that differs only there compiles apart
-            weak = tuple(i for i, x in enumerate(leaves) if getattr(x, "weak_type", False))
-            kind = f"{self.name}~weak{weak}" if weak else self.name
-            exe = self.programs[key] = program(kind, self.name, self.fn, args)[0]
-        out = exe.executable(*[x for x, a in zip(leaves, arrays) if a])
+            exe = program(self.name, self.name, self.fn, args)[0]
+        out = exe.executable(*[x for x in leaves if eqx.is_array(x)])
         return jax.tree_util.tree_unflatten(exe.out_def, out)
 
 
@@ -154,9 +144,6 @@ def count(kind: str) -> int:
 
 
 def clear(kind: str | None = None) -> None:
-    """Forget the executables of `kind` (all if None), those `stored_jit` functions keep among them."""
-    for k in [k for k in _CACHE if kind is None or k[0].split("~")[0] == kind]:  # "~": `_StoredJit`
+    """Forget the executables of `kind` (all if None), those of `stored_jit` functions among them."""
+    for k in [k for k in _CACHE if kind is None or k[0] == kind]:
         del _CACHE[k]
-    for f in _STORED_JITS:
-        if kind is None or f.name == kind:
-            f.programs.clear()
