@@ -32,13 +32,13 @@ def structure_key(*trees) -> tuple:
     """The pytree structure of `trees` with each array leaf as (shape, dtype, weak type) and other leaves as
     they are (hashable static values): what decides whether a compiled executable can be reused."""
     leaves, treedef = jax.tree_util.tree_flatten(trees)
-    return _leaves_key(treedef, leaves)
+    return _leaves_key(treedef, leaves, [eqx.is_array(x) for x in leaves])
 
 
-def _leaves_key(treedef: Any, leaves: list) -> tuple:
+def _leaves_key(treedef: Any, leaves: list, arrays: list[bool]) -> tuple:
     return (
         treedef,
-        tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) if eqx.is_array(x) else x for x in leaves),
+        tuple((x.shape, x.dtype, getattr(x, "weak_type", False)) if a else x for x, a in zip(leaves, arrays)),
     )
 
 
@@ -115,10 +115,11 @@ class _StoredJit:
         leaves, treedef = jax.tree_util.tree_flatten(args)
         if any(map(is_tracer, leaves)):  # under a caller's trace: traced inline
             return self.fn(*args)
-        exe = _CACHE.get((self.name, _leaves_key(treedef, leaves)))  # `program`'s key: structure_key(*args)
+        arrays = [eqx.is_array(x) for x in leaves]
+        exe = _CACHE.get((self.name, _leaves_key(treedef, leaves, arrays)))  # `program`'s key: structure_key
         if exe is None:
             exe = program(self.name, self.name, self.fn, args)[0]
-        out = exe.executable(*[x for x in leaves if eqx.is_array(x)])
+        out = exe.executable(*[x for x, a in zip(leaves, arrays) if a])
         return jax.tree_util.tree_unflatten(exe.out_def, out)
 
 
