@@ -65,8 +65,8 @@ def program(
     *,
     step: Callable[[str], contextlib.AbstractContextManager] = _quiet,
 ) -> tuple[Callable[..., Any], float, bool]:
-    """The executable of `fn(*args)`, called as `exe(*args)` (arrays of the same shapes and dtypes, the
-    same static parts): the one cached in this process under `kind` and the structure of `args`
+    """The executable of `fn(*args)`, called as `exe(*args)` (arrays of the same shapes, dtypes and weak
+    types, the same static parts): the one cached in this process under `kind` and the structure of `args`
     (`structure_key`), else, where `persistent_cache.enable_compilation_cache` is on, the program stored
     whole in its folder (`stored_programs.load`: nothing traced or lowered), else `fn` traced, lowered and
     compiled (and stored there where the cache is on and `args` have a stable key).
