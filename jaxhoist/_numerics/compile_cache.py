@@ -119,8 +119,7 @@ class _StoredJit:
         exe = _CACHE.get((self.name, _leaves_key(treedef, leaves, arrays)))  # `program`'s key: structure_key
         if exe is None:
             exe = program(self.name, self.name, self.fn, args)[0]
-        out = exe.executable(*[x for x, a in zip(leaves, arrays) if a])
-        return jax.tree_util.tree_unflatten(exe.out_def, out)
+        return exe.call_leaves([x for x, a in zip(leaves, arrays) if a])
 
 
 def stored_jit(name: str) -> Callable[[Callable[..., Any]], Callable[..., Any]]:

@@ -218,6 +218,11 @@ class StoredProgram:
             raise TypeError(
                 f"the inputs' structure differs from the compiled program's: {in_def} != {self.in_def}"
             )
+        return self.call_leaves(leaves)
+
+    def call_leaves(self, leaves: list):
+        """The output pytree for the arguments' array leaves, in their flattened order (the caller split
+        them, e.g. `compile_cache.stored_jit`, which flattens its arguments once per call)."""
         return jax.tree_util.tree_unflatten(self.out_def, self.executable(*leaves))
 
 
