@@ -1,10 +1,11 @@
 """Compiled programs stored whole (`stored_programs`, through `compile_cache.program`): a second process with
 the same cache folder loads the scan's group program (plain and with forward-mode sensitivities),
-`simulate`'s solve core, the bifurcation locator's solves and the rigid model's phase-driver pieces without
-tracing them, and returns the same bits; programs whose key has no stable text (a user's lambda observable)
-are not stored. (A damaged stored file, compiled again with a warning, is tested once, on a small program,
-on the route every program here takes, `stored_programs.load_or_compile`: tests/test_compilation_cache.py.)
-Short horizons and few members: the compile is what is tested, not the physics."""
+`simulate`'s solve core, the bifurcation locator's solves, `identify`'s fit pieces and the rigid model's
+phase-driver pieces without tracing them, and returns the same bits; programs whose key has no stable text
+(a user's lambda observable) are not stored. (A damaged stored file, compiled again with a warning, is
+tested once, on a small program, on the route every program here takes, `stored_programs.load_or_compile`:
+tests/test_compilation_cache.py.) Short horizons and few members: the compile is what is tested, not the
+physics."""
 
 from pathlib import Path
 
@@ -284,6 +285,45 @@ def test_a_second_process_loads_the_locators_solves_untraced_with_the_same_bits(
     assert runs[0]["values"] == runs[1]["values"]  # bit for bit (JSON keeps every digit of a float)
     names = sorted(p.name.rsplit("-", 2)[0] for p in (tmp_path / "cache" / sp.SUBFOLDER).glob("*-cache"))
     assert names == ["bifurcation-jvp", "bifurcation-value"]
+
+
+_IDENTIFY_SCRIPT = r"""
+import collections, json, sys, warnings
+import diffrax, jax, numpy as np
+jax.config.update("jax_enable_x64", True)
+import jaxhoist as jh
+
+traced = collections.Counter()
+def listen(event, duration, **kwargs):  # JAX reports each trace of a program compiled apart, by name
+    if event == "/jax/core/compile/jaxpr_trace_duration":
+        traced[kwargs.get("fun_name", "?")] += 1
+jax.monitoring.register_event_duration_secs_listener(listen)
+
+warnings.simplefilter("always")
+with warnings.catch_warnings(record=True) as caught:
+    jh.enable_compilation_cache(sys.argv[1])
+    sc = jh.load_scenario("paper-4.2")
+    m = jh.synthetic_measurement(sc, np.linspace(0.0, 0.4, 21), ["position"])
+    # Tsit5, as `fit_solver_options` advises for short records: its programs compile in a fraction of the
+    # default solver's time, and the route stored and loaded is the same
+    res = jh.identify(sc, m, ["mu"], start={"mu": 0.3}, noise={"position": 0.005},
+                      options=jh.SolverOptions(diffrax.Tsit5()))
+print(json.dumps({"traced": dict(traced), "warnings": [str(w.message) for w in caught],
+                  "fit": [res.values[0].hex(), res.cost.hex(), res.iterations]}))
+"""
+
+
+def test_a_second_process_loads_the_identify_pieces_untraced_with_the_same_bits(tmp_path):
+    """`identify`'s Levenberg-Marquardt pieces (its start and one step, `identify.core`), stored whole: a
+    second process fits without tracing the model. The tests' one-parameter problem (tests/test_identify.py:
+    μ from the mass-centre path, 21 samples)."""
+    first, second = (run_script(_IDENTIFY_SCRIPT, tmp_path / "cache", timeout=900) for _ in range(2))
+    assert first["traced"].get("lm_init", 0) == 1 and first["traced"].get("lm_step", 0) == 1
+    stored = sorted(p.name.rsplit("-", 2)[0] for p in (tmp_path / "cache" / sp.SUBFOLDER).glob("*-cache"))
+    assert stored == ["identify_init", "identify_step", "solve"]  # solve: the synthetic measurement's
+    assert not {"lm_init", "lm_step"} & set(second["traced"]), f"traced although stored: {second['traced']}"
+    assert not second["warnings"]
+    assert first["fit"][2] > 1 and second["fit"] == first["fit"]  # bit for bit
 
 
 _RIGID_SCRIPT = r"""

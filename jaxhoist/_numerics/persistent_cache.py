@@ -1,14 +1,14 @@
 """JAX's persistent compilation cache for jaxhoist's programs: `enable_compilation_cache`.
 
 With the cache on, jaxhoist's own programs (`simulate`'s solve core, a scan's group program on host CPU,
-the bifurcation locator's solves, the rigid model's phase solve and the pieces its phase driver evaluates
-between phases) are stored whole in the folder's `programs` subfolder
+the bifurcation locator's solves, `identify`'s fit pieces, the rigid model's phase solve and the pieces its
+phase driver evaluates between phases) are stored whole in the folder's `programs` subfolder
 (`stored_programs`, through `compile_cache.program`): a later process that needs the same program (the
 same call with other parameter values, which are arguments of the program, not constants) loads the
-executable without tracing, lowering or compiling it. Every other program XLA compiles (identification's,
-the scan's copies on accelerators, a user's own `jax.jit` around `simulate`) goes to JAX's cache in the
-folder itself, keyed by the program's text, the compile options, the device and the JAX/XLA versions: a
-later process traces and lowers it, then loads it instead of compiling. jaxhoist's compiled cores carry
+executable without tracing, lowering or compiling it. Every other program XLA compiles (the scan's
+copies on accelerators, a user's own `jax.jit` around `simulate`) goes to JAX's cache in the folder
+itself, keyed by the program's text, the compile options, the device and the JAX/XLA versions: a later
+process traces and lowers it, then loads it instead of compiling. jaxhoist's compiled cores carry
 no host callback, which neither would store (`callback_free`).
 
 The command line switches the cache on for every run (`--no-cache` or `JAXHOIST_CACHE_DIR=""` to switch
@@ -96,10 +96,10 @@ def enable_compilation_cache(path: str | os.PathLike | None = None, *, max_bytes
     """Switch on the persistent compilation cache for this process, so that compiled programs are stored on
     disk and later processes load them instead of compiling. `simulate`'s solve core, a scan's group
     program (where the scan runs on host CPU: plain and `derivatives=True`), `locate_bifurcation`'s
-    solves and the rigid model's phase solve and phase-driver pieces are stored whole in the folder's
-    `programs` subfolder (`stored_programs`): a later process loads the executable without tracing or
-    lowering it (for `simulate`, about 10 s of tracing and compiling on a 2-core machine become a load of
-    about half a second). Every other program goes to JAX's own cache in the
+    solves, `identify`'s fit pieces and the rigid model's phase solve and phase-driver pieces are stored
+    whole in the folder's `programs` subfolder (`stored_programs`): a later process loads the executable
+    without tracing or lowering it (for `simulate`, about 10 s of tracing and compiling on a 2-core
+    machine become a load of about half a second). Every other program goes to JAX's own cache in the
     folder, which saves the XLA compile; a later process still traces and lowers it. Call it once, before
     the first compilation.
 

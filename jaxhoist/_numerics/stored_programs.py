@@ -2,7 +2,8 @@
 loads the executable without tracing or lowering the program first. `compile_cache.program` is the way
 in: `simulate`'s solve core (the Python API with concrete inputs, and the command line), a scan's group
 program where the scan runs on host CPU, the bifurcation locator's solves (with and without the
-derivative) and, through `compile_cache.stored_jit`, the rigid model's phase solve and phase-driver pieces.
+derivative), `identify`'s fit pieces (its start and one Levenberg-Marquardt step) and, through
+`compile_cache.stored_jit`, the rigid model's phase solve and phase-driver pieces.
 
 JAX's persistent cache is keyed by the lowered program's text, so every process still traces the Python
 function into JAX's form and lowers it before it can look the program up (for `simulate`'s solve core that

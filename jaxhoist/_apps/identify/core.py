@@ -30,7 +30,7 @@ from optimistix._solver.gauss_newton import _GaussNewtonState, _make_f_info
 
 from ..._errors import SolveStatus
 from ..._numerics.callback_free import callback_free
-from ..._numerics.compile_cache import compiled, structure_key
+from ..._numerics.compile_cache import program
 from ..._numerics.options import SolverOptions
 from ..._numerics.rosenbrock import RosenbrockW
 from ..._numerics.sensitivity import augmented_solver, tangent_weighted_controller
@@ -228,6 +228,14 @@ def _model_and_jacobian(cfg: Config, z, args):
     return r, J, status, steps
 
 
+# The model and the model with its Jacobian as nested programs of the fit's pieces: JAX keeps each one's
+# trace (per problem and process), so the step, which traces the residual function and its Jacobian more
+# than once (`lm_step`, `_problem`), traces the model once. XLA inlines nested programs: the compiled code,
+# and the fit's bits, are those of the plain calls.
+_model_nested = eqx.filter_jit(model)
+_model_and_jacobian_nested = eqx.filter_jit(_model_and_jacobian)
+
+
 def _residual_fn(cfg: Config):
     """`fn(z, args) -> (r, info)` for optimistix, info = (status, solver steps). Its JVP computes the full
     forward-mode Jacobian once (p tangents carried by one solve) and applies it as a matrix."""
@@ -241,7 +249,7 @@ def _residual_fn(cfg: Config):
 
     @jax.custom_jvp
     def res(z, args):
-        r, status, steps = model(cfg, z, args)
+        r, status, steps = _model_nested(cfg, z, args)
         r, _ = guard(r, status)
         return r, jnp.stack([status, steps]).astype(jnp.float64)
 
@@ -250,7 +258,7 @@ def _residual_fn(cfg: Config):
         # The data and scenario in `args` are constants of the fit: their tangents are ignored.
         (z, args), (dz, _) = primals, tangents
 
-        r, J, status, steps = _model_and_jacobian(cfg, z, args)
+        r, J, status, steps = _model_and_jacobian_nested(cfg, z, args)
         if _VERBOSE:
             jax.debug.print(
                 "  z = {z}: status {s}, {n} solver steps, cost {c}",
@@ -351,18 +359,46 @@ class _LevenbergMarquardt(optx.LevenbergMarquardt):
 # `optimistix.least_squares(fn, solver, z0, args, has_aux=True, max_steps=cfg.max_iterations, throw=False,
 # options={"jac": "fwd"})` runs `solver.init`, then `solver.step` and `terminate` in a while loop, then
 # `postprocess` (optimistix's `_iterate`), in one program. Here the loop runs on the host over two compiled
-# pieces, `_lm_init` and `_lm_step` (one step and its termination test), which hand on the loop's carry
-# (z, steps taken, the arrays of the solver state, aux, terminate, result). `_lm_init` also hands on the
-# residual function as traced there (closure-converted: a jaxpr and its constants) and the solver state's
-# static part, so that `_lm_step` neither traces the model again nor builds a first state. Neither piece holds
-# a host callback, so JAX's persistent cache stores both; the host reports progress between steps.
+# pieces, `lm_init` and `lm_step` (one step and its termination test), which hand on the loop's carry
+# (z, steps taken, the array leaves of the solver state, aux, terminate, result): arrays only, so that both
+# pieces are keyed by their inputs' structure and the residual function (`Residuals`, a dataclass of the
+# problem's `Config`) and stored whole (`compile_cache.program`), and a later process loads them without
+# tracing the model. Each piece builds the residual function and the solver state's static part itself
+# (`_problem`). Neither holds a host callback; the host reports progress between steps.
 
 _OPTIONS = {"jac": "fwd"}
 _TAGS: frozenset = frozenset()
 
 
+@dataclasses.dataclass(frozen=True)
+class Residuals:
+    """The fit's residual function of one problem, `fn(z, args) -> (r, info)` (`_residual_fn(cfg)`), as a
+    value: equal problems give equal values, so the compiled pieces are keyed by it."""
+
+    cfg: Config
+
+    def __call__(self, z, args):
+        return _residual_fn(self.cfg)(z, args)
+
+
 def _solver(lm_tol):
     return _LevenbergMarquardt(rtol=lm_tol[0], atol=lm_tol[1])  # pyright: ignore[reportCallIssue]
+
+
+def _problem(residual_fn, y, args, lm_tol, scale):
+    """What `least_squares` builds before iterating: the residual function `residual_fn(z, args) -> (r,
+    info)` times `scale`, with its aux info and the cost 0.5 Σ r² of the unscaled r, closure-converted at
+    `y`; the solver and its first state. **Returns** `(fn, solver, state, aux_struct)`."""
+
+    def residuals(z, a):
+        r, info = residual_fn(z, a)
+        return r * scale, jnp.concatenate([info, (0.5 * jnp.sum(r**2))[None]])
+
+    fn = eqx.filter_closure_convert(OutAsArray(residuals), y, args)
+    f_struct, aux_struct = fn.out_struct  # pyright: ignore[reportFunctionMemberAccess]
+    solver = _solver(lm_tol)
+    state = solver.init(fn, y, args, _OPTIONS, f_struct, aux_struct, _TAGS)
+    return fn, solver, state, aux_struct
 
 
 def _terminate_and_result(solver, fn, y, args, state):
@@ -370,18 +406,17 @@ def _terminate_and_result(solver, fn, y, args, state):
     return done, optx.RESULTS.where(tree_allfinite(y), result, optx.RESULTS.nonfinite)
 
 
-def _outcome(solver, fn, args, static, carry, scale):
+def _outcome(solver, fn, args, state, carry, scale):
     """Whether the loop goes on (the step budget aside: the host counts it), and what `least_squares` would
     return if it stopped here: `(value, r, J, info, steps, accepted steps, codes)`, r and J of the unscaled
     residuals at the value, info the solve's (status, steps) there, codes (converged, reached
-    max_iterations; the latter read only when the host stops at the budget)."""
-    y, num_steps, dynamic, aux, terminate, result = carry
+    max_iterations; the latter read only when the host stops at the budget). `state` is the carry's."""
+    y, num_steps, _, aux, terminate, result = carry
     successful = result == optx.RESULTS.successful
     go_on = jnp.invert(terminate) & successful
     result = optx.RESULTS.where(
         successful & jnp.invert(terminate), optx.RESULTS.nonlinear_max_steps_reached, result
     )
-    state = eqx.combine(static, dynamic)
     value, aux, _ = solver.postprocess(fn, y, aux, args, _OPTIONS, state, _TAGS, result)
     f_info = state.f_info
     J = f_info.jac.as_matrix() / scale  # J @ e_i through the custom JVP: no new solve
@@ -389,50 +424,32 @@ def _outcome(solver, fn, args, static, carry, scale):
     return go_on, (value, f_info.residual / scale, J, aux[:2], num_steps, state.num_accepted_steps, codes)
 
 
-@eqx.filter_jit
-def _lm_init(residual_fn, z0, args, lm_tol, scale):
-    """What `least_squares` builds before iterating: the residual function `residual_fn(z, args) -> (r,
-    info)` (`_residual_fn`'s) times `scale`, its aux info and the cost 0.5 Σ r² of the unscaled r,
-    closure-converted; the first solver state and the loop's first carry. **Returns** `((fn, static part of
-    the state), carry, _outcome)`."""
-
-    def residuals(z, a):
-        r, info = residual_fn(z, a)
-        return r * scale, jnp.concatenate([info, (0.5 * jnp.sum(r**2))[None]])
-
+def lm_init(residual_fn, z0, args, lm_tol, scale):
+    """The loop's first carry and its `_outcome`, for the residual function `residual_fn(z, args) -> (r,
+    info)` (`Residuals`) from `z0`. **Returns** `(carry, outcome)`."""
     y0 = inexact_asarray(z0)
-    fn = eqx.filter_closure_convert(OutAsArray(residuals), y0, args)
-    f_struct, aux_struct = fn.out_struct  # pyright: ignore[reportFunctionMemberAccess]
-    solver = _solver(lm_tol)
-    state = solver.init(fn, y0, args, _OPTIONS, f_struct, aux_struct, _TAGS)
+    fn, solver, state, aux_struct = _problem(residual_fn, y0, args, lm_tol, scale)
     terminate, result = _terminate_and_result(solver, fn, y0, args, state)
-    dynamic, static = eqx.partition(state, eqx.is_array)
     aux = jax.tree_util.tree_map(lambda s: jnp.zeros(s.shape, s.dtype), aux_struct)
-    carry = (y0, jnp.array(0), dynamic, aux, terminate, result)
-    return (fn, static), carry, _outcome(solver, fn, args, static, carry, scale)
+    leaves = jax.tree_util.tree_leaves(eqx.filter(state, eqx.is_array))
+    carry = (y0, jnp.array(0), leaves, aux, terminate, result)
+    return carry, _outcome(solver, fn, args, state, carry, scale)
 
 
-@eqx.filter_jit
-def _lm_step(problem, carry, args, lm_tol, scale):
+def lm_step(residual_fn, carry, args, lm_tol, scale):
     """One Levenberg-Marquardt step (one evaluation of the residuals and their Jacobian) and its
     termination test. **Returns** the next carry, its `_outcome` and the evaluation `(z, [status, solver
     steps, cost])`."""
-    fn, static = problem
-    y, num_steps, dynamic, _, _, _ = carry
-    solver = _solver(lm_tol)
-    state = eqx.combine(static, dynamic)
+    y, num_steps, leaves, _, _, _ = carry
+    fn, solver, first, _ = _problem(residual_fn, y, args, lm_tol, scale)
+    dynamic, static = eqx.partition(first, eqx.is_array)
+    state = eqx.combine(jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(dynamic), leaves), static)
     y_new, state, aux, evaluation = solver.step_and_evaluation(fn, y, args, _OPTIONS, state, _TAGS)
     terminate, result = _terminate_and_result(solver, fn, y, args, state)  # optimistix tests the old y
     dynamic, new_static = eqx.partition(state, eqx.is_array)
     assert eqx.tree_equal(static, new_static) is True
-    carry = (y_new, num_steps + 1, dynamic, aux, terminate, result)
-    return carry, _outcome(solver, fn, args, static, carry, scale), evaluation
-
-
-def lower_step(residual_fn, init, z0, args, lm_tol, scale):
-    """`_lm_step` lowered for what `init` (`_lm_init` compiled for `residual_fn`) makes from these inputs."""
-    problem, carry, _ = init(residual_fn, z0, args, lm_tol, scale)
-    return _lm_step.lower(problem, carry, args, lm_tol, scale)
+    carry = (y_new, num_steps + 1, jax.tree_util.tree_leaves(dynamic), aux, terminate, result)
+    return carry, _outcome(solver, fn, args, state, carry, scale), evaluation
 
 
 class Core:
@@ -457,10 +474,10 @@ class Core:
         **Returns** `(z, r, J, info, iterations, accepted steps, codes)` as numpy arrays: the estimate, the
         unscaled residuals (n,) and Jacobian dr/dz (n, p) there, info = (solve status, solver steps) there,
         codes = (converged, reached max_iterations)."""
-        problem, carry, (go_on, out) = self._init(self.residual_fn, z0, args, lm_tol, scale)
+        carry, (go_on, out) = self._init(self.residual_fn, z0, args, lm_tol, scale)
         steps = 0
         while bool(go_on) and steps < self.max_iterations:
-            carry, (go_on, out), (z, info) = self._step(problem, carry, args, lm_tol, scale)
+            carry, (go_on, out), (z, info) = self._step(self.residual_fn, carry, args, lm_tol, scale)
             steps += 1
             if report is not None:
                 info = np.asarray(info)
@@ -469,11 +486,11 @@ class Core:
 
 
 def compiled_core(cfg: Config, z0, args, lm_tol, scale) -> Core:
-    """The fit's pieces compiled ahead of time (so compile and fit are timed apart), cached per structure:
-    other tolerances, scales, starts, data values and step budgets reuse them."""
-    static = dataclasses.replace(cfg, max_iterations=0)  # the host counts the steps
-    key = (static, *structure_key(z0, args, lm_tol, scale))
-    fn = _residual_fn(static)
-    init, _ = compiled("identify", ("init", *key), lambda: _lm_init.lower(fn, z0, args, lm_tol, scale))
-    step, _ = compiled("identify", ("step", *key), lambda: lower_step(fn, init, z0, args, lm_tol, scale))
+    """The fit's pieces compiled ahead of time (so compile and fit are timed apart), cached per structure
+    in this process and, where the compilation cache is on, stored whole (`compile_cache.program`): other
+    tolerances, scales, starts, data values and step budgets reuse them."""
+    fn = Residuals(dataclasses.replace(cfg, max_iterations=0))  # the host counts the steps
+    init = program("identify-init", "identify_init", lm_init, (fn, z0, args, lm_tol, scale))[0]
+    carry, _ = init(fn, z0, args, lm_tol, scale)  # the step's example inputs (no solve: a cheap program)
+    step = program("identify-step", "identify_step", lm_step, (fn, carry, args, lm_tol, scale))[0]
     return Core(fn, cfg.max_iterations, init, step)
