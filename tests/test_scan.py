@@ -14,6 +14,7 @@ import json  # noqa: E402
 import re  # noqa: E402
 
 import diffrax  # noqa: E402
+import equinox as eqx  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 
@@ -131,10 +132,12 @@ def test_identical_for_any_chunk_size_and_device_count(box, clean):
 
 
 def test_a_renamed_scenario_reuses_the_compiled_chunk(box, clean):
-    """The compiled chunk does not depend on the scenario's static labels (`Scenario.unlabelled`): the
-    same scan of a renamed copy compiles nothing, gives the same results bit for bit, and is named for the
-    copy."""
+    """The compiled chunk does not depend on the scenario's static labels (`Scenario.unlabelled`) nor on
+    how a leaf was set (`as_float64_leaves`): the same scan of a renamed copy, one of its leaves set to a
+    Python float with `eqx.tree_at`, compiles nothing, gives the same results bit for bit, and is named for
+    the copy."""
     renamed = dataclasses.replace(box, name="renamed box", t1=2 * T1, description="a copy")
+    renamed = eqx.tree_at(lambda s: s.foundation.stiffness, renamed, float(box.foundation.stiffness))
     again = scan(renamed, {MU: MUS}, TIMES, **kw(chunk_size=4))
     assert again.attrs["timings_s"]["compile"] == 0.0 and clean.attrs["timings_s"]["compile"] > 0.0
     assert again.attrs["scenario"] == "renamed box"

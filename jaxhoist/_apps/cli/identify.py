@@ -161,7 +161,8 @@ def run(args: argparse.Namespace) -> int:
     prepare_out_dir(out_dir, "identify", overwrite=getattr(args, "overwrite", False))
     note(
         f"fitting {', '.join(params)} of {scenario.name} to {len(measurement.names)} signals x "
-        f"{measurement.t.size} samples of {args.measurement} (compiles once, then iterates) ..."
+        f"{measurement.t.size} samples of {args.measurement} (its programs compiled or loaded from the "
+        "cache, then the iterations) ..."
     )
     options = SolverOptions(CLI_SOLVERS[args.solver](), rtol=args.rtol, atol=args.atol)
     bar = None

@@ -71,6 +71,7 @@ from ..._numerics.batch import (
     flatten_out,
 )
 from ..._numerics.options import SolverOptions
+from ..._numerics.solve import as_float64_leaves
 from ..._numerics.times import Times, TimesLike, as_times
 from ..._physics.params import Scenario
 from ..._physics.paths import check_path, param_unit
@@ -210,6 +211,7 @@ def _scan(
     if not isinstance(batch, BatchOptions):
         raise ScenarioError(f"batch must be a jaxhoist.BatchOptions, got {type(batch).__name__}")
     scenario.check()
+    scenario = as_float64_leaves(scenario)  # a Python float or weakly typed leaf: the same programs
     coords, shape, members = dict(sweep.values), sweep.shape, sweep.members()
     paths = tuple(coords)
     for p in paths:
