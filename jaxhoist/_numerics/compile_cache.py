@@ -2,9 +2,9 @@
 `fn(*args)`: from the process's cache, else (with the persistent compilation cache on) loaded whole from
 the cache folder without tracing or lowering (`stored_programs`), else traced, lowered and compiled (and
 stored there). `compiled(kind, key, lower)` lowers and compiles once per `(kind, key)` for programs made
-another way (an accelerator's copies of a scan's group program). Either keeps the
-executable for the process's lifetime, so repeated calls (scan chunks, the command line's `main()` called
-again in one process, identification starts) compile once and can time the compilation apart from the run.
+another way (an accelerator's copies of a scan's group program). Either keeps the executable for the
+process's lifetime, so repeated calls (scan chunks, the command line's `main()` called again in one
+process, identification starts) compile once and can time the compilation apart from the run.
 `structure_key` is the usual key: pytree structure, leaf shapes, dtypes and weak types. `stored_jit(name)`
 compiles a function called many times from the host (the rigid model's phase driver) through `program`,
 as `equinox.filter_jit` would compile it.

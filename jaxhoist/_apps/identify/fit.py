@@ -22,8 +22,8 @@ residuals whitened by given noise levels, else the residual variance estimate RS
 
 Everything the user gives is checked on the host before anything is compiled; the compiled programs are
 cached per problem structure (parameters, signals, sizes, solver options), so repeated fits and several
-starts compile once, and they hold no host callback, so JAX's persistent compilation cache stores them for
-the next process.
+starts compile once, and they hold no host callback, so the persistent compilation cache
+(`enable_compilation_cache`) stores them whole and the next process loads them without tracing the model.
 """
 
 from __future__ import annotations
