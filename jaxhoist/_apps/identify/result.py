@@ -52,8 +52,9 @@ class IdentificationResult:
       unit vector in relative units along which the fit changes least; `identifiable`: False if the matrix is
       near-singular or a parameter's relative standard error exceeds the limit; `warnings`: plain sentences.
     - `starts`: every LM run (several starts); `scenario`: the scenario with θ̂ set.
-    - `wall_time`: the whole call [s]; `compile_time`: compiling the core (≈ 0 when cached) [s];
-      `fit_time`: the LM runs [s].
+    - `wall_time`: the whole call [s]; `compile_time`: compiling the fit's programs, or loading them from
+      the compilation cache folder (≈ 0 when compiled earlier in the process) [s]; `fit_time`: the LM
+      runs [s].
     - `jacobian`: d(whitened residual)/dθ at θ̂ from the forward sensitivities, (n_residuals, p).
     """
 
@@ -122,7 +123,8 @@ class IdentificationResult:
             f"covariance: Gauss-Newton at the optimum, {noise}; condition number of JᵀJ (relative units) "
             f"{self.condition_number:.3g}",
             f"simulation at the estimate: {self.solve_status.name.lower()}, {self.solver_steps} steps; "
-            f"wall time {self.wall_time:.3g} s (compile {self.compile_time:.3g} s, fit {self.fit_time:.3g} s"
+            f"wall time {self.wall_time:.3g} s (compile or load {self.compile_time:.3g} s, "
+            f"fit {self.fit_time:.3g} s"
             + (f" over {len(self.starts)} starts)" if len(self.starts) > 1 else ")"),
         ]
         if self.identifiable:
