@@ -6,6 +6,7 @@ One compiled problem serves every fit here: μ of paper-4.2 from the mass-centre
 differentiable, see docs/identification.md). The tests change data values only, so the cached core is reused.
 """
 
+import dataclasses
 import json
 import math
 
@@ -197,6 +198,12 @@ def test_covariance_matches_scatter(scenario, clean):
         identify(scenario, _noisy(clean, seed), ["mu"], noise={"position": SIGMA}) for seed in range(1, n)
     ]
     assert _identify_programs() == compiled  # new data values reuse the compiled core
+    # so do a renamed copy and a leaf set to a Python float (neither is part of the problem's structure)
+    copy = eqx.tree_at(lambda s: s.rope.stiffness, scenario, float(scenario.rope.stiffness))
+    again = identify(
+        dataclasses.replace(copy, name="a copy"), _noisy(clean, 0), ["mu"], noise={"position": SIGMA}
+    )
+    assert _identify_programs() == compiled and again.values[0] == fits[0].values[0]
     assert all(f.compile_time < 0.5 for f in fits[1:])
     est = np.array([f.values[0] for f in fits])
     se = np.array([f.std_errors[0] for f in fits])

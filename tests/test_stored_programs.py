@@ -299,6 +299,16 @@ def listen(event, duration, **kwargs):  # JAX reports each trace of a program co
         traced[kwargs.get("fun_name", "?")] += 1
 jax.monitoring.register_event_duration_secs_listener(listen)
 
+from jaxhoist._apps.identify import core
+calls = collections.Counter()  # traces of the model and of the model with its Jacobian, by their solves
+def counting(name, f):
+    def wrapper(*args, **kwargs):
+        calls[name] += 1
+        return f(*args, **kwargs)
+    return wrapper
+core.solve = counting("model", core.solve)
+core._sensitivity_solve = counting("jacobian", core._sensitivity_solve)
+
 warnings.simplefilter("always")
 with warnings.catch_warnings(record=True) as caught:
     jh.enable_compilation_cache(sys.argv[1])
@@ -308,7 +318,7 @@ with warnings.catch_warnings(record=True) as caught:
     # default solver's time, and the route stored and loaded is the same
     res = jh.identify(sc, m, ["mu"], start={"mu": 0.3}, noise={"position": 0.005},
                       options=jh.SolverOptions(diffrax.Tsit5()))
-print(json.dumps({"traced": dict(traced), "warnings": [str(w.message) for w in caught],
+print(json.dumps({"traced": dict(traced), "calls": dict(calls), "warnings": [str(w.message) for w in caught],
                   "fit": [res.values[0].hex(), res.cost.hex(), res.iterations]}))
 """
 
@@ -319,9 +329,13 @@ def test_a_second_process_loads_the_identify_pieces_untraced_with_the_same_bits(
     μ from the mass-centre path, 21 samples)."""
     first, second = (run_script(_IDENTIFY_SCRIPT, tmp_path / "cache", timeout=900) for _ in range(2))
     assert first["traced"].get("lm_init", 0) == 1 and first["traced"].get("lm_step", 0) == 1
+    # the pieces trace the residual function and its Jacobian more than once, the model and the model with
+    # its Jacobian once each (nested programs: `identify.core.model_nested`); twice each without them
+    assert first["calls"] == {"model": 1, "jacobian": 1}
     stored = sorted(p.name.rsplit("-", 2)[0] for p in (tmp_path / "cache" / sp.SUBFOLDER).glob("*-cache"))
-    assert stored == ["identify_init", "identify_step", "solve"]  # solve: the synthetic measurement's
+    assert stored == ["identify-init", "identify-step", "solve"]  # solve: the synthetic measurement's
     assert not {"lm_init", "lm_step"} & set(second["traced"]), f"traced although stored: {second['traced']}"
+    assert second["calls"] == {}
     assert not second["warnings"]
     assert first["fit"][2] > 1 and second["fit"] == first["fit"]  # bit for bit
 

@@ -1,7 +1,8 @@
 """The compiled core of `identify`: the model with its forward sensitivities, the residual function with a
 one-pass Jacobian (`jax.custom_jvp`), the Levenberg-Marquardt run as compiled pieces (its start, one step)
-in a loop on the host, and the host side of its progress reports. No piece holds a host callback, so JAX's
-persistent compilation cache stores them."""
+in a loop on the host, and the host side of its progress reports. No piece holds a host callback; the pieces
+are stored whole in the compilation cache folder (`compile_cache.program`), and a later process loads them
+without tracing the model."""
 
 from __future__ import annotations
 
@@ -232,7 +233,7 @@ def _model_and_jacobian(cfg: Config, z, args):
 # trace (per problem and process), so the step, which traces the residual function and its Jacobian more
 # than once (`lm_step`, `_problem`), traces the model once. XLA inlines nested programs: the compiled code,
 # and the fit's bits, are those of the plain calls.
-_model_nested = eqx.filter_jit(model)
+model_nested = eqx.filter_jit(model)
 _model_and_jacobian_nested = eqx.filter_jit(_model_and_jacobian)
 
 
@@ -249,7 +250,7 @@ def _residual_fn(cfg: Config):
 
     @jax.custom_jvp
     def res(z, args):
-        r, status, steps = _model_nested(cfg, z, args)
+        r, status, steps = model_nested(cfg, z, args)
         r, _ = guard(r, status)
         return r, jnp.stack([status, steps]).astype(jnp.float64)
 
@@ -443,6 +444,9 @@ def lm_step(residual_fn, carry, args, lm_tol, scale):
     y, num_steps, leaves, _, _, _ = carry
     fn, solver, first, _ = _problem(residual_fn, y, args, lm_tol, scale)
     dynamic, static = eqx.partition(first, eqx.is_array)
+    like = jax.tree_util.tree_leaves(dynamic)
+    if [(x.shape, x.dtype) for x in leaves] != [(x.shape, x.dtype) for x in like]:
+        raise TypeError("identify: the carried solver state does not match the state the step builds")
     state = eqx.combine(jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(dynamic), leaves), static)
     y_new, state, aux, evaluation = solver.step_and_evaluation(fn, y, args, _OPTIONS, state, _TAGS)
     terminate, result = _terminate_and_result(solver, fn, y, args, state)  # optimistix tests the old y
@@ -490,7 +494,7 @@ def compiled_core(cfg: Config, z0, args, lm_tol, scale) -> Core:
     in this process and, where the compilation cache is on, stored whole (`compile_cache.program`): other
     tolerances, scales, starts, data values and step budgets reuse them."""
     fn = Residuals(dataclasses.replace(cfg, max_iterations=0))  # the host counts the steps
-    init = program("identify-init", "identify_init", lm_init, (fn, z0, args, lm_tol, scale))[0]
+    init = program("identify-init", "identify-init", lm_init, (fn, z0, args, lm_tol, scale))[0]
     carry, _ = init(fn, z0, args, lm_tol, scale)  # the step's example inputs (no solve: a cheap program)
-    step = program("identify-step", "identify_step", lm_step, (fn, carry, args, lm_tol, scale))[0]
+    step = program("identify-step", "identify-step", lm_step, (fn, carry, args, lm_tol, scale))[0]
     return Core(fn, cfg.max_iterations, init, step)

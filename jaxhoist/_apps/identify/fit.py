@@ -36,7 +36,6 @@ from pathlib import Path
 from typing import Any
 
 import diffrax
-import equinox as eqx
 import jax.numpy as jnp
 import numpy as np
 
@@ -56,7 +55,7 @@ from ..._numerics.times import Times
 from ..._physics.params import Scenario
 from ..._physics.paths import param_unit
 from ..simulate import simulate
-from .core import Config, FitReporter, compiled_core, model
+from .core import Config, FitReporter, compiled_core, model_nested
 from .options import FitOptions, fit_solver_options
 from .parameters import ALIASES as ALIASES
 from .parameters import SYMBOLS as SYMBOLS
@@ -144,13 +143,9 @@ def _setup(
         max_iterations=int(max_iterations),
     )
     tr = tuple(tuple(jnp.asarray(a, dtype=jnp.float64) for a in (p.ref, p.lo, p.hi, p.scale)) for p in plist)
-    args = (scenario, tr, jnp.asarray(data), jnp.asarray(sigma), jnp.asarray(ts))
+    # unlabelled: one program for any name, t1 or description (the solves read `ts`, not the labels)
+    args = (scenario.unlabelled(), tr, jnp.asarray(data), jnp.asarray(sigma), jnp.asarray(ts))
     return _Problem(scenario, measurement, plist, theta0, names, sig, noise_known, warnings, n_res, cfg, args)
-
-
-@eqx.filter_jit
-def _model_jit(cfg: Config, z, args):
-    return model(cfg, z, args)
 
 
 def residual_function(
@@ -187,7 +182,7 @@ def residual_function(
 
     def fn(theta):
         z = jnp.asarray(flat_z(prob.params, np.asarray(theta, dtype=np.float64)))
-        r, status, _ = _model_jit(cfg, z, prob.args)
+        r, status, _ = model_nested(cfg, z, prob.args)
         r = np.asarray(r)
         return r if int(status) == SolveStatus.OK else np.full_like(r, np.nan)
 
