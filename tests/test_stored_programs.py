@@ -287,17 +287,25 @@ def test_a_second_process_loads_the_locators_solves_untraced_with_the_same_bits(
     assert names == ["bifurcation-jvp", "bifurcation-value"]
 
 
-_IDENTIFY_SCRIPT = r"""
-import collections, json, sys, warnings
-import diffrax, jax, numpy as np
-jax.config.update("jax_enable_x64", True)
-import jaxhoist as jh
-
+# The first lines of the scripts below: JAX's report of each trace of a program compiled apart, counted in
+# `traced` by the program's name.
+_TRACE_LOG = r"""
+import collections
+import jax
 traced = collections.Counter()
-def listen(event, duration, **kwargs):  # JAX reports each trace of a program compiled apart, by name
+def listen(event, duration, **kwargs):
     if event == "/jax/core/compile/jaxpr_trace_duration":
         traced[kwargs.get("fun_name", "?")] += 1
 jax.monitoring.register_event_duration_secs_listener(listen)
+"""
+
+_IDENTIFY_SCRIPT = (
+    _TRACE_LOG
+    + r"""
+import json, sys, warnings
+import diffrax, numpy as np
+jax.config.update("jax_enable_x64", True)
+import jaxhoist as jh
 
 from jaxhoist._apps.identify import core
 calls = collections.Counter()  # traces of the model and of the model with its Jacobian, by their solves
@@ -321,6 +329,7 @@ with warnings.catch_warnings(record=True) as caught:
 print(json.dumps({"traced": dict(traced), "calls": dict(calls), "warnings": [str(w.message) for w in caught],
                   "fit": [res.values[0].hex(), res.cost.hex(), res.iterations]}))
 """
+)
 
 
 def test_a_second_process_loads_the_identify_pieces_untraced_with_the_same_bits(tmp_path):
@@ -340,18 +349,14 @@ def test_a_second_process_loads_the_identify_pieces_untraced_with_the_same_bits(
     assert first["fit"][2] > 1 and second["fit"] == first["fit"]  # bit for bit
 
 
-_RIGID_SCRIPT = r"""
-import collections, json, sys, warnings
-import jax, numpy as np
+_RIGID_SCRIPT = (
+    _TRACE_LOG
+    + r"""
+import json, sys, warnings
+import numpy as np
 jax.config.update("jax_enable_x64", True)
 import jaxhoist as jh
 from jaxhoist._numerics import compile_cache
-
-traced = collections.Counter()
-def listen(event, duration, **kwargs):  # JAX reports each trace of a program compiled apart, by name
-    if event == "/jax/core/compile/jaxpr_trace_duration":
-        traced[kwargs.get("fun_name", "?")] += 1
-jax.monitoring.register_event_duration_secs_listener(listen)
 
 warnings.simplefilter("always")
 with warnings.catch_warnings(record=True) as caught:
@@ -362,6 +367,7 @@ np.savez(sys.argv[2], position=np.asarray(tr.position), euler=np.asarray(tr.eule
 print(json.dumps({"traced": dict(traced), "warnings": [str(w.message) for w in caught],
                   "pieces": sorted(k for k, _ in compile_cache._CACHE if k.startswith("rigid-"))}))
 """
+)
 
 
 def test_a_second_process_loads_the_rigid_models_pieces_untraced_with_the_same_bits(tmp_path):
