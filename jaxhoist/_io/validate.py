@@ -13,8 +13,8 @@ or the file, before anything is compiled or solved; none imports JAX transformat
 - Parameter paths (`check_param_path`), counts (`check_count`), observables (`check_scalar_observable`) and
   (the agreement of `t1` with `ts` is checked with the time grid, `numerics.solve.check_times`).
 - A scenario's own values, including each parameter's plausible range (refused outside unless the scenario
-  opts in with `allow_implausible`), are checked by `Scenario.check()` (`jaxhoist._physics.params`);
-  `check_scenario` is the same call.
+  opts in with `allow_implausible`), are checked by `Scenario.check()` (`jaxhoist._physics.params`),
+  which every solving entry point calls through `jaxhoist._numerics.solve.checked_scenario`.
 """
 
 from __future__ import annotations
@@ -41,7 +41,6 @@ __all__ = [
     "check_out_dir",
     "check_param_path",
     "check_scalar_observable",
-    "check_scenario",
     "clean_outputs",
     "count_arg",
     "number_arg",
@@ -408,13 +407,3 @@ def check_scalar_observable(observable, flag: str = "--observable") -> None:
             f"{flag} {name!r} is a vector observable with components {list(comps)}; a scalar is needed: "
             f"pick one, e.g. '{name}[{comps[-1]}]'"
         )
-
-
-def check_scenario(scenario: P.Scenario) -> P.Scenario:
-    """The one validation of a scenario's values, shared by the CLI and the Python API: `scenario.check()`
-    (hard limits, shapes, dtypes, the box geometry and the plausible ranges, unless `allow_implausible`).
-
-    **Returns** `scenario`. **Raises** `ScenarioError` naming the first invalid field.
-    """
-    scenario.check()
-    return scenario

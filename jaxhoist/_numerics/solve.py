@@ -181,6 +181,22 @@ def as_float64_leaves(scenario: Scenario) -> Scenario:
     return jax.tree_util.tree_map(fix, scenario)
 
 
+def checked_scenario(scenario: object) -> Scenario:
+    """What every entry point that solves (`simulate`, `simulate_rigid`, `scan`, `locate_bifurcation`,
+    `identify`) does first with its scenario, on the host, before anything compiles: refuse what is no
+    `Scenario`, run `Scenario.check()`, and pass every float leaf through `as_float64_leaves`.
+
+    **Returns** the checked scenario, its float leaves strongly typed float64 arrays (a leaf set to a Python
+    float reuses the programs compiled for the others).
+
+    **Raises** `TypeError` for what is no `Scenario`; `ScenarioError` naming the first invalid field.
+    """
+    if not isinstance(scenario, Scenario):
+        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
+    scenario.check()
+    return as_float64_leaves(scenario)
+
+
 #: The number of saved times of `simulate` and `simulate_rigid` when `Times.n` is None.
 DEFAULT_N = 501
 
@@ -204,10 +220,7 @@ def simulate_elastic(
     **Raises** `ScenarioError` for invalid input (before compiling), and (with `throw=True`) an
     `EquinoxRuntimeError` naming the failure.
     """
-    if not isinstance(scenario, Scenario):
-        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
-    scenario.check()
-    scenario = as_float64_leaves(scenario)
+    scenario = checked_scenario(scenario)
     if options is None:
         options = SolverOptions()
     _, ts = times.resolve(scenario, DEFAULT_N, jnp)

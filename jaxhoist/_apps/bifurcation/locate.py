@@ -32,7 +32,7 @@ import numpy as np
 
 from ..._errors import ScenarioError, require_x64
 from ..._numerics.options import SolverOptions
-from ..._numerics.solve import as_float64_leaves
+from ..._numerics.solve import checked_scenario
 from ..._numerics.times import TimesLike, as_times
 from ..._physics.params import Scenario
 from ..._physics.paths import check_path, param_unit, set_param
@@ -95,10 +95,7 @@ def locate_bifurcation(
     search, options = settings(search, options)
     require_x64()
     wall0 = time.perf_counter()
-    if not isinstance(scenario, Scenario):
-        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
-    scenario.check()
-    scenario = as_float64_leaves(scenario)  # a Python float or weakly typed leaf: the same programs
+    scenario = checked_scenario(scenario)
     check_path(scenario, param)
     lo, hi = (float(b) for b in bracket)
     if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):

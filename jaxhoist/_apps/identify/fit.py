@@ -50,7 +50,7 @@ from ..._io.measurement import (
 )
 from ..._io.scenario import load_scenario
 from ..._numerics.options import SolverOptions
-from ..._numerics.solve import as_float64_leaves
+from ..._numerics.solve import checked_scenario
 from ..._numerics.times import Times
 from ..._physics.params import Scenario
 from ..._physics.paths import param_unit
@@ -110,8 +110,7 @@ def _setup(
         raise TypeError(
             f"scenario must be a jaxhoist.Scenario, a preset name or a path, got {type(scenario).__name__}"
         )
-    scenario.check()
-    scenario = as_float64_leaves(scenario)  # a Python float or weakly typed leaf: the same programs
+    scenario = checked_scenario(scenario)
     if isinstance(measurement, str | Path):
         measurement = read_measurement(measurement)
     if not isinstance(measurement, Measurement):

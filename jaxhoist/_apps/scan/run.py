@@ -71,7 +71,7 @@ from ..._numerics.batch import (
     flatten_out,
 )
 from ..._numerics.options import SolverOptions
-from ..._numerics.solve import as_float64_leaves
+from ..._numerics.solve import checked_scenario
 from ..._numerics.times import Times, TimesLike, as_times
 from ..._physics.params import Scenario
 from ..._physics.paths import check_path, param_unit
@@ -206,12 +206,9 @@ def _scan(
     """`scan` with every choice an object (the sweep, the saved times, the solver options with forward mode
     if `derivatives`, the batch options): the entry point for the package's own callers."""
     wall0 = time.perf_counter()
-    if not isinstance(scenario, Scenario):
-        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
     if not isinstance(batch, BatchOptions):
         raise ScenarioError(f"batch must be a jaxhoist.BatchOptions, got {type(batch).__name__}")
-    scenario.check()
-    scenario = as_float64_leaves(scenario)  # a Python float or weakly typed leaf: the same programs
+    scenario = checked_scenario(scenario)
     coords, shape, members = dict(sweep.values), sweep.shape, sweep.members()
     paths = tuple(coords)
     for p in paths:

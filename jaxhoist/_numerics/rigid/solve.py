@@ -47,7 +47,7 @@ from ..._errors import ScenarioError, require_x64
 from ..._physics import rigid
 from ..._physics.params import Scenario
 from ..._physics.rigid.model import InextensibleRope, RigidGround
-from ..solve import as_float64_leaves
+from ..solve import checked_scenario
 from ..times import TimesLike, as_times
 from .compiled import (
     OUTPUT_CHUNK,
@@ -122,10 +122,7 @@ def simulate_rigid(
         raise ScenarioError(f"model must be RigidGround(...), got {type(model).__name__}")
     if not isinstance(options, RigidOptions):
         raise ScenarioError(f"options must be RigidOptions(...), got {type(options).__name__}")
-    if not isinstance(scenario, Scenario):
-        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
-    scenario.check()
-    scenario = as_float64_leaves(scenario)  # a Python float or weakly typed leaf: the same programs
+    scenario = checked_scenario(scenario)
     t1, ts = times.resolve(scenario, DEFAULT_N)
     t1 = float(t1)
     if times.ts is None:  # the rigid model's grid, linspace(0, t1, n): it rounds differently from resolve's
