@@ -14,6 +14,7 @@ import numpy as np
 
 from ..._errors import ScenarioError, require_x64
 from ..._numerics.batch import ScanStatus
+from ..._numerics.solve import checked_scenario
 from ..._numerics.times import TimesLike, as_times
 from ..._physics.params import Scenario
 from ..._physics.paths import check_path, param_unit
@@ -35,9 +36,7 @@ def check_inputs(scenario: Scenario, uncertain) -> dict[str, AbstractDistributio
     **Raises** `TypeError` for a `scenario` that is no `Scenario`; `ScenarioError` naming the field.
     """
     require_x64()
-    if not isinstance(scenario, Scenario):
-        raise TypeError(f"scenario must be a jaxhoist.Scenario, got {type(scenario).__name__}")
-    scenario.check()
+    checked_scenario(scenario)
     dists = check_uncertain(uncertain)
     for p in dists:
         check_path(scenario, p)

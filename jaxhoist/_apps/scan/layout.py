@@ -97,9 +97,10 @@ def adaptive_lanes(n: int, n_devices: int = 1, accelerator: bool = False) -> int
     on one device, so a scan of fewer groups than devices leaves devices idle. The width that keeps every
     device busy with the widest groups wins: 256 members of paper-4.2 over 25 s on two CPU devices cost
     0.97x the CPU time per trajectory of 4096 members in 2 groups of 128, against 1.57x in 16 groups of 16
-    (`experiments/benchmarks/bench_scan_sizes.py`, docs/performance.md). The lock-step waste of wide groups
-    is small where neighbours take about the same steps, as in a sorted scan of one parameter; a sparse
-    scan of few, far-apart members loses some of the gain (64 members over μ = 0.1-0.6 in one group of 64:
+    (`experiments/benchmarks/bench_scan_sizes.py --compare-lanes 16`, on a shared machine under load).
+    The lock-step waste of wide groups is small where neighbours take about the same steps, as in a
+    sorted scan of one parameter; a sparse scan of few, far-apart members loses some of the gain (64
+    members over μ = 0.1-0.6 in one group of 64:
     1.25x the cost of groups of 16 at a lock-step efficiency of 0.39, with an earlier solver whose steps
     varied more), and so does a stiff friction law, whose members' steps spread (256 members at ε = 1e-4
     m/s: steps median 1 712, max 6 250; 3.2x the cost per trajectory of ε = 1e-3 in the default groups of
