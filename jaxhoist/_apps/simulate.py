@@ -43,13 +43,17 @@ def simulate(
       `RigidTrajectory` with the same output names plus `impact_loss` and the phase log).
     - `options`: `SolverOptions` (solver, step-size controller, adjoint, dt0, max_steps, progress meter).
       The rigid model reads only its tolerances and step budget.
-    - `throw`: raise if the solve fails (max steps, non-finite state); with False, read `Trajectory.status`.
+    - `throw`: raise if the status of the elastic model's solve is not ok: the solver reached max steps or
+      failed, the state became non-finite, or the solver reported success but the energy balance does not
+      close (`SolveStatus.ENERGY_BALANCE`); with False, read `Trajectory.status`. The rigid model does not
+      read it.
 
     **Returns** a `Trajectory`: for the rigid model its subclass `RigidTrajectory`, which adds `impact_loss`
     and the phase log.
 
     **Raises** `ScenarioError` for invalid input (before compiling), `Float64Error` without x64,
-    and (with `throw=True`) an `EquinoxRuntimeError` naming the failure.
+    and (with `throw=True`) an `EquinoxRuntimeError` naming the failure; the rigid model raises
+    `RigidContactError` when it cannot continue, whatever `throw`.
     """
     require_x64()
     times = as_times(times)

@@ -59,7 +59,7 @@ class SolverOptions(eqx.Module):
       solver works (e.g. `diffrax.Tsit5()`, explicit, for short non-stiff spans).
     - `stepsize_controller`: a diffrax step-size controller: `diffrax.PIDController(rtol, atol)` for error
       control (the default; with the default solver rtol 5e-4, atol 1e-5 and the PI coefficients
-      pcoeff = icoeff = 0.3, with any other rtol 1e-6, atol 1e-8 and diffrax's integral controller) or
+      pcoeff = icoeff = 0.3, with any other solver rtol 1e-6, atol 1e-8 and diffrax's integral controller) or
       `diffrax.ConstantStepSize()` for constant steps of `dt0` (no error control; every member of a vmapped
       batch takes the same steps).
     - `adjoint`: how derivatives are taken: `diffrax.RecursiveCheckpointAdjoint()` (default; `jax.grad`) or

@@ -32,7 +32,7 @@ def configure_parser(subparsers) -> None:
     """Add `jaxhoist scan SCENARIO --param PATH --values a:b:n [...] --t1 T --out DIR`."""
     p = subparsers.add_parser(
         "scan",
-        help="sweep scenario parameters; observables per member as npz/json",
+        help="sweep scenario parameters; observables per member as npz/json/nc and plots",
         description="Solve a scenario for many values of one or more float leaves (vmapped, chunked, "
         "sharded over all devices, resumable) and save the observables of every member.",
     )
