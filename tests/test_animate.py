@@ -175,6 +175,8 @@ def test_bad_input_refused_before_rendering(result_dir, tmp_path, capsys):
         an.animate(result_dir, stride=0)
     with pytest.raises(ScenarioError, match="--format"):
         an.animate(result_dir, fmt="avi")
+    with pytest.raises(ScenarioError, match="--keyframes"):
+        an.animate(result_dir, n_keyframes=0)
     meta = json.loads((result_dir / "trajectory.json").read_text())
     del meta["scenario"]
     with pytest.raises(ScenarioError, match="load.size"):
@@ -192,6 +194,35 @@ def test_bad_input_refused_before_rendering(result_dir, tmp_path, capsys):
     with pytest.raises(SystemExit):  # argparse: --duration and --stride exclude each other
         cli.main(["animate", str(result_dir), "--duration", "1", "--stride", "2"])
     assert not (result_dir / "animation.gif").exists()
+
+
+def test_damaged_or_mismatched_result_files_are_refused(result_dir, tmp_path, capsys):
+    """A result whose npz is truncated, or is another run's npz beside this sidecar (the sidecar's
+    checksum differs), or whose sidecar is not JSON: one line naming the file, exit code 2, nothing drawn."""
+    other = tmp_path / "other"
+    results.save_arrays(other / "trajectory", {"ts": np.linspace(0.0, 2.0, 5)}, {"ts": "s"})
+    cases = {
+        "mismatched": lambda d: shutil.copy(other / "trajectory.npz", d / "trajectory.npz"),
+        "truncated": lambda d: (d / "trajectory.npz").write_bytes((d / "trajectory.npz").read_bytes()[:500]),
+        "sidecar": lambda d: (d / "trajectory.json").write_text("{"),
+    }
+    for name, damage in cases.items():
+        d = _fresh_copy(result_dir, tmp_path / name)
+        damage(d)
+        with pytest.raises(results.ResultFileError, match="trajectory"):
+            results.load_trajectory(d) if name != "sidecar" else results.load_metadata(d)
+        assert cli.main(["animate", str(d)]) == 2, name
+        err = capsys.readouterr().err.strip().splitlines()
+        assert len(err) == 1 and err[0].startswith("jaxhoist: error:") and str(d) in err[0], (name, err)
+        assert not (d / "animation.gif").exists()
+    # without a sidecar there is no checksum to compare: a truncated npz is still refused as damaged
+    d = _fresh_copy(result_dir, tmp_path / "alone")
+    (d / "trajectory.json").unlink()
+    (d / "trajectory.npz").write_bytes((d / "trajectory.npz").read_bytes()[:500])
+    with pytest.raises(results.ResultFileError, match="damaged"):
+        results.load_trajectory(d)
+    # the intact file reads back as written
+    np.testing.assert_array_equal(results.load_trajectory(other)["ts"], np.linspace(0.0, 2.0, 5))
 
 
 def test_cli_animate_writes_both_files(result_dir, tmp_path, capsys):

@@ -217,6 +217,65 @@ def test_identify_and_bifurcation_keep_the_rule(tmp_path, capsys, monkeypatch):
     assert "`jaxhoist simulate`" in _error(capsys)
 
 
+def test_a_refused_scan_leaves_the_earlier_scan_in_its_folder(tmp_path, capsys, monkeypatch):
+    """A scan refused by any check (an option, a member's values, a repeated --param) exits 2 before the
+    folder is claimed: the results of the scan that wrote the folder before stay there."""
+    monkeypatch.setattr(scan_cli, "scan", _boom)
+    folder = tmp_path / "S"
+    earlier = ["scan.npz", "scan.json", "scan.nc", "scan_final_psi.png", "chunk_00000.npz", "manifest.json"]
+    claim_out_dir(folder, "scan")
+    for name in earlier:
+        (folder / name).write_text("earlier")
+    base = ["scan", "paper-4.2", "--param", "foundation.friction_coefficient", "--values", "0.2,0.3",
+            "--out", str(folder), "--quiet"]  # fmt: skip
+    refusals = {
+        "--lanes": [*base, "--lanes", "0"],
+        "--chunk-size": [*base, "--chunk-size", "-4"],
+        "AccuracyCheck.members": [*base, "--accuracy-members", "0"],
+        "--n-save": [*base, "--n-save", "1"],
+        "given more than once": [*base, "--param", "foundation.friction_coefficient", "--values", "0.5"],
+        "every member of the scan is invalid": [*base[:3], "load.mass", "--values=-1,-2", *base[6:]],
+    }
+    for words, argv in refusals.items():
+        assert cli.main(argv) == 2, words
+        assert words in _error(capsys)
+        assert sorted(p.name for p in folder.iterdir()) == sorted([*earlier, MARKER]), words
+        assert all((folder / name).read_text() == "earlier" for name in earlier), words
+
+
+def test_a_value_list_may_start_with_a_negative_number():
+    """`--values -0.2:0.4:4` (and `--along-values`) reach the command as written, not as an unknown option."""
+    from jaxhoist._apps.cli.app import _join_negative_specs, build_parser
+
+    argv = ["scan", "paper-4.2", "--param", "boom.tip_position[0]", "--values", "-0.2:0.4:4", "--t1", "-1"]
+    joined = _join_negative_specs(argv)
+    assert joined[4] == "--values=-0.2:0.4:4" and joined[5:] == ["--t1", "-1"]
+    assert build_parser().parse_args(joined).values == ["-0.2:0.4:4"]
+    assert _join_negative_specs(["bifurcation", "--along-values", "-1,0,1"])[1] == "--along-values=-1,0,1"
+
+
+def test_set_load_density_gives_the_mass_of_the_box_as_a_file_does(paper42):
+    """`--set load.density` makes m = ρabc of the size after any `--set load.size`, as a scenario file's
+    `density` does; `load.size` alone keeps the mass (a leaf replaced); mass and density together are
+    refused."""
+    from jaxhoist._io.scenario import apply_overrides
+
+    m0 = float(paper42.load.mass)  # 850 kg/m^3 x 2.5 m x 6 m x 2.5 m
+    sc, _ = apply_overrides(paper42, ["load.density=900"])
+    assert float(sc.load.mass) == pytest.approx(m0 * 900 / 850, rel=1e-15)
+    sc, overrides = apply_overrides(paper42, ["load.size=5,12,5", "load.density=850"])
+    assert float(sc.load.mass) == pytest.approx(850 * 5 * 12 * 5, rel=1e-15)
+    assert overrides == {"load.size": [5.0, 12.0, 5.0], "load.density": 850.0}
+    assert float(apply_overrides(paper42, ["load.size=5,12,5"])[0].load.mass) == m0
+    for items, words in (
+        (["load.density=850", "load.mass=3"], "not both"),
+        (["load.density=1,2"], "one number"),
+        (["load.density=-1"], "load.density"),
+    ):
+        with pytest.raises(ScenarioError, match=words):
+            apply_overrides(paper42, items)
+
+
 # ------------------------------------------------------------------------------------------- messages
 
 

@@ -294,6 +294,13 @@ def test_failed_members_are_counted_apart(box):
     r2 = jh.lift_risk(box, unc, HAZARDS, {TIP: [4.0]}, samples=64, **KW)
     assert np.isnan(r2.probability("slide")[0]) and np.all(np.isnan(r2.interval("slide")[0]))
     assert np.all(np.isnan(r2.quantile("ground_slide", 0.5)))
+    # the summary says why: the failures counted by status, the first one's reason, and why there are NaNs
+    first = r.scan.failures()[0]
+    assert first["params"][MU] < 0 and f"failed {n_neg}/64" in r.summary()
+    assert f"failed members: invalid_parameter {n_neg}; the first (" in r.summary()
+    assert f"{MU} = {first['params'][MU]:g}" in r.summary()
+    assert first["reason"] in r.summary() and "NaN where" not in r.summary()
+    assert "NaN where more than max_failed = 0.05" in r2.summary()
 
 
 def test_netcdf_file(tmp_path, shifted):

@@ -2,6 +2,7 @@
 no recompilation when only leaf values change, and failure reporting."""
 
 import dataclasses
+import warnings
 
 import diffrax
 import equinox as eqx
@@ -199,6 +200,14 @@ def test_max_steps_reported_or_raised(paper42):
     assert int(tr.status) == jh.SolveStatus.MAX_STEPS
     assert not bool(tr.ok)
     assert int(tr.num_accepted_steps + tr.num_rejected_steps) == TSIT5_CAPPED.max_steps
+    # the saved times it did not reach hold inf: their arrays for the files (the command line's) have a NaN
+    # energy residual there, without numpy's "invalid value" warning
+    from jaxhoist._io.results import trajectory_arrays
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        arrays = trajectory_arrays(tr)
+    assert np.isinf(arrays["position"][-1]).all() and np.isnan(arrays["energy_residual"][-1])
     with pytest.raises(eqx.EquinoxRuntimeError, match="max_steps"):
         jh.simulate(stiff, times, throw=True, options=TSIT5_CAPPED)
 

@@ -8,7 +8,10 @@ version, command line, scenario name and every scenario leaf by dotted path, sol
     units = load_metadata("out/run/trajectory.npz")["arrays"]["position"]["unit"]   # "m"
 
 The npz needs nothing but numpy to read (`numpy.load`); `load_trajectory` returns a plain dict of arrays.
-Arrays keep any leading batch axis (a scan), so the same functions serve single solves and batches.
+The sidecar holds the npz file's SHA-256 checksum (`data_sha256`): the readers here refuse an npz that is
+not the one its sidecar describes (replaced, or written by a run that stopped between the two files) or
+that is damaged, with a `ResultFileError` naming the file. Arrays keep any leading batch axis (a scan), so
+the same functions serve single solves and batches.
 `save_arrays` is the generic writer for other result kinds (scans, bifurcation maps).
 """
 
@@ -16,16 +19,29 @@ from __future__ import annotations
 
 import dataclasses
 import datetime
+import hashlib
+import io
 import json
 import os
 import platform
+import zipfile
+import zlib
 from collections.abc import Mapping, Sequence
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from .._errors import ScenarioError
+
 FORMAT = "jaxhoist-trajectory/1"
+
+
+class ResultFileError(ScenarioError):
+    """A result file that cannot be trusted: missing or unreadable, damaged (not a readable npz or JSON), or
+    an npz that is not the one its JSON sidecar describes (its checksum differs). The command line prints
+    it on one line and exits with code 2."""
+
 
 # name -> (unit, meaning). The order is the order in the npz file.
 TRAJECTORY_ARRAYS: dict[str, tuple[str, str]] = {
@@ -71,10 +87,16 @@ def trajectory_arrays(traj) -> dict[str, np.ndarray]:
     e = traj.energy
     # mechanical energy and balance residual in numpy: `Energy.mechanical` and `Trajectory.energy_residual`
     # are annotated for one solve, and a scan's trajectory carries a batch axis first.
-    mech = sum(np.asarray(x) for x in (e.kinetic, e.potential, e.ground_spring, e.rope_spring, e.boom_spring))
-    supplied = np.asarray(traj.hoist_work) - np.asarray(traj.damping_loss) - np.asarray(traj.friction_work)
-    if hasattr(traj, "impact_loss"):  # the rigid model loses energy in impacts too
-        supplied = supplied - np.asarray(traj.impact_loss)
+    # After a solve that stopped early the saved times it did not reach hold inf (diffrax's fill value): their
+    # residual is NaN, without numpy's "invalid value" warning (the status says the solve stopped).
+    with np.errstate(invalid="ignore"):
+        parts = (e.kinetic, e.potential, e.ground_spring, e.rope_spring, e.boom_spring)
+        mech = sum(np.asarray(x) for x in parts)
+        supplied = np.asarray(traj.hoist_work) - np.asarray(traj.damping_loss)
+        supplied = supplied - np.asarray(traj.friction_work)
+        if hasattr(traj, "impact_loss"):  # the rigid model loses energy in impacts too
+            supplied = supplied - np.asarray(traj.impact_loss)
+        residual = (mech - mech[..., :1]) - (supplied - supplied[..., :1])  # pyright: ignore[reportIndexIssue]  # mech is an array here
     out = {
         "ts": traj.ts,
         "position": traj.position,
@@ -99,7 +121,7 @@ def trajectory_arrays(traj) -> dict[str, np.ndarray]:
         "hoist_work": traj.hoist_work,
         "damping_loss": traj.damping_loss,
         "friction_work": traj.friction_work,
-        "energy_residual": (mech - mech[..., :1]) - (supplied - supplied[..., :1]),  # pyright: ignore[reportIndexIssue]  # mech is an array here
+        "energy_residual": residual,
         "status": traj.status,
         "num_accepted_steps": traj.num_accepted_steps,
         "num_rejected_steps": traj.num_rejected_steps,
@@ -280,12 +302,14 @@ def save_arrays(
     # never a truncated one
     tmp = npz_path.with_name(npz_path.name + ".tmp.npz")
     np.savez_compressed(tmp, **arrs)  # pyright: ignore[reportArgumentType]  # numpy's stubs read **arrs as the allow_pickle keyword
+    checksum = hashlib.sha256(tmp.read_bytes()).hexdigest()
     os.replace(tmp, npz_path)
     sidecar = {
         "format": kind,
         "created": datetime.datetime.now(datetime.UTC).isoformat(timespec="seconds"),
         "versions": _versions(),
         "data_file": npz_path.name,
+        "data_sha256": checksum,
         "arrays": described,
         **_jsonable(dict(metadata or {})),  # pyright: ignore[reportGeneralTypeIssues]  # _jsonable returns the dict it was given
     }
@@ -338,17 +362,45 @@ def save_trajectory(
 
 def load_arrays(path: str | Path) -> dict[str, np.ndarray]:
     """The arrays of a `.npz` result file (give the `.npz`, the `.json`, the stem, or the folder of a
-    `jaxhoist simulate` result, which holds `trajectory.npz`) as a dict."""
-    with np.load(_file(_read_stem(path), ".npz"), allow_pickle=False) as f:
-        return {k: f[k] for k in f.files}
+    `jaxhoist simulate` result, which holds `trajectory.npz`) as a dict.
+
+    **Raises** `ResultFileError` naming the file where it is missing or unreadable, damaged, or not the npz
+    that its sidecar's checksum names (a sidecar without a checksum, or none at all, is not compared)."""
+    stem = _read_stem(path)
+    npz = _file(stem, ".npz")
+    try:
+        data = npz.read_bytes()
+    except OSError as e:
+        raise ResultFileError(f"{npz}: cannot be read ({e.strerror or e})") from None
+    sidecar = _file(stem, ".json")
+    if sidecar.exists():
+        want = load_metadata(sidecar).get("data_sha256")
+        if want is not None and hashlib.sha256(data).hexdigest() != want:
+            raise ResultFileError(
+                f"{npz}: is not the file that {sidecar.name} beside it describes (its SHA-256 checksum "
+                f"differs: replaced or changed since it was written, or a run stopped between the two)"
+            )
+    try:
+        with np.load(io.BytesIO(data), allow_pickle=False) as f:
+            return {k: f[k] for k in f.files}
+    except (zipfile.BadZipFile, zlib.error, ValueError, EOFError, OSError, KeyError) as e:
+        raise ResultFileError(f"{npz}: is damaged or not an npz file ({type(e).__name__}: {e})") from None
 
 
 load_trajectory = load_arrays
 
 
 def load_metadata(path: str | Path) -> dict[str, Any]:
-    """The JSON sidecar of a result file (give the `.npz`, the `.json`, the stem or a result folder)."""
-    return json.loads(_file(_read_stem(path), ".json").read_text())
+    """The JSON sidecar of a result file (give the `.npz`, the `.json`, the stem or a result folder).
+
+    **Raises** `ResultFileError` naming the file where it is missing, unreadable or not JSON."""
+    sidecar = _file(_read_stem(path), ".json")
+    try:
+        return json.loads(sidecar.read_text(encoding="utf-8"))
+    except OSError as e:
+        raise ResultFileError(f"{sidecar}: cannot be read ({e.strerror or e})") from None
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        raise ResultFileError(f"{sidecar}: is damaged or not a JSON file ({e})") from None
 
 
 def units(path: str | Path) -> dict[str, str]:

@@ -343,13 +343,25 @@ def parse_overrides(items) -> dict[str, float | list]:
 
 def apply_overrides(scenario: P.Scenario, items) -> tuple[P.Scenario, dict]:
     """A scenario with `--set PATH=VALUE` items applied and checked; errors name the path and say
-    "[from --set]". **Returns** `(scenario, {path: value})`."""
+    "[from --set]". PATH is a leaf's dotted path (`Scenario.replace`), or `load.density` [kg/m^3], which
+    sets the mass to ρabc of the box's size (after a `load.size` of the same command line), as a scenario
+    file's `density` does; `load.size` alone keeps the mass. **Returns** `(scenario, {path: value})`."""
     overrides = parse_overrides(items or [])
+    leaves = dict(overrides)
+    density = leaves.pop("load.density", None)
     try:
-        for path in overrides:
+        if density is not None and "load.mass" in leaves:
+            raise ScenarioError("load: give load.mass [kg] or load.density [kg/m^3], not both")
+        if density is not None and not isinstance(density, float):
+            raise ScenarioError(f"load.density: expected one number [kg/m^3], got {brief(density)}")
+        for path in leaves:
             get_leaf(scenario, path)  # raises ScenarioError naming a bad path
+        if leaves:
+            scenario = scenario.replace(**leaves)
+        if density is not None:  # m = ρabc, checked as the file's density is (Load's constructor)
+            mass = P.Load(scenario.load.size, density=density).mass
+            scenario = scenario.replace(**{"load.mass": float(mass)})
         if overrides:
-            scenario = scenario.replace(**overrides)
             scenario.check()
     except ScenarioError as e:
         raise ScenarioError(f"{e} [from --set]") from None

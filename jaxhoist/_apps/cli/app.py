@@ -15,6 +15,7 @@ from __future__ import annotations
 import argparse
 import importlib
 import os
+import re
 import sys
 from collections.abc import Sequence
 from typing import NoReturn
@@ -121,6 +122,25 @@ def _add_unavailable(subparsers, name: str, module: str, error: BaseException) -
     p = subparsers.add_parser(name, help=f"(unavailable: {error})", add_help=False)
     p.add_argument("rest", nargs=argparse.REMAINDER)
     p.set_defaults(func=run)
+
+
+#: The options whose value is a list or range of numbers (`-0.2:0.4:4`, `-1,0,1`).
+_SPEC_OPTIONS = ("--values", "--along-values")
+
+
+def _join_negative_specs(argv: list[str]) -> list[str]:
+    """`--values -0.2:0.4:4` as `--values=-0.2:0.4:4`: argparse reads a word that starts with a minus sign as
+    an option unless it is one plain negative number, so a list or range of values that starts with a
+    negative number would be refused as a missing value."""
+    out, i = [], 0
+    while i < len(argv):
+        if argv[i] in _SPEC_OPTIONS and i + 1 < len(argv) and re.match(r"-[0-9.]", argv[i + 1]):
+            out.append(f"{argv[i]}={argv[i + 1]}")
+            i += 2
+        else:
+            out.append(argv[i])
+            i += 1
+    return out
 
 
 def _use_devices(argv: list[str]) -> list[str]:
@@ -231,6 +251,7 @@ def main(argv: Sequence[str] | None = None) -> int:
         print(f"{PROG}: error: {e}", file=sys.stderr)
         return 2
     argv, no_cache = _take_no_cache(argv)
+    argv = _join_negative_specs(argv)
     parser = build_parser()
     args = parser.parse_args(argv)
     args.argv = argv

@@ -227,6 +227,9 @@ def _summary_json(risk: LiftRisk) -> dict:
         "seed": risk.seed,
         "confidence": risk.confidence,
         "n_failed": np.asarray(risk.n_failed).ravel().tolist(),
+        # why members failed: every status by name, and the first failed member (values, status, reason)
+        "status_counts": risk.scan.status_counts() if risk.scan is not None else None,
+        "first_failure": (risk.scan.failures() or [None])[0] if risk.scan is not None else None,
         "hazards": {
             h.name: {
                 "hazard": h.describe(),

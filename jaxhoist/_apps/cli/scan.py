@@ -16,7 +16,7 @@ from ..._numerics.options import SolverOptions
 from ..._numerics.times import Times
 from ..scan.accuracy import AccuracyCheck, summary
 from ..scan.layout import BatchOptions
-from ..scan.run import scan
+from ..scan.run import check_inputs, scan
 from ..scan.sweep import as_sweep
 from .common import (
     CLI_SOLVERS,
@@ -153,8 +153,19 @@ def run_cli(args) -> int:
     scenario, _ = apply_overrides(
         load_scenario(args.scenario, allow_implausible=args.allow_implausible), args.set
     )
+    repeated = sorted({p for p in args.param if args.param.count(p) > 1})
+    if repeated:
+        raise ScenarioError(f"--param {repeated[0]} is given more than once: give each parameter once")
     params = {p: parse_values(v, "--values") for p, v in zip(args.param, args.values, strict=True)}
-    accuracy = _accuracy(args)  # a bad --accuracy-members is refused before the folder is made
+    if args.n_save < 2:
+        raise ScenarioError(f"--n-save must be >= 2, got {args.n_save}")
+    # every option is made, and so checked, before the folder is touched
+    for flag, value in (("--lanes", args.lanes), ("--chunk-size", args.chunk_size)):
+        if value is not None and value < 1:
+            raise ScenarioError(f"{flag} must be >= 1, got {value}")
+    accuracy = _accuracy(args)
+    times = Times(args.t1, n=args.n_save)
+    batch = BatchOptions(lanes=args.lanes, chunk_size=args.chunk_size)
     out = Path(args.out) if args.out else default_out(args.scenario, "scan-")
     prepare_out_dir(out, "scan", overwrite=args.overwrite)
     if args.fixed_step is None:
@@ -170,16 +181,27 @@ def run_cli(args) -> int:
         )
     sweep = as_sweep(params, args.mode)
     _check_before_writing(scenario, args)
+    # the scan's own checks (the members' values among them): a refused scan leaves the folder as it was
+    check_inputs(
+        scenario,
+        sweep,
+        times,
+        observables=args.observable,
+        options=options,
+        histories=args.history,
+        batch=batch,
+        accuracy=accuracy,
+    )
     claim_out_dir(out, "scan", ["scan.npz", "scan.json", "scan.nc", "scan_*.png"])
     res = rerun_scan(
         lambda resume: scan(
             scenario,
             sweep,
-            Times(args.t1, n=args.n_save),
+            times,
             observables=args.observable,
             options=options,
             histories=args.history,
-            batch=BatchOptions(lanes=args.lanes, chunk_size=args.chunk_size),
+            batch=batch,
             out_dir=out,
             resume=resume,
             progress=not args.quiet,

@@ -464,7 +464,8 @@ class LiftRisk:
         return np.take(self.quantiles[observable], hit[0], axis=len(self.shape))
 
     def summary(self) -> str:
-        """A text table: one row per design point, P and interval of every hazard, failures."""
+        """A text table: one row per design point, P and interval of every hazard, failures; where members
+        failed, a line with their statuses counted and the first one's reason."""
         lines = []
         rows = list(np.ndindex(*self.shape)) if self.shape else [()]
         for idx in rows:
@@ -476,7 +477,26 @@ class LiftRisk:
                 for h in self.hazards
             ]
             lines.append(head + "; ".join(cells) + f"; failed {int(self.n_failed[idx])}/{self.samples}")
+        lines += self._failure_lines()
         return "\n".join(lines)
+
+    def _failure_lines(self) -> list[str]:
+        """Why members failed (their statuses counted, the first one's reason) and, where a design point's
+        numbers are NaN, that more than `max_failed` of its members failed; nothing if none failed."""
+        if not int(np.sum(self.n_failed)):
+            return []
+        lines = []
+        if self.scan is not None:
+            counts = ", ".join(f"{k} {v}" for k, v in self.scan.status_counts().items() if k != "ok")
+            first = self.scan.failures()[0]
+            values = ", ".join(f"{p} = {v:g}" for p, v in first["params"].items())
+            lines.append(f"failed members: {counts}; the first ({values}): {first['reason']}")
+        if np.any(self.n_failed > self.max_failed * self.samples):
+            lines.append(
+                f"NaN where more than max_failed = {self.max_failed:g} of a design point's {self.samples} "
+                f"members failed"
+            )
+        return lines
 
     def _design_value(self, p: str, idx: tuple) -> float:
         if self.design_mode == "grid":

@@ -350,6 +350,11 @@ def animate(
         raise ScenarioError(f"--format must be one of {', '.join(FORMATS)}, got {fmt!r}")
     if fmt == "mp4" and not ffmpeg_available():
         raise ScenarioError("--format mp4 needs ffmpeg on PATH; install it or use --format gif")
+    if keyframes and n_keyframes < 1:
+        raise ScenarioError(
+            f"n_keyframes (--keyframes) must be >= 1, got {n_keyframes}; to write no key-frame strip, pass "
+            f"keyframes=False (--no-keyframes)"
+        )
     out = Path(result_dir)
     out = out if out.is_dir() else out.parent  # a result file: its folder
     paths = []

@@ -206,17 +206,10 @@ def _scan(
     """`scan` with every choice an object (the sweep, the saved times, the solver options with forward mode
     if `derivatives`, the batch options): the entry point for the package's own callers."""
     wall0 = time.perf_counter()
-    if not isinstance(batch, BatchOptions):
-        raise ScenarioError(f"batch must be a jaxhoist.BatchOptions, got {type(batch).__name__}")
-    scenario = checked_scenario(scenario)
-    coords, shape, members = dict(sweep.values), sweep.shape, sweep.members()
+    scenario, coords, shape, members, obs, histories, ts, (invalid, order, solve_rows) = _checked(
+        scenario, sweep, times, observables, options, histories, batch
+    )
     paths = tuple(coords)
-    for p in paths:
-        check_path(scenario, p)
-    obs, histories = _observables(observables, histories)
-    _, ts = times.resolve(scenario, DEFAULT_N)
-    _check_fixed_steps(options, ts)
-    ts = jnp.asarray(ts, dtype=jnp.float64)
     devs = tuple(jax.local_devices() if batch.devices is None else batch.devices)
     n_proc, proc = jax.process_count(), jax.process_index()
     if n_proc > 1 and out_dir is None:
@@ -227,7 +220,6 @@ def _scan(
     n = members.shape[0]
     check = accuracy_mod.resolve(accuracy, n)
     lanes = batch.lanes_for(options, n, devs)
-    invalid, order, solve_rows = layout.order(scenario, paths, members, batch.sort)
     chunk = layout.chunk_size(n, lanes, len(devs), len(ts), histories, batch)
     spec = BatchSpec(
         paths=paths,
@@ -309,6 +301,47 @@ def _scan(
         result.save(store.out / "scan")
         result.to_netcdf(store.out / "scan.nc")
     return result
+
+
+def _checked(
+    scenario, sweep: AbstractSweep, times: Times, observables, options: SolverOptions, histories, batch
+):
+    """The host-side checks of `_scan`, before anything is compiled or written: the scenario, the swept
+    paths, the observables and histories, the saved times against a constant step's budget, and each
+    member's values (`layout.order`: refused where every member is invalid). **Returns** `(scenario
+    checked, coords, shape, members, observables, histories, ts, (invalid, order, solve_rows))`.
+    **Raises** `ScenarioError` naming what is wrong."""
+    if not isinstance(batch, BatchOptions):
+        raise ScenarioError(f"batch must be a jaxhoist.BatchOptions, got {type(batch).__name__}")
+    scenario = checked_scenario(scenario)
+    coords, shape, members = dict(sweep.values), sweep.shape, sweep.members()
+    for p in coords:
+        check_path(scenario, p)
+    obs, histories = _observables(observables, histories)
+    _, ts = times.resolve(scenario, DEFAULT_N)
+    _check_fixed_steps(options, ts)
+    ts = jnp.asarray(ts, dtype=jnp.float64)
+    laid_out = layout.order(scenario, tuple(coords), members, batch.sort)
+    return scenario, coords, shape, members, obs, histories, ts, laid_out
+
+
+def check_inputs(
+    scenario: Scenario,
+    sweep: AbstractSweep,
+    times: Times,
+    *,
+    observables,
+    options: SolverOptions,
+    histories,
+    batch: BatchOptions,
+    accuracy: AccuracyCheck | bool | None = None,
+) -> None:
+    """Every check that `scan` makes of these arguments before it compiles or writes anything, and nothing
+    else (nothing is solved or written): the command line runs it before it claims its output folder, so
+    that a refused scan leaves an earlier scan's results there in place. **Raises** `ScenarioError` naming
+    what is wrong."""
+    members = _checked(scenario, sweep, times, observables, options, histories, batch)[3]
+    accuracy_mod.resolve(accuracy, members.shape[0])
 
 
 def _check_fixed_steps(options: SolverOptions, ts) -> None:
