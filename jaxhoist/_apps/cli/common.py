@@ -41,11 +41,12 @@ ATOL_HELP = (
 
 # ------------------------------------------------------------------------------------- output folders
 #
-# One rule for every command that writes a folder (simulate, scan, bifurcation, identify): the folder gets
-# a marker file MARKER naming the command; a folder holding the marker of the same command is the
-# command's own and a re-run replaces its results there (scan resumes the same scan, recomputes another);
-# a non-empty folder without it (or with another command's) is refused unless --overwrite. Only the files
-# the command writes are ever removed; anything else in the folder stays.
+# One rule for every command that writes a folder (simulate, scan, bifurcation, identify, risk,
+# optimise-lift): the folder gets a marker file MARKER naming the command; a folder holding the marker of
+# the same command is the command's own and a re-run replaces its results there (scan resumes the same
+# scan, recomputes another); a non-empty folder without it (or with another command's) is refused unless
+# --overwrite. Only the files the command writes are ever removed, and only once every input is checked
+# (`claim_out_dir` after the checks); anything else in the folder stays.
 
 
 def default_out(scenario_arg: str, prefix: str = "") -> Path:
