@@ -243,6 +243,31 @@ def test_a_refused_scan_leaves_the_earlier_scan_in_its_folder(tmp_path, capsys, 
         assert all((folder / name).read_text() == "earlier" for name in earlier), words
 
 
+def test_a_warning_is_one_line_naming_no_source(tmp_path, capsys, monkeypatch):
+    """A warning while a command runs (a damaged chunk recomputed, a stored program compiled again) prints as
+    `jaxhoist: warning: <message>`, without Python's source file, line and code line; Python's own display is
+    back afterwards."""
+    import warnings
+
+    def warns_then_stops(*a, **k):
+        warnings.warn("jaxhoist: out/chunk_00000.npz: damaged; recomputed", UserWarning, stacklevel=2)
+        raise ScenarioError("stopped here")
+
+    monkeypatch.setattr(scan_cli, "scan", warns_then_stops)
+    shown = warnings.showwarning
+    argv = ["scan", "paper-4.2", "--param", "foundation.friction_coefficient", "--values", "0.2,0.3",
+            "--out", str(tmp_path / "S"), "--quiet"]  # fmt: skip
+    with warnings.catch_warnings():
+        warnings.simplefilter("always")
+        assert cli.main(argv) == 2
+    err = capsys.readouterr().err.splitlines()
+    assert err == [
+        "jaxhoist: warning: out/chunk_00000.npz: damaged; recomputed",
+        "jaxhoist: error: stopped here",
+    ]
+    assert warnings.showwarning is shown
+
+
 def test_a_value_list_may_start_with_a_negative_number():
     """`--values -0.2:0.4:4` (and `--along-values`) reach the command as written, not as an unknown option."""
     from jaxhoist._apps.cli.app import _join_negative_specs, build_parser

@@ -17,6 +17,7 @@ import importlib
 import os
 import re
 import sys
+import warnings
 from collections.abc import Sequence
 from typing import NoReturn
 
@@ -242,8 +243,6 @@ def main(argv: Sequence[str] | None = None) -> int:
     Returns the exit code: 0 ok, 1 the solve failed (status not ok), 2 invalid input (one-line message on
     stderr, no traceback)."""
     enable_x64()
-    from ..._errors import Float64Error, ScenarioError, one_line
-
     argv = list(sys.argv[1:] if argv is None else argv)
     try:
         argv = _use_devices(argv)
@@ -258,6 +257,26 @@ def main(argv: Sequence[str] | None = None) -> int:
     if getattr(args, "func", None) is None:
         parser.print_help(sys.stderr)
         return 2
+    shown, warnings.showwarning = warnings.showwarning, _warning_line
+    try:
+        return _run(args, no_cache)
+    finally:  # Python's own display again once the command returns (in-process callers: the tests)
+        warnings.showwarning = shown
+
+
+def _warning_line(message, category, filename, lineno, file=None, line=None) -> None:
+    """A warning as the command line's one line, `jaxhoist: warning: <message>` on stderr, without the source
+    file, line number and code line of Python's own display (which reads as a crash)."""
+    from ..._errors import one_line
+
+    text = str(message).removeprefix(f"{PROG}: ")
+    print(f"{PROG}: warning: {one_line(text)}", file=sys.stderr if file is None else file, flush=True)
+
+
+def _run(args: argparse.Namespace, no_cache: bool) -> int:
+    """The parsed command run, its errors turned into their one-line messages and exit codes (see `main`)."""
+    from ..._errors import Float64Error, ScenarioError, one_line
+
     if not no_cache:
         _use_cache()
     try:
