@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import Any
 
 import diffrax
 import jax
@@ -181,31 +182,22 @@ def run_cli(args) -> int:
         )
     sweep = as_sweep(params, args.mode)
     _check_before_writing(scenario, args)
-    # the scan's own checks (the members' values among them): a refused scan leaves the folder as it was
-    check_inputs(
-        scenario,
-        sweep,
-        times,
-        observables=args.observable,
-        options=options,
-        histories=args.history,
-        batch=batch,
-        accuracy=accuracy,
+    what: dict[str, Any] = dict(
+        observables=args.observable, options=options, histories=args.history, batch=batch
     )
+    # the scan's own checks (the members' values among them): a refused scan leaves the folder as it was
+    check_inputs(scenario, sweep, times, accuracy=accuracy, **what)
     claim_out_dir(out, "scan", ["scan.npz", "scan.json", "scan.nc", "scan_*.png"])
     res = rerun_scan(
         lambda resume: scan(
             scenario,
             sweep,
             times,
-            observables=args.observable,
-            options=options,
-            histories=args.history,
-            batch=batch,
             out_dir=out,
             resume=resume,
             progress=not args.quiet,
             accuracy=accuracy,
+            **what,
         ),
         out,
         not args.no_resume,
