@@ -282,7 +282,7 @@ def test_a_value_list_may_start_with_a_negative_number():
 def test_set_load_density_gives_the_mass_of_the_box_as_a_file_does(paper42):
     """`--set load.density` makes m = ρabc of the size after any `--set load.size`, as a scenario file's
     `density` does; `load.size` alone keeps the mass (a leaf replaced); mass and density together are
-    refused."""
+    refused; `load.inertia` sets an inertia where the preset has none, checked as a file's."""
     from jaxhoist._io.scenario import apply_overrides
 
     m0 = float(paper42.load.mass)  # 850 kg/m^3 x 2.5 m x 6 m x 2.5 m
@@ -292,6 +292,15 @@ def test_set_load_density_gives_the_mass_of_the_box_as_a_file_does(paper42):
     assert float(sc.load.mass) == pytest.approx(850 * 5 * 12 * 5, rel=1e-15)
     assert overrides == {"load.size": [5.0, 12.0, 5.0], "load.density": 850.0}
     assert float(apply_overrides(paper42, ["load.size=5,12,5"])[0].load.mass) == m0
+    # an inertia where the preset has none (the uniform box's is computed) is set as a file's would be
+    assert paper42.load.inertia is None
+    j = [[2e5, 0.0, 0.0], [0.0, 2e5, 0.0], [0.0, 0.0, 3e5]]
+    sc, _ = apply_overrides(paper42, [f"load.inertia={j}"])
+    np.testing.assert_array_equal(np.asarray(sc.load.inertia_tensor()), j)
+    assert float(sc.load.mass) == m0 and sc.load.mass_centre is not None
+    np.testing.assert_array_equal(np.asarray(sc.load.mass_centre), np.asarray(paper42.load.mass_centre))
+    with pytest.raises(ScenarioError, match="symmetric"):
+        apply_overrides(paper42, ["load.inertia=[[2e5, 1, 0], [0, 2e5, 0], [0, 0, 3e5]]"])
     for items, words in (
         (["load.density=850", "load.mass=3"], "not both"),
         (["load.density=1,2"], "one number"),

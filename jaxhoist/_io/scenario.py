@@ -26,6 +26,8 @@ from importlib import resources
 from pathlib import Path
 from typing import Any
 
+import equinox as eqx
+
 from .._errors import ScenarioError, require_x64
 from .._physics import params as P
 from .._physics.checks import OPT_IN
@@ -345,10 +347,14 @@ def apply_overrides(scenario: P.Scenario, items) -> tuple[P.Scenario, dict]:
     """A scenario with `--set PATH=VALUE` items applied and checked; errors name the path and say
     "[from --set]". PATH is a leaf's dotted path (`Scenario.replace`), or `load.density` [kg/m^3], which
     sets the mass to ρabc of the box's size (after a `load.size` of the same command line), as a scenario
-    file's `density` does; `load.size` alone keeps the mass. **Returns** `(scenario, {path: value})`."""
+    file's `density` does (`load.size` alone keeps the mass), or `load.inertia` [kg m²] where the scenario
+    has none (as a file's `inertia`). **Returns** `(scenario, {path: value})`."""
     overrides = parse_overrides(items or [])
     leaves = dict(overrides)
     density = leaves.pop("load.density", None)
+    # an inertia where the scenario has none (the uniform box's is then computed): a new Load, not a leaf
+    unset = scenario.load.inertia is None and "load.inertia" in leaves
+    inertia = leaves.pop("load.inertia") if unset else None
     try:
         if density is not None and "load.mass" in leaves:
             raise ScenarioError("load: give load.mass [kg] or load.density [kg/m^3], not both")
@@ -361,6 +367,10 @@ def apply_overrides(scenario: P.Scenario, items) -> tuple[P.Scenario, dict]:
         if density is not None:  # m = ρabc, checked as the file's density is (Load's constructor)
             mass = P.Load(scenario.load.size, density=density).mass
             scenario = scenario.replace(**{"load.mass": float(mass)})
+        if inertia is not None:
+            ld = scenario.load
+            load = P.Load(ld.size, ld.mass, mass_centre=ld.mass_centre, inertia=inertia)
+            scenario = eqx.tree_at(lambda s: s.load, scenario, load)
         if overrides:
             scenario.check()
     except ScenarioError as e:
