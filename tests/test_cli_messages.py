@@ -268,6 +268,26 @@ def test_a_warning_is_one_line_naming_no_source(tmp_path, capsys, monkeypatch):
     assert warnings.showwarning is shown
 
 
+def test_identify_says_the_fit_starts_only_once_its_input_is_checked(tmp_path, capsys, monkeypatch):
+    """`jaxhoist identify` with a misspelled --fit name, --starts 0 or a misspelled --noise signal prints the
+    one error line only, not first its "fitting ..." line; valid input prints that line, then fits."""
+    monkeypatch.setattr(identify_cli, "identify", _boom)
+    csv = tmp_path / "lift.csv"
+    csv.write_text("t [s],position_x [m]\n0.1,1.0\n0.2,1.0\n0.3,1.0\n")
+    base = ["identify", "paper-4.2", str(csv), "--out", str(tmp_path / "fit")]
+    for extra, words in (
+        (["--fit", "muu"], "did you mean 'mu'"),
+        (["--fit", "mu", "--starts", "0"], "n_starts"),
+        (["--fit", "mu", "--noise", "positon_x=0.01"], "positon_x"),
+    ):
+        assert cli.main([*base, *extra]) == 2, extra
+        err = [ln for ln in capsys.readouterr().err.splitlines() if ln.strip()]
+        assert len(err) == 1 and words in err[0], err
+    with pytest.raises(AssertionError, match="the computation ran"):
+        cli.main([*base, "--fit", "mu"])
+    assert capsys.readouterr().err.startswith("fitting mu of paper-4.2")
+
+
 def test_a_value_list_may_start_with_a_negative_number():
     """`--values -0.2:0.4:4` (and `--along-values`) reach the command as written, not as an unknown option."""
     from jaxhoist._apps.cli.app import _join_negative_specs, build_parser

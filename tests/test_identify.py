@@ -391,6 +391,17 @@ def test_reader_converts_units_and_reads_side_file(tmp_path):
     np.testing.assert_allclose(back.t, m.t)
     np.testing.assert_allclose(back.signals["rope_tension"], m.signals["rope_tension"])
     assert back.noise["rope_tension"] == pytest.approx(m.noise["rope_tension"])
+    # Too few digits to keep the times apart (0, 1, 2 s as 0, 1e+03, 2e+03 ms; 100.1 s and 100.2 s as 1e+02):
+    # refused before the file is written, as are digits that are no whole number from 1 to 17.
+    dense = Measurement(np.array([0.0, 100.1, 100.2]), {"position_x": np.zeros(3)})
+    with pytest.raises(MeasurementError, match="digits = 2 is too few to keep the sample times apart"):
+        write_measurement(tmp_path / "few.csv", dense, digits=2)
+    assert not (tmp_path / "few.csv").exists()
+    write_measurement(tmp_path / "enough.csv", dense, digits=4)
+    np.testing.assert_array_equal(read_measurement(tmp_path / "enough.csv").t, dense.t)
+    for digits in (0, 18, True):
+        with pytest.raises(MeasurementError, match="digits must be a whole number 1 to 17"):
+            write_measurement(tmp_path / "bad.csv", dense, digits=digits)
 
 
 @pytest.mark.parametrize(
@@ -485,6 +496,8 @@ def test_bad_arguments_rejected_before_compiling(scenario, clean, no_compile):
         identify(scenario, clean, ["mu"], noise={"postion": 0.005})
     with pytest.raises(MeasurementError, match=r"'rope_tension' selects no measured signal"):
         identify(scenario, clean, ["mu"], signals=["rope_tension"])
+    with pytest.raises(MeasurementError, match=r"the signal selection is empty; choose from the measured"):
+        identify(scenario, clean, ["mu"], signals=[])
     with pytest.raises(jh.ScenarioError, match=r"not both"):
         identify(
             scenario, clean, ["mu"], noise={"position_x": 0.01}, fit=jh.FitOptions(weights={"position": 1.0})

@@ -476,6 +476,9 @@ def test_invalid_requests_fail_before_compiling(box):
         scan(box, {MU: [-1.0, np.nan]}, T1)
     with pytest.raises(jh.ScenarioError, match="unknown observable"):
         scan(box, {MU: [0.2]}, TIMES, observables=["final_yaw"])
+    # one history name as a string is that name, not its letters ("history 'p' is not ...")
+    with pytest.raises(jh.ScenarioError, match="history 'positon' is not a Trajectory output"):
+        scan(box, {MU: [0.2]}, TIMES, histories="positon")
 
 
 def test_first_down_crossing_is_interpolated():
@@ -827,6 +830,9 @@ def test_sweep_objects_count_members_and_refuse_bad_input(box):
         (lambda: jh.Points([0.1, 0.2]), "Points takes a mapping"),
         (lambda: as_sweep([0.1, 0.2]), "sweep must be Sweep"),
         (lambda: scan(box, jh.Sweep("foundation.frction_coefficient", [0.1]), T1), "frction_coefficient"),
+        # one parameter under two spellings would sweep one of them only, labelled as both
+        (lambda: jh.Grid({MU: [0.1, 0.6], MU + " ": [0.3]}), f"Grid: '{MU}' and '{MU} ' name the same"),
+        (lambda: jh.Points({"load.mass_centre[0]": [1], "load.mass_centre[00]": [1]}), "name the same"),
     ]
     for make, match in bad:
         with pytest.raises(jh.ScenarioError, match=re.escape(match)) as err:

@@ -121,6 +121,10 @@ class Measurement:
     def select(self, names: Iterable[str]) -> Measurement:
         """A measurement with only the named signals (group names such as `position` allowed)."""
         names = list(names)
+        if not names:
+            raise MeasurementError(
+                f"{self.source}: the signal selection is empty; choose from the measured {self.names}"
+            )
         check_signal_names(names, f"{self.source}: signal selection", groups=True)
         chosen: list[str] = []
         for n in names:
@@ -377,11 +381,16 @@ def write_measurement(
     units and the noise levels (standard deviations in the column units).
 
     - `units`: column -> unit to write in (e.g. {"rope_tension": "kN"}); default SI.
-    - `digits`: significant digits per value.
+    - `digits`: significant digits per value (1 to 17); refused where the times written with them would
+      repeat, so that the file always reads back.
 
     **Returns** the CSV path.
     """
     path = Path(path)
+    if isinstance(digits, bool) or not isinstance(digits, int | np.integer) or not 1 <= digits <= 17:
+        raise MeasurementError(
+            f"write_measurement({path}): digits must be a whole number 1 to 17, got {digits!r}"
+        )
     units = dict(units or {})
     all_units = measurement.units()
     check_signal_names([k for k in units if k != "t"], f"write_measurement({path}): units")
@@ -393,13 +402,18 @@ def write_measurement(
         header.append(f"{name} [{unit}]")
         scaled.append(values / f)
         used[name] = (unit, f)
+    rows = [[f"{x:.{digits}g}" for x in row] for row in np.stack(scaled, axis=1)]
+    written = np.array([float(row[0]) for row in rows])
+    if np.any(np.diff(written) <= 0):  # the file could not be read back: its times would repeat
+        raise MeasurementError(
+            f"write_measurement({path}): digits = {digits} is too few to keep the sample times apart "
+            f"(written, {written[0]:g} to {written[-1]:g} s would repeat or go back): give more digits"
+        )
     path.parent.mkdir(parents=True, exist_ok=True)
-    table = np.stack(scaled, axis=1)
     with path.open("w", newline="") as fh:
         w = csv.writer(fh)
         w.writerow(header)
-        for row in table:
-            w.writerow([f"{x:.{digits}g}" for x in row])
+        w.writerows(rows)
     if side_file:
         side = {
             "units": {n: u for n, (u, _) in used.items()},

@@ -7,6 +7,7 @@ import argparse
 import json
 import sys
 from pathlib import Path
+from typing import Any
 
 import jax
 import numpy as np
@@ -17,7 +18,7 @@ from ..._io.measurement import (
 )
 from ..._io.scenario import apply_overrides, load_scenario
 from ..._numerics.options import SolverOptions
-from ..identify.fit import identify
+from ..identify.fit import check_inputs, identify
 from ..identify.options import FitOptions
 from ..identify.parameters import ALIASES
 from ..identify.result import plot_fit
@@ -159,30 +160,23 @@ def run(args: argparse.Namespace) -> int:
     signals = [s.strip() for s in args.signals.split(",")] if args.signals else None
     out_dir = Path(args.out) if args.out else default_out(args.scenario, "identify-")
     prepare_out_dir(out_dir, "identify", overwrite=getattr(args, "overwrite", False))
+    options = SolverOptions(CLI_SOLVERS[args.solver](), rtol=args.rtol, atol=args.atol)
+    fit = FitOptions(n_starts=args.starts, max_iterations=args.max_iterations)
+    inputs: dict[str, Any] = dict(signals=signals, noise=noise or None, start=start, t1=args.t1)
+    # every input checked (the fit's own host-side checks) before the line that says the fit starts
+    check_inputs(scenario, measurement, params, options=options, fit=fit, **inputs)
     note(
         f"fitting {', '.join(params)} of {scenario.name} to {len(measurement.names)} signals x "
         f"{measurement.t.size} samples of {args.measurement} (its programs compiled or loaded from the "
         "cache, then the iterations) ..."
     )
-    options = SolverOptions(CLI_SOLVERS[args.solver](), rtol=args.rtol, atol=args.atol)
     bar = None
     if not quiet:
         from .progress import FitProgressBar
 
         bar = FitProgressBar(total=args.max_iterations)
     try:
-        res = identify(
-            scenario,
-            measurement,
-            params,
-            signals=signals,
-            noise=noise or None,
-            start=start,
-            t1=args.t1,
-            options=options,
-            fit=FitOptions(n_starts=args.starts, max_iterations=args.max_iterations),
-            progress=bar,
-        )
+        res = identify(scenario, measurement, params, options=options, fit=fit, progress=bar, **inputs)
     finally:
         if bar is not None:
             bar.close()

@@ -147,6 +147,45 @@ def _setup(
     return _Problem(scenario, measurement, plist, theta0, names, sig, noise_known, warnings, n_res, cfg, args)
 
 
+def check_inputs(
+    scenario,
+    measurement,
+    params,
+    *,
+    signals=None,
+    noise=None,
+    start=None,
+    bounds=None,
+    t1=None,
+    options: SolverOptions | None = None,
+    fit: FitOptions | None = None,
+) -> None:
+    """Every check that `identify` makes of these arguments before it compiles anything, and nothing else
+    (the command line runs it before it says that the fit starts). **Raises** as `identify` does for invalid
+    input."""
+    fit = FitOptions() if fit is None else fit
+    _checked_problem(scenario, measurement, params, signals, noise, start, bounds, t1, options, fit)
+
+
+def _checked_problem(scenario, measurement, params, signals, noise, start, bounds, t1, options, fit):
+    """`_setup` with `identify`'s arguments: the fit options checked, the solver options completed."""
+    if not isinstance(fit, FitOptions):
+        raise ScenarioError(f"fit must be a jaxhoist.FitOptions, got {type(fit).__name__}")
+    return _setup(
+        scenario,
+        measurement,
+        params,
+        signals=signals,
+        noise=noise,
+        weights=fit.weights,
+        start=start,
+        bounds=bounds,
+        t1=t1,
+        options=fit_solver_options(options),
+        max_iterations=fit.max_iterations,
+    )
+
+
 def residual_function(
     scenario,
     measurement,
@@ -244,22 +283,8 @@ def identify(
     require_x64()
     wall0 = time.perf_counter()
     fit = FitOptions() if fit is None else fit
-    if not isinstance(fit, FitOptions):
-        raise ScenarioError(f"fit must be a jaxhoist.FitOptions, got {type(fit).__name__}")
     # ---- host side: every input is checked before anything is compiled
-    prob = _setup(
-        scenario,
-        measurement,
-        params,
-        signals=signals,
-        noise=noise,
-        weights=fit.weights,
-        start=start,
-        bounds=bounds,
-        t1=t1,
-        options=fit_solver_options(options),
-        max_iterations=fit.max_iterations,
-    )
+    prob = _checked_problem(scenario, measurement, params, signals, noise, start, bounds, t1, options, fit)
     scenario, plist, theta0, cfg, args = prob.scenario, prob.params, prob.theta0, prob.cfg, prob.args
     # Each start is checked as a scenario before compiling (e.g. a mass centre outside the box).
     starts = [theta0] + random_starts(
@@ -443,6 +468,7 @@ def synthetic_measurement(
     options = SolverOptions() if options is None else options
     t = np.asarray(t, dtype=np.float64)
     names: list[str] = []
+    signals = [signals] if isinstance(signals, str) else list(signals)  # one name, or several
     check_signal_names(signals, "synthetic_measurement: signals", groups=True)
     for s in signals:
         names += [n for n in signal_groups(s) if n not in names]

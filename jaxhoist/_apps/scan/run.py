@@ -362,7 +362,7 @@ def _observables(observables, histories) -> tuple[tuple, tuple[str, ...]]:
         obs = obs_mod.resolve(observables)
     except (ValueError, TypeError) as e:
         raise ScenarioError(str(e)) from None
-    histories = tuple(histories)
+    histories = (histories,) if isinstance(histories, str) else tuple(histories)  # one name, or several
     for h in histories:
         if h not in HISTORY_UNITS:
             raise ScenarioError(

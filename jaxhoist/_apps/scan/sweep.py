@@ -53,12 +53,18 @@ def _checked(kind: str, values) -> dict[str, np.ndarray]:
         )
     if not values:
         raise ScenarioError(f"{kind} needs at least one parameter to sweep")
-    out = {}
+    out, named = {}, {}
     for path, spec in values.items():
         if not isinstance(path, str) or not path.strip():
             raise ScenarioError(
                 f"{kind}: a parameter path must be a dotted name like 'hoist.speed', got {path!r}"
             )
+        try:  # two spellings of one parameter ("hoist.speed" and " hoist.speed", "c[0]" and "c[00]")
+            same = named.setdefault(parse_path(path), path)
+        except ScenarioError:  # not a path: the scan's own check of the paths says so, with a hint
+            same = path
+        if same != path:
+            raise ScenarioError(f"{kind}: {same!r} and {path!r} name the same parameter: give it once")
         try:
             v = parse_values(spec)
         except ScenarioError as e:
