@@ -471,3 +471,181 @@ def test_trace_boundary_passes_its_settings_to_every_point(monkeypatch):
     for s, o, kw in seen:
         assert s == search and o is options and kw["times"] == jh.Times(0.2)
     assert (options.solver, options.rtol, options.atol) == (diffrax.Tsit5(), 1e-6, 1e-9)
+
+
+def _no_solve(*a, **k):
+    raise AssertionError("a solve ran despite the refusal")
+
+
+def test_trace_boundary_refuses_invalid_input_before_solving(monkeypatch):
+    """A bracket, level, continuation parameter or continuation value that is invalid is refused with the
+    argument's name before any point is solved (it was a NaN point, or a Boundary of NaNs with n_dense < 0);
+    the values may be text as `scan`'s `--values`, increasing or decreasing."""
+    import types
+
+    from jaxhoist._apps.bifurcation import trace as bifurcation_trace
+
+    monkeypatch.setattr(bifurcation_trace, "locate_bifurcation", _no_solve)
+    sc = symmetric_lift()
+    refusals = [
+        (((0.57, 0.46), "hoist.speed", [0.05, 0.06]), {}, r"bracket must be two finite values lo < hi"),
+        (((0.46, 0.46), "hoist.speed", [0.05, 0.06]), {}, r"bracket must be two finite values lo < hi"),
+        (((0.46, np.nan), "hoist.speed", [0.05, 0.06]), {}, r"bracket must be two finite values lo < hi"),
+        (((0.46, 0.57), "hoist.speed", [0.05, -0.05]), {}, r"along_values: hoist.speed = -0.05 is invalid"),
+        (((0.46, 0.57), "hoist.speed", [0.05, np.nan]), {}, r"along_values must be finite"),
+        (((0.46, 0.57), "hoist.speed", [0.05, 0.05, 0.06]), {}, r"along_values must be strictly increasing"),
+        (((0.46, 0.57), "hoist.speed", [0.05, 0.07, 0.06]), {}, r"along_values must be strictly increasing"),
+        (((0.46, 0.57), "hoist.speed", []), {}, r"along_values: expected a non-empty"),
+        (((0.46, 0.57), "hoist.speed", "0.05:0.06"), {}, r"along_values: expected 'start:stop:num'"),
+        (((0.46, 0.57), XI, [0.47, 0.48]), {}, r"along 'load.mass_centre\[0\]' is the located parameter"),
+        (((0.46, 0.57), "hoist.sped", [0.05, 0.06]), {}, r"along"),
+        (((0.46, 0.57), "hoist.speed", [0.05, 0.06]), {"level": np.nan}, r"level must be a finite number"),
+    ]
+    for args, kw, words in refusals:
+        with pytest.raises(jh.ScenarioError, match=words):
+            trace_boundary(sc, XI, *args, E_MINUS_D, **kw, **SYM_KW)
+    with pytest.raises(jh.ScenarioError, match=r"'final_position\[z\]'"):
+        trace_boundary(sc, XI, (0.46, 0.57), "hoist.speed", [0.05], "final_position", **SYM_KW)
+
+    def record(sc, param, obs, br, **kw):
+        return types.SimpleNamespace(value=0.5, y_lo=0.0, y_hi=1.0, n_solves=1, width=1e-6, notes=[])
+
+    monkeypatch.setattr(bifurcation_trace, "locate_bifurcation", record)
+    for spec, qs in (("0.05:0.06:3", [0.05, 0.055, 0.06]), ("0.07,0.05", [0.07, 0.05]), ([0.06], [0.06])):
+        tr = trace_boundary(sc, XI, (0.46, 0.57), "hoist.speed", spec, E_MINUS_D, **SYM_KW)
+        np.testing.assert_allclose(tr.along_values, qs, rtol=0, atol=1e-15)
+        assert tr.n_dense > 0
+
+
+def test_locator_refuses_a_vector_observable_and_a_bad_bracket_or_level_before_solving(monkeypatch):
+    """A vector observable gets the command line's message (pick a component) before any solve (it solved,
+    then failed converting an array to a float); a bracket that is not two numbers, and a level that is
+    not finite, are refused naming the argument; a `Jump` is a bracket."""
+    from jaxhoist._apps.bifurcation import jumps as bifurcation_jumps
+    from jaxhoist._apps.bifurcation import locate as bifurcation_locate
+
+    monkeypatch.setattr(bifurcation_locate, "_refine", _no_solve)
+    monkeypatch.setattr(bifurcation_locate, "multisection", _no_solve)
+    sc = symmetric_lift()
+    refusals = [
+        (("final_position", (0.46, 0.57)), {}, r"observable 'final_position' is a vector observable .* "
+         r"pick one, e.g. 'final_position\[z\]'"),
+        ((E_MINUS_D, (0.46, 0.57)), {"level": np.nan}, r"level must be a finite number"),
+        ((E_MINUS_D, (0.46, 0.57)), {"level": -np.inf}, r"level must be a finite number"),
+        ((None, (0.46, 0.57)), {}, r"observable: one observable is needed, got 4"),
+        ((3.5, (0.46, 0.57)), {}, r"observable: expected a built-in name"),
+    ]  # fmt: skip
+    for args, kw, words in refusals:
+        with pytest.raises(jh.ScenarioError, match=words):
+            locate_bifurcation(sc, XI, *args, **kw, **SYM_KW)
+    # what the annotations refuse under the tests' run-time type checking, but a user's call reaches (it
+    # was "too many values to unpack" and "'float' object is not iterable"): the check the locator makes
+    for bracket, shown in (((0.46, 0.5, 0.57), r"\(0.46, 0.5, 0.57\)"), (0.5, "0.5"), ("ab", "'ab'")):
+        with pytest.raises(jh.ScenarioError, match=rf"^bracket must be two numbers lo < hi, got {shown}$"):
+            bifurcation_locate.check_bracket(bracket)
+    with pytest.raises(jh.ScenarioError, match=r"^level must be a finite number"):
+        bifurcation_locate.check_level("0")
+
+    def stop(p):  # the checked problem, shown instead of solved
+        raise RuntimeError(f"{p.lo}, {p.hi}, {p.level}")
+
+    monkeypatch.setattr(bifurcation_locate, "_refine", stop)
+    j = bifurcation_jumps.Jump(XI, "e-d", 0.46, 0.57, -1.0, 1.0, 2.0, np.inf, 0)
+    with pytest.raises(RuntimeError, match=r"^0.46, 0.57, 0.0$"):
+        locate_bifurcation(sc, XI, E_MINUS_D, j, level=0.0, **SYM_KW)
+
+
+def test_search_options_refuse_a_budget_the_locator_cannot_start_with():
+    """`max_solves` is a whole number no smaller than the first evaluations (the two ends; a multisection's
+    first round); the continuation's settings are checked alike."""
+    refusals = [
+        ({"max_solves": 0}, r"max_solves must be a whole number >= 2 .*got 0"),
+        ({"max_solves": -3}, r"max_solves must be a whole number >= 2 .*got -3"),
+        ({"max_solves": True}, r"max_solves"),
+        ({"method": Multisection(points_per_round=8), "max_solves": 7}, r"max_solves .* >= 8"),
+        ({"max_expansions": 0}, r"max_expansions must be a whole number >= 1"),
+        ({"initial_half_width": 0.0}, r"initial_half_width must be > 0"),
+        ({"min_jump_fraction": np.nan}, r"min_jump_fraction must be a finite number >= 0"),
+    ]
+    for kw, words in refusals:
+        with pytest.raises(jh.ScenarioError, match=words):
+            SearchOptions(**kw)
+    from jaxhoist._apps.bifurcation import options as bifurcation_options
+
+    # 2.5 reaches the check in a user's call (the tests' run-time type checking refuses it before)
+    assert not bifurcation_options._is_count(2.5) and bifurcation_options._is_count(np.int64(2))
+    assert SearchOptions(max_solves=2).max_solves == 2
+    assert SearchOptions(Multisection(points_per_round=8), max_solves=8).max_solves == 8
+
+
+def test_find_jumps_refuses_settings_that_would_hide_the_jumps():
+    """A NaN factor found no jump at all; a negative one, an empty window or a negative min_size, an unknown
+    parameter or observable, and a saved scan's path are refused naming the argument."""
+    x = np.linspace(0.0, 1.0, 21)
+    res = _sweep(x, "impacts", np.where(x > 0.5, 3.0, 2.0))
+    assert len(find_jumps(res, "impacts")) == 1
+    refusals = [
+        ({"factor": np.nan}, r"find_jumps: factor must be a finite number > 0, got nan"),
+        ({"factor": -1.0}, r"factor must be a finite number > 0"),
+        ({"window": 0}, r"find_jumps: window must be a whole number >= 1, got 0"),
+        ({"min_size": -1.0}, r"find_jumps: min_size must be a finite number >= 0"),
+        ({"param": "foo"}, r"find_jumps: param 'foo' is not a parameter of the scan: \['p'\]"),
+    ]
+    for kw, words in refusals:
+        with pytest.raises(jh.ScenarioError, match=words):
+            find_jumps(res, "impacts", **kw)
+    with pytest.raises(jh.ScenarioError, match=r"observable 'impact' is not an observable of the scan"):
+        find_jumps(res, "impact")
+    with pytest.raises(jh.ScenarioError, match=r"find_crossings: level must be a finite number"):
+        find_crossings(res, "impacts", np.nan)
+    # what the annotations refuse under the tests' run-time type checking, but a user's call reaches (it was
+    # an AttributeError): the checks find_jumps makes
+    from jaxhoist._apps.bifurcation import jumps as bifurcation_jumps
+
+    with pytest.raises(TypeError, match=r"ScanResult.load\(path\) first"):
+        bifurcation_jumps._series("scan.npz", "impacts", None, "find_jumps")
+    with pytest.raises(jh.ScenarioError, match=r"window must be a whole number >= 1, got 2.5"):
+        bifurcation_jumps._check_jump_settings(8.0, 2.5, None)
+
+
+def test_bifurcation_command_refuses_in_one_line(tmp_path, capsys, monkeypatch):
+    """`jaxhoist bifurcation` refuses an invalid bracket, level, --along or --along-values in one line and
+    exit code 2 before anything is solved; a search that ran and could not proceed (no sign change) ends in
+    one line and exit code 1, not a traceback."""
+    from jaxhoist._apps.cli import bifurcation as bifurcation_cli
+    from jaxhoist._apps.cli.app import main
+
+    for name in ("locate_bifurcation", "scan", "trace_boundary"):
+        monkeypatch.setattr(bifurcation_cli, name, _no_solve)
+    monkeypatch.chdir(tmp_path)
+    base = ["bifurcation", "paper-4.2", "--param", "foundation.friction_coefficient", "--observable",
+            "contact_margin[E]", "--t1", "0.6", "--n-save", "601", "--quiet"]  # fmt: skip
+    along = ["--along", "hoist.speed", "--along-values"]
+
+    def error_line(argv, code):
+        assert main(argv) == code
+        err = capsys.readouterr().err
+        lines = [ln for ln in err.splitlines() if ln.strip()]
+        assert "Traceback" not in err and len(lines) == 1 and lines[0].startswith("jaxhoist: error: "), err
+        return lines[0]
+
+    refusals = [
+        (["--bracket", "0.3", "0.25", *along, "0.3:0.32:2"], "--bracket must be two finite values lo < hi"),
+        (["--bracket", "0.1", "0.2", "--level", "nan"], "--level must be a finite number"),
+        (["--bracket", "0.1", "0.2", *along, "0.3,0.3,0.32"], "--along-values must be strictly increasing"),
+        (["--bracket", "0.1", "0.2", *along, "0.3,nan"], "--along-values must be finite"),
+        (["--bracket", "0.1", "0.2", *along, "0.3,-0.3"], "--along-values: hoist.speed = -0.3 is invalid"),
+        (["--bracket", "0.1", "0.2", "--along", "foundation.friction_coefficient", "--along-values",
+          "0.3,0.4"], "--along 'foundation.friction_coefficient' is the located parameter"),
+        (["--bracket", "0.1", "0.2", "--along", "hoist.speed"], "--along and --along-values go together"),
+    ]  # fmt: skip
+    for extra, words in refusals:
+        assert words in error_line([*base, *extra], 2)
+    assert not (tmp_path / "out").exists()
+
+    def no_sign_change(*a, **k):
+        raise BifurcationError("contact_margin[E] - level has the same sign at both ends of the bracket")
+
+    monkeypatch.setattr(bifurcation_cli, "locate_bifurcation", no_sign_change)
+    line = error_line([*base, "--bracket", "0.1", "0.2", "--level", "0"], 1)
+    assert line == "jaxhoist: error: contact_margin[E] - level has the same sign at both ends of the bracket"

@@ -16,6 +16,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._errors import ScenarioError, SolveStatus
+from ..._io.validate import brief, check_scalar_observable
 from ..._numerics import observables as obs_mod
 from ..._numerics.compile_cache import program
 from ..._numerics.options import SolverOptions
@@ -26,13 +27,30 @@ from .options import SearchOptions
 from .result import Bifurcation, BifurcationError, jump_fraction
 
 
-def resolve_one(observable) -> obs_mod.Observable:
-    """The one `Observable` named or given by `observable`."""
+def resolve_one(observable, where: str = "observable") -> obs_mod.Observable:
+    """The one scalar `Observable` named or given by `observable`, checked before any solve (the Python API
+    and `jaxhoist bifurcation --observable` alike).
+
+    **Arguments**
+    - `observable`: a built-in name (a scalar one, or a component such as "final_position[z]"), a callable
+      or an `Observable`.
+    - `where`: the argument or flag it came from, for the message.
+
+    **Raises** `ScenarioError` naming `where` for an unknown name, none or several observables, or a vector
+    observable (with the component to pick).
+    """
     try:
-        (o,) = obs_mod.resolve(observable)
+        found = obs_mod.resolve(observable)
+    except TypeError:
+        raise ScenarioError(
+            f"{where}: expected a built-in name, a callable or an Observable, got {brief(observable)}"
+        ) from None
     except ValueError as e:
-        raise ScenarioError(f"locate_bifurcation needs one observable: {e}") from None
-    return o
+        raise ScenarioError(f"{where}: {e}") from None
+    if len(found) != 1:
+        raise ScenarioError(f"{where}: one observable is needed, got {len(found)}: {[o.name for o in found]}")
+    check_scalar_observable(found[0], where)
+    return found[0]
 
 
 def indicator(y, level, y_lo_end):

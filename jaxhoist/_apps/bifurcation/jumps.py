@@ -5,10 +5,13 @@ brackets for `locate_bifurcation`."""
 from __future__ import annotations
 
 import dataclasses
+import numbers
+import os
 
 import numpy as np
 
 from ..._errors import ScenarioError
+from ..._io.validate import brief
 from ..scan.result import ScanResult
 
 
@@ -33,13 +36,28 @@ class Jump:
     index: int
 
 
-def _series(result: ScanResult, observable: str, param: str | None, who: str):
-    """(param, x, y): a scalar observable of a 1-D scan against its parameter, valid members only, sorted."""
+def _series(result: object, observable: str, param: str | None, who: str):
+    """(param, x, y): a scalar observable of a 1-D scan against its parameter, valid members only, sorted.
+
+    **Raises** `TypeError` for a `result` that is no `ScanResult` (a saved scan's path among them);
+    `ScenarioError` for a `param` or `observable` the scan does not have, a grid, a vector observable."""
+    if not isinstance(result, ScanResult):
+        load = " (a saved scan: load it with jaxhoist.ScanResult.load(path) first)"
+        raise TypeError(
+            f"{who}: result must be a jaxhoist.ScanResult, got {type(result).__name__}"
+            + (load if isinstance(result, str | os.PathLike) else "")
+        )
     if len(result.params) != 1 and param is None:
         raise ScenarioError(f"{who}: the scan has parameters {list(result.params)}; say which with param=")
+    if param is not None and param not in result.params:
+        raise ScenarioError(f"{who}: param {param!r} is not a parameter of the scan: {list(result.params)}")
     param = result.params[0] if param is None else param
     if result.mode == "grid" and len(result.params) > 1:
         raise ScenarioError(f"{who} works along a 1-D scan; take a slice of the grid first")
+    if observable not in result.data:
+        raise ScenarioError(
+            f"{who}: observable {observable!r} is not an observable of the scan: {list(result.data)}"
+        )
     y = np.asarray(result[observable], dtype=np.float64)
     if y.shape != result.shape:
         raise ScenarioError(
@@ -52,6 +70,32 @@ def _series(result: ScanResult, observable: str, param: str | None, who: str):
     x, y = x[keep], y[keep]
     order = np.argsort(x, kind="stable")
     return param, x[order], y[order]
+
+
+def _finite(x) -> float | None:
+    """`x` as a float if it is a finite number (not a bool or text), else None."""
+    if isinstance(x, bool | str | bytes):
+        return None
+    try:
+        v = float(x)
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return v if np.isfinite(v) else None
+
+
+def _check_jump_settings(factor, window, min_size) -> None:
+    """Refuse `find_jumps` settings that would silently find nothing (a NaN `factor`) or anything."""
+    f = _finite(factor)
+    if f is None or f <= 0:
+        raise ScenarioError(f"find_jumps: factor must be a finite number > 0, got {brief(factor)}")
+    if not (isinstance(window, numbers.Integral) and not isinstance(window, bool) and int(window) >= 1):
+        raise ScenarioError(f"find_jumps: window must be a whole number >= 1, got {brief(window)}")
+    m = _finite(min_size)
+    if min_size is not None and (m is None or m < 0):
+        raise ScenarioError(
+            f"find_jumps: min_size must be a finite number >= 0 (or None: 1e-6 of the observable's range), "
+            f"got {brief(min_size)}"
+        )
 
 
 def _bracket(param, observable, x, y, i, j, score) -> Jump:
@@ -80,6 +124,8 @@ def find_crossings(
     (an event that stops happening) are jumps, not crossings, and left to `find_jumps`. `score` is inf.
 
     **Returns** the brackets sorted by parameter value, as `Jump`s."""
+    if _finite(level) is None:
+        raise ScenarioError(f"find_crossings: level must be a finite number, got {brief(level)}")
     param, x, y = _series(result, observable, param, "find_crossings")
     above = y - float(level) > 0.0
     finite = np.isfinite(y)
@@ -105,8 +151,21 @@ def find_jumps(
     such as a count going 8 -> 7 -> 8 is two jumps). A step between a finite value and ±inf (an event that
     stops happening) always counts, on its own.
 
+    **Arguments**
+    - `result`: a 1-D `ScanResult` (`scan`'s result, or `ScanResult.load` of a saved one).
+    - `observable`: the name of a scalar observable of the scan; `param`: the swept parameter (needed when
+      the scan has several).
+    - `factor`: how many times the median neighbouring step a candidate step is, a finite number > 0.
+    - `window`: neighbours on either side of a step that set its median, a whole number >= 1.
+    - `min_size`: the smallest candidate step [unit of the observable], finite and >= 0 (default None:
+      1e-6 of the observable's range).
+
     **Returns** the candidates sorted by parameter value.
+
+    **Raises** `ScenarioError` naming the argument for an invalid `factor`, `window`, `min_size`, `param` or
+    `observable`; `TypeError` for a `result` that is no `ScanResult`.
     """
+    _check_jump_settings(factor, window, min_size)
     param, x, y = _series(result, observable, param, "find_jumps")
     if x.size < 2:
         return []

@@ -31,6 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._errors import ScenarioError, require_x64
+from ..._io.validate import brief
 from ..._numerics.options import SolverOptions
 from ..._numerics.solve import checked_scenario
 from ..._numerics.times import TimesLike, as_times
@@ -38,7 +39,7 @@ from ..._physics.params import Scenario
 from ..._physics.paths import check_path, param_unit, set_param
 from ..scan.result import ScanResult
 from .eval import Evaluator, Problem, indicator, level_from_ends, resolve_one
-from .jumps import find_crossings, find_jumps
+from .jumps import Jump, find_crossings, find_jumps
 from .multisection import multisection
 from .options import Multisection, Newton, SearchOptions, settings
 from .result import Bifurcation, BifurcationError
@@ -51,7 +52,7 @@ def locate_bifurcation(
     scenario: Scenario,
     param: str,
     observable,
-    bracket: tuple[float, float],
+    bracket: tuple[float, float] | Jump,
     *,
     level: float | None = None,
     search: SearchOptions | None = None,
@@ -88,8 +89,9 @@ def locate_bifurcation(
 
     **Returns** a `Bifurcation`.
 
-    **Raises** `ScenarioError` on invalid input (before compiling); `BifurcationError` if g has the same
-    sign at both ends, or a solve fails.
+    **Raises** `ScenarioError` on invalid input (before compiling: the bracket, a level that is not a finite
+    number, a vector observable, a bracket end outside the parameter's valid range); `BifurcationError` if
+    g has the same sign at both ends, or a solve fails.
     """
     times = as_times(times)
     search, options = settings(search, options)
@@ -97,9 +99,8 @@ def locate_bifurcation(
     wall0 = time.perf_counter()
     scenario = checked_scenario(scenario)
     check_path(scenario, param)
-    lo, hi = (float(b) for b in bracket)
-    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
-        raise ScenarioError(f"bracket must be two finite values lo < hi, got {bracket}")
+    lo, hi = check_bracket(bracket)
+    level = check_level(level)
     for v in (lo, hi):
         set_param(scenario, param, v).check()
     obs = resolve_one(observable)
@@ -110,6 +111,46 @@ def locate_bifurcation(
     if isinstance(search.method, Multisection):
         return multisection(p)
     return _refine(p)
+
+
+def check_bracket(bracket, where: str = "bracket") -> tuple[float, float]:
+    """(lo, hi) of a bracket [unit of the parameter], checked before any solve: two finite numbers lo < hi
+    (or a `Jump` from `find_jumps`, its `lo` and `hi`).
+
+    **Arguments**
+    - `bracket`: the bracket as given; `where`: the argument or flag it came from, for the message.
+
+    **Raises** `ScenarioError` naming `where` for one number, three, text, NaN or inf, or lo >= hi.
+    """
+    if isinstance(bracket, Jump):
+        bracket = (bracket.lo, bracket.hi)
+    try:
+        lo, hi = (float(b) for b in bracket)
+    except (TypeError, ValueError, OverflowError):
+        raise ScenarioError(f"{where} must be two numbers lo < hi, got {brief(bracket)}") from None
+    if not (np.isfinite(lo) and np.isfinite(hi) and lo < hi):
+        raise ScenarioError(f"{where} must be two finite values lo < hi, got {brief(bracket)}")
+    return lo, hi
+
+
+def check_level(level, where: str = "level") -> float | None:
+    """The indicator's level [unit of the observable], checked before any solve: None (the midpoint of the
+    values at the bracket ends) or a finite number.
+
+    **Raises** `ScenarioError` naming `where` for NaN, ±inf or what is no number.
+    """
+    if level is None:
+        return None
+    try:
+        value = float(level)
+    except (TypeError, ValueError, OverflowError):
+        value = float("nan")
+    if isinstance(level, bool | str) or not np.isfinite(value):
+        raise ScenarioError(
+            f"{where} must be a finite number (or none: the midpoint of the values at the bracket ends), "
+            f"got {brief(level)}"
+        )
+    return value
 
 
 class _Reporter:

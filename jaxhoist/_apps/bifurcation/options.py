@@ -4,6 +4,7 @@ corrector (`SearchOptions`), and the locator's default solver settings."""
 
 from __future__ import annotations
 
+import numbers
 from typing import ClassVar
 
 import diffrax
@@ -69,7 +70,8 @@ class SearchOptions(eqx.Module):
 
     - `method`: `Newton()` (default), `Bisection()` or `Multisection(points_per_round, lanes)`.
     - `tol`: the final bracket width [unit of the located parameter], > 0.
-    - `max_solves`: give up (converged=False) after this many solves.
+    - `max_solves`: give up (converged=False) after this many solves, a whole number >= 2 (>=
+      `points_per_round` for multisection).
     - `initial_half_width`: `trace_boundary` only: the corrector's half-width at the second point [unit of
       the parameter] (default None: 5 % of the initial bracket).
     - `max_expansions`: `trace_boundary` only: how many times the corrector's bracket is doubled before a
@@ -77,7 +79,10 @@ class SearchOptions(eqx.Module):
     - `min_jump_fraction`: `trace_boundary` only (with `level=None`): a point whose change across its final
       bracket is below this fraction of the first point's is reported lost.
 
-    **Raises** `ScenarioError` for a non-positive `tol`, an unknown method, or fewer than 2 points per round.
+    **Raises** `ScenarioError` for a non-positive `tol`, an unknown method, fewer than 2 points per round,
+    a `max_solves` that is no whole number or below what the method needs first (2 solves for the ends of
+    the bracket; `points_per_round` for multisection), a non-positive `initial_half_width`, a
+    `max_expansions` below 1 or a negative `min_jump_fraction`.
     """
 
     method: AbstractSearchMethod
@@ -103,10 +108,37 @@ class SearchOptions(eqx.Module):
         if not (np.isfinite(tol) and tol > 0):
             raise ScenarioError(f"tol must be > 0, got {tol}")
         self.tol = tol
-        self.max_solves = max_solves
+        # the two ends of the bracket; multisection's first round solves points_per_round values at once
+        least = max(2, method.points_per_round) if isinstance(method, Multisection) else 2
+        if not _is_count(max_solves) or max_solves < least:
+            why = (
+                "points_per_round, its first round"
+                if isinstance(method, Multisection)
+                else "the two ends of the bracket"
+            )
+            raise ScenarioError(f"max_solves must be a whole number >= {least} ({why}), got {max_solves!r}")
+        self.max_solves = int(max_solves)
+        if initial_half_width is not None and not (
+            _is_real(initial_half_width) and np.isfinite(initial_half_width) and initial_half_width > 0
+        ):
+            raise ScenarioError(
+                f"initial_half_width must be > 0 (or None: 5 % of the bracket), got {initial_half_width!r}"
+            )
         self.initial_half_width = initial_half_width
-        self.max_expansions = max_expansions
+        if not _is_count(max_expansions) or max_expansions < 1:
+            raise ScenarioError(f"max_expansions must be a whole number >= 1, got {max_expansions!r}")
+        self.max_expansions = int(max_expansions)
+        if not (_is_real(min_jump_fraction) and np.isfinite(min_jump_fraction) and min_jump_fraction >= 0):
+            raise ScenarioError(f"min_jump_fraction must be a finite number >= 0, got {min_jump_fraction!r}")
         self.min_jump_fraction = min_jump_fraction
+
+
+def _is_count(n) -> bool:
+    return isinstance(n, numbers.Integral) and not isinstance(n, bool)
+
+
+def _is_real(x) -> bool:
+    return isinstance(x, numbers.Real) and not isinstance(x, bool)
 
 
 def default_solver_options() -> SolverOptions:

@@ -9,12 +9,16 @@ from collections.abc import Callable, Sequence
 import numpy as np
 
 from ..._errors import ScenarioError
+from ..._io.validate import brief, check_param_path, parse_values
 from ..._numerics.options import SolverOptions
+from ..._numerics.solve import checked_scenario
 from ..._numerics.times import TimesLike, as_times
 from ..._physics.params import Scenario
-from ..._physics.paths import check_path, set_param
+from ..._physics.paths import parse_path, set_param
+from ..scan.sweep import validate_members
 from .eval import resolve_one
-from .locate import locate_bifurcation
+from .jumps import Jump
+from .locate import check_bracket, check_level, locate_bifurcation
 from .options import SearchOptions, settings
 from .result import BifurcationError, Boundary
 
@@ -22,9 +26,9 @@ from .result import BifurcationError, Boundary
 def trace_boundary(
     scenario: Scenario,
     param: str,
-    bracket: tuple[float, float],
+    bracket: tuple[float, float] | Jump,
     along: str,
-    along_values: Sequence[float] | np.ndarray,
+    along_values: Sequence[float] | np.ndarray | str,
     observable,
     *,
     level: float | None = None,
@@ -48,7 +52,9 @@ def trace_boundary(
     **Arguments**
     - `scenario`, `param`, `bracket`, `observable`, `level`: as in `locate_bifurcation`, at q =
       `along_values[0]`.
-    - `along`, `along_values`: the continuation parameter's path and its values q [its unit].
+    - `along`, `along_values`: the continuation parameter's path and its values q [its unit] (at least one;
+      finite, strictly monotone; a sequence, an array or text "start:stop:num" / "v1,v2,..."; see
+      `check_along`).
     - `search`: `SearchOptions` (method, tol, max_solves of each point; the corrector's bracketing).
     - `options`: `SolverOptions` (default `SolverOptions(diffrax.Tsit5())`, as in `locate_bifurcation`).
     - `times`: the saved times, a `Times(t1, n, ts)` (a number is t1 [s], a 1-D array ts [s]), as in
@@ -57,16 +63,20 @@ def trace_boundary(
       `point` (index k of q), `n_points` and `along_value` (q) added.
 
     **Returns** a `Boundary`.
+
+    **Raises** `ScenarioError` on invalid input, before any solve: as `locate_bifurcation` (the bracket,
+    `level`, a vector observable), and `check_along` (the continuation parameter and its values).
     """
     times = as_times(times)
     search, options = settings(search, options)
-    qs = np.asarray(along_values, dtype=np.float64)
-    if qs.ndim != 1 or qs.size < 1:
-        raise ScenarioError("along_values must be a non-empty 1-D sequence")
-    check_path(scenario, along)
-    check_path(scenario, param)
+    scenario = checked_scenario(scenario)
+    check_param_path(scenario, param, "param")
+    qs = check_along(scenario, param, along, along_values)
+    lo, hi = check_bracket(bracket)
+    for v in (lo, hi):  # at the first q, where the bracket applies
+        set_param(set_param(scenario, along, qs[0]), param, v).check()
+    level = check_level(level)
     obs = resolve_one(observable)
-    lo, hi = (float(v) for v in bracket)
     tol = search.tol
     ps: list[float] = []
     points: list = []
@@ -100,6 +110,8 @@ def trace_boundary(
             except BifurcationError as e:  # no sign change in this bracket: widen it
                 n_solves += e.n_solves
             except ScenarioError:  # the widened bracket left the valid range of the parameter
+                if k == 0:  # the given bracket (checked above): an invalid input is no lost point
+                    raise
                 break
         lost = False
         if pt is not None:
@@ -131,6 +143,48 @@ def trace_boundary(
         points=points,
         tol=tol,
     )
+
+
+def check_along(
+    scenario: Scenario,
+    param: str,
+    along: str,
+    along_values,
+    where: tuple[str, str] = ("along", "along_values"),
+) -> np.ndarray:
+    """The continuation values q [unit of `along`], checked before any solve.
+
+    **Arguments**
+    - `scenario`, `param`: the base scenario and the located parameter's path.
+    - `along`: the continuation parameter's path: a float leaf (or a component of one) other than `param`.
+    - `along_values`: its values, a 1-D sequence or array, or text as `scan`'s `--values` ("start:stop:num",
+      inclusive, or "v1,v2,..."): finite, strictly increasing or strictly decreasing (the secant predictor
+      divides by the step between them), each valid for the scenario (its range checks, as a scan member's).
+    - `where`: the names of the two arguments (or flags) for the messages.
+
+    **Returns** the values as a 1-D float64 array.
+
+    **Raises** `ScenarioError` naming the argument.
+    """
+    f_along, f_values = where
+    check_param_path(scenario, along, f_along)
+    if parse_path(str(along)) == parse_path(str(param)):
+        raise ScenarioError(
+            f"{f_along} {along!r} is the located parameter itself; continue along another parameter"
+        )
+    qs = parse_values(along_values, f_values)
+    if not np.all(np.isfinite(qs)):
+        raise ScenarioError(f"{f_values} must be finite numbers, got {brief(qs)}")
+    steps = np.diff(qs)
+    if not (np.all(steps > 0) or np.all(steps < 0)):
+        raise ScenarioError(
+            f"{f_values} must be strictly increasing or strictly decreasing (no repeats), got {brief(qs)}"
+        )
+    bad = validate_members(scenario, [along], qs[:, None])
+    if bad:
+        i, msg = min(bad.items())
+        raise ScenarioError(f"{f_values}: {along} = {qs[i]:g} is invalid: {msg}")
+    return qs
 
 
 def _candidate_brackets(qs, ps, k, q, lo, hi, search: SearchOptions) -> list[tuple[float, float]]:

@@ -12,19 +12,26 @@ import diffrax
 import jax
 import numpy as np
 
-from ..._errors import ScenarioError
+from ..._errors import ScenarioError, one_line
 from ..._numerics import observables as obs_mod
 from ..._numerics.options import SolverOptions
 from ..._numerics.times import Times
 from ..._physics.paths import set_param
 from ..bifurcation.eval import resolve_one
 from ..bifurcation.jumps import find_crossings, find_jumps
-from ..bifurcation.locate import locate_bifurcation, locate_jumps
+from ..bifurcation.locate import check_bracket, check_level, locate_bifurcation, locate_jumps
 from ..bifurcation.options import SearchOptions, as_method
-from ..bifurcation.result import fmt_located
-from ..bifurcation.trace import trace_boundary
+from ..bifurcation.result import BifurcationError, fmt_located
+from ..bifurcation.trace import check_along, trace_boundary
 from ..scan.run import scan
-from .common import add_allow_implausible, add_out_options, claim_out_dir, prepare_out_dir, rerun_scan
+from .common import (
+    PROG,
+    add_allow_implausible,
+    add_out_options,
+    claim_out_dir,
+    prepare_out_dir,
+    rerun_scan,
+)
 
 
 def configure_parser(subparsers) -> None:
@@ -115,21 +122,22 @@ def _cli_observable(name: str):
 
 def _check_cli_args(args, scenario) -> np.ndarray | None:
     """Every argument of `jaxhoist bifurcation` checked before any solve; returns the --along values."""
-    from ..._io.validate import check_count, check_param_path, check_scalar_observable
-    from ..._io.validate import parse_values as strict_values
+    from ..._io.validate import check_count, check_param_path
 
     check_count(args.scan, "--scan", 2, allow_zero=True)
-    try:
-        (obs,) = obs_mod.resolve(_cli_observable(args.observable))
-    except ValueError as e:
-        raise ScenarioError(f"--observable: {e}") from None
-    check_scalar_observable(obs, "--observable")
+    resolve_one(_cli_observable(args.observable), "--observable")
     check_param_path(scenario, args.param, "--param")
+    check_bracket(args.bracket, "--bracket")
+    check_level(args.level, "--level")
+    if (args.along is None) != (args.along_values is None):
+        raise ScenarioError("--along and --along-values go together")
+    if args.along is not None and args.scan:
+        raise ScenarioError("--along traces one boundary from --bracket; it does not combine with --scan")
     along = None
     if args.along is not None:
-        check_param_path(scenario, args.along, "--along")
-    if args.along_values is not None:
-        along = strict_values(args.along_values, "--along-values")
+        along = check_along(
+            scenario, args.param, args.along, args.along_values, ("--along", "--along-values")
+        )
     if args.out:
         prepare_out_dir(args.out, "bifurcation", overwrite=getattr(args, "overwrite", False))
     return along
@@ -143,6 +151,15 @@ def run_cli(args) -> int:
         load_scenario(args.scenario, allow_implausible=args.allow_implausible), args.set
     )
     along_values = _check_cli_args(args, scenario)
+    try:
+        return _locate_and_write(args, scenario, overrides, along_values)
+    except BifurcationError as e:  # the search ran and could not go on: no sign change, a failed solve
+        print(f"{PROG}: error: {one_line(str(e))}", file=sys.stderr)
+        return 1
+
+
+def _locate_and_write(args, scenario, overrides, along_values) -> int:
+    """The located values (or the traced boundary) printed and written; the exit code."""
     observable = _cli_observable(args.observable)
     # the settings of the --scan and --classify solves (scan's default solver at --rtol/--atol/--max-steps)
     kw = dict(
@@ -200,10 +217,6 @@ def _locator_settings(args) -> dict:
 def _run_locator(args, scenario, observable, along_values, lo, hi, out, kw, bar):
     boundary = res = None
     quiet = getattr(args, "quiet", False)
-    if (args.along is None) != (args.along_values is None):
-        raise ScenarioError("--along and --along-values go together")
-    if args.along is not None and args.scan:
-        raise ScenarioError("--along traces one boundary from --bracket; it does not combine with --scan")
     loc = _locator_settings(args)
     if args.along is not None:
         boundary = trace_boundary(
