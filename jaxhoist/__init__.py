@@ -51,6 +51,7 @@ from ._errors import SolveStatus as SolveStatus
 from ._io.measurement import SIGNALS as MEASUREMENT_SIGNALS  # noqa: F401  (re-export under a clearer name)
 from ._io.measurement import read_measurement as read_measurement
 from ._io.measurement import write_measurement as write_measurement
+from ._io.results import ResultFileError as ResultFileError
 from ._io.results import load_metadata as load_metadata
 from ._io.results import load_trajectory as load_trajectory
 from ._io.results import save_trajectory as save_trajectory

@@ -205,12 +205,13 @@ def test_damaged_or_mismatched_result_files_are_refused(result_dir, tmp_path, ca
         "mismatched": lambda d: shutil.copy(other / "trajectory.npz", d / "trajectory.npz"),
         "truncated": lambda d: (d / "trajectory.npz").write_bytes((d / "trajectory.npz").read_bytes()[:500]),
         "sidecar": lambda d: (d / "trajectory.json").write_text("{"),
+        "not an object": lambda d: (d / "trajectory.json").write_text("null"),
     }
     for name, damage in cases.items():
         d = _fresh_copy(result_dir, tmp_path / name)
         damage(d)
         with pytest.raises(results.ResultFileError, match="trajectory"):
-            results.load_trajectory(d) if name != "sidecar" else results.load_metadata(d)
+            results.load_trajectory(d) if name in ("mismatched", "truncated") else results.load_metadata(d)
         assert cli.main(["animate", str(d)]) == 2, name
         err = capsys.readouterr().err.strip().splitlines()
         assert len(err) == 1 and err[0].startswith("jaxhoist: error:") and str(d) in err[0], (name, err)

@@ -303,7 +303,7 @@ def test_set_load_density_gives_the_mass_of_the_box_as_a_file_does(paper42):
     """`--set load.density` makes m = ρabc of the size after any `--set load.size`, as a scenario file's
     `density` does; `load.size` alone keeps the mass (a leaf replaced); mass and density together are
     refused; `load.inertia` sets an inertia where the preset has none, checked as a file's."""
-    from jaxhoist._io.scenario import apply_overrides
+    from jaxhoist._io.scenario import apply_overrides, load_scenario
 
     m0 = float(paper42.load.mass)  # 850 kg/m^3 x 2.5 m x 6 m x 2.5 m
     sc, _ = apply_overrides(paper42, ["load.density=900"])
@@ -325,9 +325,14 @@ def test_set_load_density_gives_the_mass_of_the_box_as_a_file_does(paper42):
         (["load.density=850", "load.mass=3"], "not both"),
         (["load.density=1,2"], "one number"),
         (["load.density=-1"], "load.density"),
+        (["load.density=1.2e5"], "outside its plausible range"),  # as in a file (0.1 to 1e5 kg/m^3)
     ):
         with pytest.raises(ScenarioError, match=words):
             apply_overrides(paper42, items)
+    opted_in = load_scenario("paper-4.2", allow_implausible=True)
+    assert float(apply_overrides(opted_in, ["load.density=1.2e5"])[0].load.mass) == pytest.approx(
+        1.2e5 * 37.5
+    )
 
 
 # ------------------------------------------------------------------------------------------- messages

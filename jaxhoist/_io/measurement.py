@@ -405,9 +405,10 @@ def write_measurement(
     rows = [[f"{x:.{digits}g}" for x in row] for row in np.stack(scaled, axis=1)]
     written = np.array([float(row[0]) for row in rows])
     if np.any(np.diff(written) <= 0):  # the file could not be read back: its times would repeat
+        t_unit = used["t"][0]
         raise MeasurementError(
             f"write_measurement({path}): digits = {digits} is too few to keep the sample times apart "
-            f"(written, {written[0]:g} to {written[-1]:g} s would repeat or go back): give more digits"
+            f"(written, {written[0]:g} to {written[-1]:g} {t_unit} would repeat or go back): give more digits"
         )
     path.parent.mkdir(parents=True, exist_ok=True)
     with path.open("w", newline="") as fh:

@@ -396,11 +396,16 @@ def load_metadata(path: str | Path) -> dict[str, Any]:
     **Raises** `ResultFileError` naming the file where it is missing, unreadable or not JSON."""
     sidecar = _file(_read_stem(path), ".json")
     try:
-        return json.loads(sidecar.read_text(encoding="utf-8"))
+        meta = json.loads(sidecar.read_text(encoding="utf-8"))
     except OSError as e:
         raise ResultFileError(f"{sidecar}: cannot be read ({e.strerror or e})") from None
     except (UnicodeDecodeError, json.JSONDecodeError) as e:
         raise ResultFileError(f"{sidecar}: is damaged or not a JSON file ({e})") from None
+    if not isinstance(meta, dict):
+        raise ResultFileError(
+            f"{sidecar}: is not a result's sidecar (JSON {type(meta).__name__}, not an object)"
+        )
+    return meta
 
 
 def units(path: str | Path) -> dict[str, str]:

@@ -240,15 +240,10 @@ def scenario_from_dict(data: dict, source: str = "<dict>", *, allow_implausible:
 
     try:
         ld = r.table(data["load"], "load")
-        rho = ld.get("density")
-        lo, hi = DENSITY_RANGE
-        implausible = rho is not None and math.isfinite(rho) and rho > 0 and not lo <= rho <= hi
-        if implausible and not allow_implausible:
-            raise r.error(
-                "load",
-                f"load.density = {rho:g} kg/m^3 is outside its plausible range {lo:g} to {hi:g} kg/m^3 "
-                f"(a hollow container ~100, steel 7850, osmium 22600); {OPT_IN}",
-            )
+        try:
+            _check_density(ld.get("density"), allow_implausible)
+        except ScenarioError as e:
+            raise r.error("load", str(e)) from None
         load = P.Load(
             ld["size"],
             ld.get("mass"),
@@ -343,6 +338,18 @@ def parse_overrides(items) -> dict[str, float | list]:
     return out
 
 
+def _check_density(rho, allow_implausible: bool) -> None:
+    """Refuse a load density ρ [kg/m^3] outside `DENSITY_RANGE` unless `allow_implausible` (a file's
+    `density` and `--set load.density` alike; `Load` itself refuses ρ <= 0 and NaN)."""
+    lo, hi = DENSITY_RANGE
+    implausible = rho is not None and math.isfinite(rho) and rho > 0 and not lo <= rho <= hi
+    if implausible and not allow_implausible:
+        raise ScenarioError(
+            f"load.density = {rho:g} kg/m^3 is outside its plausible range {lo:g} to {hi:g} kg/m^3 "
+            f"(a hollow container ~100, steel 7850, osmium 22600); {OPT_IN}"
+        )
+
+
 def apply_overrides(scenario: P.Scenario, items) -> tuple[P.Scenario, dict]:
     """A scenario with `--set PATH=VALUE` items applied and checked; errors name the path and say
     "[from --set]". PATH is a leaf's dotted path (`Scenario.replace`), or `load.density` [kg/m^3], which
@@ -364,7 +371,8 @@ def apply_overrides(scenario: P.Scenario, items) -> tuple[P.Scenario, dict]:
             get_leaf(scenario, path)  # raises ScenarioError naming a bad path
         if leaves:
             scenario = scenario.replace(**leaves)
-        if density is not None:  # m = ρabc, checked as the file's density is (Load's constructor)
+        if density is not None:  # m = ρabc, checked as the file's density is
+            _check_density(density, scenario.allow_implausible)
             mass = P.Load(scenario.load.size, density=density).mass
             scenario = scenario.replace(**{"load.mass": float(mass)})
         if inertia is not None:

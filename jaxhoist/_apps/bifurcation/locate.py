@@ -125,6 +125,8 @@ def check_bracket(bracket, where: str = "bracket") -> tuple[float, float]:
     if isinstance(bracket, Jump):
         bracket = (bracket.lo, bracket.hi)
     try:
+        if isinstance(bracket, str | bytes):  # "12" would unpack as (1, 2)
+            raise TypeError
         lo, hi = (float(b) for b in bracket)
     except (TypeError, ValueError, OverflowError):
         raise ScenarioError(f"{where} must be two numbers lo < hi, got {brief(bracket)}") from None

@@ -53,7 +53,7 @@ def trace_boundary(
     - `scenario`, `param`, `bracket`, `observable`, `level`: as in `locate_bifurcation`, at q =
       `along_values[0]`.
     - `along`, `along_values`: the continuation parameter's path and its values q [its unit] (at least one;
-      finite, strictly monotone; a sequence, an array or text "start:stop:num" / "v1,v2,..."; see
+      finite and distinct; a sequence, an array or text "start:stop:num" / "v1,v2,..."; see
       `check_along`).
     - `search`: `SearchOptions` (method, tol, max_solves of each point; the corrector's bracketing).
     - `options`: `SolverOptions` (default `SolverOptions(diffrax.Tsit5())`, as in `locate_bifurcation`).
@@ -158,8 +158,8 @@ def check_along(
     - `scenario`, `param`: the base scenario and the located parameter's path.
     - `along`: the continuation parameter's path: a float leaf (or a component of one) other than `param`.
     - `along_values`: its values, a 1-D sequence or array, or text as `scan`'s `--values` ("start:stop:num",
-      inclusive, or "v1,v2,..."): finite, strictly increasing or strictly decreasing (the secant predictor
-      divides by the step between them), each valid for the scenario (its range checks, as a scan member's).
+      inclusive, or "v1,v2,..."): finite and distinct, in any order (the secant predictor divides by the
+      step between two of them), each valid for the scenario (its range checks, as a scan member's).
     - `where`: the names of the two arguments (or flags) for the messages.
 
     **Returns** the values as a 1-D float64 array.
@@ -175,11 +175,8 @@ def check_along(
     qs = parse_values(along_values, f_values)
     if not np.all(np.isfinite(qs)):
         raise ScenarioError(f"{f_values} must be finite numbers, got {brief(qs)}")
-    steps = np.diff(qs)
-    if not (np.all(steps > 0) or np.all(steps < 0)):
-        raise ScenarioError(
-            f"{f_values} must be strictly increasing or strictly decreasing (no repeats), got {brief(qs)}"
-        )
+    if np.unique(qs).size != qs.size:
+        raise ScenarioError(f"{f_values} must be distinct values (a value repeats), got {brief(qs)}")
     bad = validate_members(scenario, [along], qs[:, None])
     if bad:
         i, msg = min(bad.items())

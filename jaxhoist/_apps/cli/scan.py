@@ -249,8 +249,8 @@ def _flag(name: str, value: float) -> str:
 
 
 def _check_before_writing(scenario, args) -> None:
-    """The --param paths and --observable names, checked before the output folder is made (`scan` checks
-    them again, with everything else, before compiling)."""
+    """The --param paths and --observable names, checked first for messages that name their flags
+    (`check_inputs` then checks them again, with everything else, before the folder is claimed)."""
     from ..._io.validate import check_param_path
     from ..._numerics import observables as obs_mod
 

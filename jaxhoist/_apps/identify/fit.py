@@ -168,10 +168,12 @@ def check_inputs(
 
 
 def _checked_problem(scenario, measurement, params, signals, noise, start, bounds, t1, options, fit):
-    """`_setup` with `identify`'s arguments: the fit options checked, the solver options completed."""
+    """`_setup` with `identify`'s arguments (the fit options checked, the solver options completed), and the
+    fit's starts, each checked as a scenario (e.g. a mass centre outside the box). **Returns** `(problem,
+    starts)`."""
     if not isinstance(fit, FitOptions):
         raise ScenarioError(f"fit must be a jaxhoist.FitOptions, got {type(fit).__name__}")
-    return _setup(
+    prob = _setup(
         scenario,
         measurement,
         params,
@@ -184,6 +186,12 @@ def _checked_problem(scenario, measurement, params, signals, noise, start, bound
         options=fit_solver_options(options),
         max_iterations=fit.max_iterations,
     )
+    starts = [prob.theta0] + random_starts(
+        prob.params, prob.theta0, int(fit.n_starts) - 1, float(fit.start_spread), int(fit.seed)
+    )
+    for th in starts:
+        apply_params(prob.scenario, unflatten(prob.params, th)).check()
+    return prob, starts
 
 
 def residual_function(
@@ -284,14 +292,10 @@ def identify(
     wall0 = time.perf_counter()
     fit = FitOptions() if fit is None else fit
     # ---- host side: every input is checked before anything is compiled
-    prob = _checked_problem(scenario, measurement, params, signals, noise, start, bounds, t1, options, fit)
-    scenario, plist, theta0, cfg, args = prob.scenario, prob.params, prob.theta0, prob.cfg, prob.args
-    # Each start is checked as a scenario before compiling (e.g. a mass centre outside the box).
-    starts = [theta0] + random_starts(
-        plist, theta0, int(fit.n_starts) - 1, float(fit.start_spread), int(fit.seed)
+    prob, starts = _checked_problem(
+        scenario, measurement, params, signals, noise, start, bounds, t1, options, fit
     )
-    for th in starts:
-        apply_params(scenario, unflatten(plist, th)).check()
+    scenario, plist, cfg, args = prob.scenario, prob.params, prob.cfg, prob.args
     lm_tol = jnp.asarray([fit.lm_rtol, fit.lm_atol], dtype=jnp.float64)
 
     # ---- the compiled core, once per start

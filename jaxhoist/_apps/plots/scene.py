@@ -4,7 +4,6 @@ Split off `apps/animate.py`, which re-exports these names; drawing and saving st
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -176,8 +175,5 @@ def load_scene(result_dir: str | Path, *, arrow_length: float | None = None) -> 
             f"{result_dir}: no trajectory.npz and trajectory.json here (write them with "
             f"`jaxhoist simulate ... --out {result_dir}`)"
         )
-    try:
-        meta = load_metadata(npz)
-    except json.JSONDecodeError as e:
-        raise ScenarioError(f"{npz.with_suffix('.json')}: not valid JSON: {e}") from None
-    return scene_from_result(load_trajectory(npz), meta, npz, arrow_length=arrow_length)
+    # a damaged or mismatched pair of files: ResultFileError (a ScenarioError) naming the file
+    return scene_from_result(load_trajectory(npz), load_metadata(npz), npz, arrow_length=arrow_length)
