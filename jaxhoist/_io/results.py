@@ -367,19 +367,32 @@ def load_arrays(path: str | Path) -> dict[str, np.ndarray]:
     **Raises** `ResultFileError` naming the file where it is missing or unreadable, damaged, or not the npz
     that its sidecar's checksum names (a sidecar without a checksum, or none at all, is not compared)."""
     stem = _read_stem(path)
-    npz = _file(stem, ".npz")
+    sidecar = _file(stem, ".json")
+    return _load_npz(stem, load_metadata(sidecar) if sidecar.exists() else {})
+
+
+def load_result(path: str | Path) -> tuple[dict[str, np.ndarray], dict[str, Any]]:
+    """`(load_arrays(path), load_metadata(path))`, the sidecar read once: the arrays, checked against the
+    sidecar's checksum, and the sidecar. **Raises** `ResultFileError` as those two do."""
+    stem = _read_stem(path)
+    meta = load_metadata(stem)
+    return _load_npz(stem, meta), meta
+
+
+def _load_npz(stem: Path, meta: Mapping[str, Any]) -> dict[str, np.ndarray]:
+    """The arrays of `<stem>.npz`, refused where they are not those whose checksum the sidecar `meta` holds
+    (a sidecar without one, or none, `{}`, is not compared)."""
+    npz, sidecar = _file(stem, ".npz"), _file(stem, ".json")
     try:
         data = npz.read_bytes()
     except OSError as e:
         raise ResultFileError(f"{npz}: cannot be read ({e.strerror or e})") from None
-    sidecar = _file(stem, ".json")
-    if sidecar.exists():
-        want = load_metadata(sidecar).get("data_sha256")
-        if want is not None and hashlib.sha256(data).hexdigest() != want:
-            raise ResultFileError(
-                f"{npz}: is not the file that {sidecar.name} beside it describes (its SHA-256 checksum "
-                f"differs: replaced or changed since it was written, or a run stopped between the two)"
-            )
+    want = meta.get("data_sha256")
+    if want is not None and hashlib.sha256(data).hexdigest() != want:
+        raise ResultFileError(
+            f"{npz}: is not the file that {sidecar.name} beside it describes (its SHA-256 checksum "
+            f"differs: replaced or changed since it was written, or a run stopped between the two)"
+        )
     try:
         with np.load(io.BytesIO(data), allow_pickle=False) as f:
             return {k: f[k] for k in f.files}

@@ -80,6 +80,18 @@ def brief(value, limit: int = 80) -> str:
     return text if len(text) <= limit else text[: limit - 3] + "..."
 
 
+def finite_number(x) -> float | None:
+    """`x` as a float if it is a finite number given as a number (not a bool or text), else None: for the
+    checks of numeric arguments of the Python API (`find_jumps`'s factor, `locate_bifurcation`'s level)."""
+    if isinstance(x, bool | str | bytes):
+        return None
+    try:
+        v = float(x)
+    except (TypeError, ValueError, OverflowError):
+        return None
+    return v if np.isfinite(v) else None
+
+
 # ------------------------------------------------------------------------------------------- numbers
 
 _NUMBER = re.compile(r"[+-]?(?:[0-9]+\.?[0-9]*(?:[eE][+-]?[0-9]+)?|\.[0-9]+(?:[eE][+-]?[0-9]+)?)")

@@ -11,7 +11,7 @@ import os
 import numpy as np
 
 from ..._errors import ScenarioError
-from ..._io.validate import brief
+from ..._io.validate import brief, finite_number
 from ..scan.result import ScanResult
 
 
@@ -72,25 +72,14 @@ def _series(result: object, observable: str, param: str | None, who: str):
     return param, x[order], y[order]
 
 
-def _finite(x) -> float | None:
-    """`x` as a float if it is a finite number (not a bool or text), else None."""
-    if isinstance(x, bool | str | bytes):
-        return None
-    try:
-        v = float(x)
-    except (TypeError, ValueError, OverflowError):
-        return None
-    return v if np.isfinite(v) else None
-
-
 def _check_jump_settings(factor, window, min_size) -> None:
     """Refuse `find_jumps` settings that would silently find nothing (a NaN `factor`) or anything."""
-    f = _finite(factor)
+    f = finite_number(factor)
     if f is None or f <= 0:
         raise ScenarioError(f"find_jumps: factor must be a finite number > 0, got {brief(factor)}")
     if not (isinstance(window, numbers.Integral) and not isinstance(window, bool) and int(window) >= 1):
         raise ScenarioError(f"find_jumps: window must be a whole number >= 1, got {brief(window)}")
-    m = _finite(min_size)
+    m = finite_number(min_size)
     if min_size is not None and (m is None or m < 0):
         raise ScenarioError(
             f"find_jumps: min_size must be a finite number >= 0 (or None: 1e-6 of the observable's range), "
@@ -124,7 +113,7 @@ def find_crossings(
     (an event that stops happening) are jumps, not crossings, and left to `find_jumps`. `score` is inf.
 
     **Returns** the brackets sorted by parameter value, as `Jump`s."""
-    if _finite(level) is None:
+    if finite_number(level) is None:
         raise ScenarioError(f"find_crossings: level must be a finite number, got {brief(level)}")
     param, x, y = _series(result, observable, param, "find_crossings")
     above = y - float(level) > 0.0

@@ -31,7 +31,7 @@ import jax.numpy as jnp
 import numpy as np
 
 from ..._errors import ScenarioError, require_x64
-from ..._io.validate import brief
+from ..._io.validate import brief, finite_number
 from ..._numerics.options import SolverOptions
 from ..._numerics.solve import checked_scenario
 from ..._numerics.times import TimesLike, as_times
@@ -143,11 +143,8 @@ def check_level(level, where: str = "level") -> float | None:
     """
     if level is None:
         return None
-    try:
-        value = float(level)
-    except (TypeError, ValueError, OverflowError):
-        value = float("nan")
-    if isinstance(level, bool | str) or not np.isfinite(value):
+    value = finite_number(level)
+    if value is None:
         raise ScenarioError(
             f"{where} must be a finite number (or none: the midpoint of the values at the bracket ends), "
             f"got {brief(level)}"

@@ -73,9 +73,9 @@ def trace_boundary(
     check_param_path(scenario, param, "param")
     qs = check_along(scenario, param, along, along_values)
     lo, hi = check_bracket(bracket)
-    for v in (lo, hi):  # at the first q, where the bracket applies
-        set_param(set_param(scenario, along, qs[0]), param, v).check()
     level = check_level(level)
+    # the bracket's ends at the first q are checked by the first point's locate_bifurcation, before it
+    # solves (its ScenarioError is raised, not taken for a lost point)
     obs = resolve_one(observable)
     tol = search.tol
     ps: list[float] = []
@@ -110,7 +110,7 @@ def trace_boundary(
             except BifurcationError as e:  # no sign change in this bracket: widen it
                 n_solves += e.n_solves
             except ScenarioError:  # the widened bracket left the valid range of the parameter
-                if k == 0:  # the given bracket (checked above): an invalid input is no lost point
+                if k == 0:  # the given bracket and level: an invalid input, not a lost point
                     raise
                 break
         lost = False

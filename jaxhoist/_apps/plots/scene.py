@@ -11,7 +11,7 @@ from typing import Any
 import numpy as np
 
 from ..._errors import ScenarioError
-from ..._io.results import load_metadata, load_trajectory
+from ..._io.results import load_result
 
 CORNERS = ("D", "E", "F", "H")
 CORNER_COLOURS = ("tab:blue", "tab:orange", "tab:green", "tab:red")
@@ -176,4 +176,4 @@ def load_scene(result_dir: str | Path, *, arrow_length: float | None = None) -> 
             f"`jaxhoist simulate ... --out {result_dir}`)"
         )
     # a damaged or mismatched pair of files: ResultFileError (a ScenarioError) naming the file
-    return scene_from_result(load_trajectory(npz), load_metadata(npz), npz, arrow_length=arrow_length)
+    return scene_from_result(*load_result(npz), npz, arrow_length=arrow_length)

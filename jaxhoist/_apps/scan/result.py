@@ -191,9 +191,9 @@ class ScanResult:
     @classmethod
     def load(cls, path: str | Path) -> ScanResult:
         """Read a result written by `save` (give the `.npz`, the `.json` or the stem)."""
-        from ..._io.results import load_arrays, load_metadata
+        from ..._io.results import load_result
 
-        arrays, meta = load_arrays(path), load_metadata(path)
+        arrays, meta = load_result(path)
         s = meta["scan"]
         return cls(
             params=s["params"],
