@@ -56,6 +56,18 @@ def test_default_simulate_core_has_no_host_callback(tiny):
     _assert_no_host_callback(_solve_jit.lower(sc, ts, jh.SolverOptions()))
 
 
+def test_forward_mode_derivative_of_the_core_has_no_host_callback(tiny):
+    # `jax.jvp` of the compiled core differentiates its traced program after the core's own trace has ended:
+    # the custom JVP rule (the augmented solve) must trace diffrax's checks without callbacks too
+    sc, ts = tiny
+    forward = jh.SolverOptions(adjoint=diffrax.ForwardMode())
+
+    def x_end(mu):
+        return _solve_jit(sc.replace(**{"foundation.friction_coefficient": mu}), ts, forward).position[-1, 0]
+
+    _assert_no_host_callback(jax.jit(lambda mu: jax.jvp(x_end, (mu,), (1.0,))).lower(0.3))
+
+
 def test_a_progress_meter_is_a_host_callback(tiny):
     # the check above can fail: the in-loop meter, asked for, is a callback
     sc, ts = tiny

@@ -1,8 +1,9 @@
 """Time to first result of the Python API: the first call of `scan` (256 values of μ, then in the same
 process 256 values of the foundation's stiffness), `scan` with derivatives (16 values), `identify` (the
-docs' five-parameter fit) and `locate_bifurcation` (paper-4.3's μ*), each in a fresh Python process with
-the README's set-up lines (float64, every core, the persistent compilation cache), cold (an empty cache
-folder) and warm (the same folder again, a new process).
+docs' five-parameter fit), docs/getting-started.md's first derivative d x_C(1 s)/dμ by `jax.jvp` (forward
+mode) and by `jax.grad` (reverse mode), and `locate_bifurcation` (paper-4.3's μ*), each in a fresh Python
+process with the README's set-up lines (float64, every core, the persistent compilation cache), cold (an
+empty cache folder) and warm (the same folder again, a new process).
 
     python experiments/benchmarks/bench_first_call.py [--out DIR] [--quick] [--case NAME ...]
 
@@ -83,6 +84,30 @@ def first():
     fit(0)
 def again():
     fit(1)
+""",
+    "jvp-getting-started": """\
+import diffrax
+sc = jh.load_scenario("paper-4.2")
+n = 0
+forward = jh.SolverOptions(adjoint=diffrax.ForwardMode())
+def x_end(mu):  # docs/getting-started.md's first derivative: d x_C(1 s)/d mu, forward mode
+    s = sc.replace(**{MU: mu})
+    return jh.simulate(s, jh.Times(1.0, n=2), options=forward).position[-1, 0]
+def first():
+    jax.jvp(x_end, (0.3,), (1.0,))
+def again():
+    jax.jvp(x_end, (0.35,), (1.0,))
+""",
+    "grad-getting-started": """\
+sc = jh.load_scenario("paper-4.2")
+n = 0
+def x_end(mu):  # the same derivative by reverse mode (the default adjoint)
+    s = sc.replace(**{MU: mu})
+    return jh.simulate(s, jh.Times(1.0, n=2)).position[-1, 0]
+def first():
+    jax.grad(x_end)(0.3)
+def again():
+    jax.grad(x_end)(0.35)
 """,
     "locate-paper-4.3": """\
 sc = jh.load_scenario("paper-4.3")

@@ -55,6 +55,7 @@ from .._physics.equilibrium import initial_state
 from .._physics.linearise import linearise as elastic_linearise
 from .._physics.linearise import linearise_exact_slope
 from .._physics.params import Scenario
+from .callback_free import checks_as_nan
 from .options import SolverOptions
 from .rosenbrock import RosenbrockW, time_derivative_of
 
@@ -164,6 +165,8 @@ def solve_forward(
 
         # symbolic zeros: the leaves that are not differentiated (every scenario leaf but the swept ones,
         # and the saved times) stay constants of the tangent solve instead of carrying zero tangents
+        # `checks_as_nan`: JAX traces this rule when it differentiates the traced core, which for
+        # `jax.jvp` of the compiled core happens after the core's own `callback_free` block has ended
         @functools.partial(run.defjvp, symbolic_zeros=True)
         def run_jvp(primals, tangents):
             dyn, ts = primals
@@ -172,10 +175,11 @@ def solve_forward(
             def augmented():
                 return _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, status_of)
 
-            if joint:
-                return augmented()
-            primal = solve_plain(eqx.combine(dyn, static), ts, options)
-            return primal, augmented()[1]
+            with checks_as_nan():
+                if joint:
+                    return augmented()
+                primal = solve_plain(eqx.combine(dyn, static), ts, options)
+                return primal, augmented()[1]
 
         return run(dyn, ts)
 
