@@ -571,10 +571,10 @@ def test_search_options_refuse_a_budget_the_locator_cannot_start_with():
     for kw, words in refusals:
         with pytest.raises(jh.ScenarioError, match=words):
             SearchOptions(**kw)
-    from jaxhoist._apps.bifurcation import options as bifurcation_options
+    from jaxhoist._io.validate import whole_number  # SearchOptions' test of max_solves, max_expansions
 
     # 2.5 reaches the check in a user's call (the tests' run-time type checking refuses it before)
-    assert not bifurcation_options._is_count(2.5) and bifurcation_options._is_count(np.int64(2))
+    assert not whole_number(2.5) and whole_number(np.int64(2)) and not whole_number(True)
     assert SearchOptions(max_solves=2).max_solves == 2
     assert SearchOptions(Multisection(points_per_round=8), max_solves=8).max_solves == 8
 

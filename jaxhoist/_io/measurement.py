@@ -42,7 +42,7 @@ from .signals import check_signal_names as check_signal_names
 from .signals import hint
 from .signals import signal_groups as signal_groups
 from .signals import unit_factor as unit_factor
-from .validate import parse_number, read_text
+from .validate import parse_number, read_text, whole_number
 
 # ------------------------------------------------------------------------------------------ object
 
@@ -387,7 +387,7 @@ def write_measurement(
     **Returns** the CSV path.
     """
     path = Path(path)
-    if isinstance(digits, bool) or not isinstance(digits, int | np.integer) or not 1 <= digits <= 17:
+    if not whole_number(digits) or not 1 <= digits <= 17:
         raise MeasurementError(
             f"write_measurement({path}): digits must be a whole number 1 to 17, got {digits!r}"
         )

@@ -20,6 +20,7 @@ or the file, before anything is compiled or solved; none imports JAX transformat
 from __future__ import annotations
 
 import argparse
+import numbers
 import os
 import re
 import reprlib
@@ -90,6 +91,13 @@ def finite_number(x) -> float | None:
     except (TypeError, ValueError, OverflowError):
         return None
     return v if np.isfinite(v) else None
+
+
+def whole_number(x) -> bool:
+    """Whether `x` is a whole number given as one (a Python or numpy integer, not a bool): for the checks
+    of counts among the Python API's arguments (`find_jumps`'s window, `SearchOptions`' max_solves,
+    `write_measurement`'s digits)."""
+    return isinstance(x, numbers.Integral) and not isinstance(x, bool)
 
 
 # ------------------------------------------------------------------------------------------- numbers

@@ -5,13 +5,12 @@ brackets for `locate_bifurcation`."""
 from __future__ import annotations
 
 import dataclasses
-import numbers
 import os
 
 import numpy as np
 
 from ..._errors import ScenarioError
-from ..._io.validate import brief, finite_number
+from ..._io.validate import brief, finite_number, whole_number
 from ..scan.result import ScanResult
 
 
@@ -77,7 +76,7 @@ def _check_jump_settings(factor, window, min_size) -> None:
     f = finite_number(factor)
     if f is None or f <= 0:
         raise ScenarioError(f"find_jumps: factor must be a finite number > 0, got {brief(factor)}")
-    if not (isinstance(window, numbers.Integral) and not isinstance(window, bool) and int(window) >= 1):
+    if not (whole_number(window) and int(window) >= 1):
         raise ScenarioError(f"find_jumps: window must be a whole number >= 1, got {brief(window)}")
     m = finite_number(min_size)
     if min_size is not None and (m is None or m < 0):

@@ -12,6 +12,7 @@ import equinox as eqx
 import numpy as np
 
 from ..._errors import ScenarioError
+from ..._io.validate import whole_number
 from ..._numerics.options import SolverOptions
 
 
@@ -110,7 +111,7 @@ class SearchOptions(eqx.Module):
         self.tol = tol
         # the two ends of the bracket; multisection's first round solves points_per_round values at once
         least = max(2, method.points_per_round) if isinstance(method, Multisection) else 2
-        if not _is_count(max_solves) or max_solves < least:
+        if not whole_number(max_solves) or max_solves < least:
             why = (
                 "points_per_round, its first round"
                 if isinstance(method, Multisection)
@@ -125,16 +126,12 @@ class SearchOptions(eqx.Module):
                 f"initial_half_width must be > 0 (or None: 5 % of the bracket), got {initial_half_width!r}"
             )
         self.initial_half_width = initial_half_width
-        if not _is_count(max_expansions) or max_expansions < 1:
+        if not whole_number(max_expansions) or max_expansions < 1:
             raise ScenarioError(f"max_expansions must be a whole number >= 1, got {max_expansions!r}")
         self.max_expansions = int(max_expansions)
         if not (_is_real(min_jump_fraction) and np.isfinite(min_jump_fraction) and min_jump_fraction >= 0):
             raise ScenarioError(f"min_jump_fraction must be a finite number >= 0, got {min_jump_fraction!r}")
         self.min_jump_fraction = min_jump_fraction
-
-
-def _is_count(n) -> bool:
-    return isinstance(n, numbers.Integral) and not isinstance(n, bool)
 
 
 def _is_real(x) -> bool:
