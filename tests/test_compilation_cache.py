@@ -18,6 +18,7 @@ import jax
 import jax.numpy as jnp
 import numpy as np
 import pytest
+from conftest import N_SAVE, SOLVE_OPTIONS
 
 import jaxhoist as jh
 from jaxhoist._apps.identify import core as identify_core
@@ -54,6 +55,29 @@ def tiny():
 def test_default_simulate_core_has_no_host_callback(tiny):
     sc, ts = tiny
     _assert_no_host_callback(_solve_jit.lower(sc, ts, jh.SolverOptions()))
+
+
+def test_simulate_compiles_one_program_for_any_tolerances(paper42):
+    """`simulate` passes rtol and atol to its compiled core as values (`SolverOptions.traced_tolerances`): a
+    solve at other tolerances compiles nothing, and uses the tolerances it is given (it takes other steps).
+    That the values are bit for bit those of a program with the tolerances compiled in is
+    tests/test_reference_results.py's (its references were computed so)."""
+    ts = jh.Times(ts=jnp.linspace(0.0, 0.5, N_SAVE))
+    compiled = []
+
+    def listener(event, duration, **kw):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiled.append(kw.get("fun_name"))
+
+    shared = jh.simulate(paper42, ts, options=SOLVE_OPTIONS)  # the shared program of the physics tests
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        loose = jh.simulate(paper42, ts, options=jh.SolverOptions(diffrax.Tsit5(), rtol=1e-4, atol=1e-6))
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert not [name for name in compiled if "solve" in str(name)], compiled
+    assert int(loose.num_accepted_steps) < int(shared.num_accepted_steps)
+    assert not np.array_equal(np.asarray(loose.position), np.asarray(shared.position))
 
 
 def test_forward_mode_derivative_of_the_core_has_no_host_callback(tiny):

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import diffrax
 import equinox as eqx
+import jax.numpy as jnp
 import numpy as np
 
 from .._errors import ScenarioError
@@ -52,7 +53,10 @@ def _positive(name: str, v) -> float:
 
 
 class SolverOptions(eqx.Module):
-    """Numerical settings of a solve (a change of any of them compiles anew).
+    """Numerical settings of a solve. A change of the solver, the controller's kind or settings, the adjoint,
+    `dt0` or `max_steps` compiles anew; `simulate` passes the tolerances `rtol` and `atol` of the default
+    `PIDController` to its compiled program as values (`traced_tolerances`), so that one program serves any
+    tolerances (a scan still compiles one per tolerance).
 
     - `solver`: a diffrax solver. Default (None): `jaxhoist.RosenbrockW()`, the linearly implicit solver that
       treats the model's stiff contact, rope and boom forces implicitly (`numerics.rosenbrock`); any diffrax
@@ -156,6 +160,18 @@ class SolverOptions(eqx.Module):
     def forward_mode(self) -> bool:
         """True if derivatives are taken in forward mode (`diffrax.ForwardMode`)."""
         return isinstance(self.adjoint, diffrax.ForwardMode)
+
+    def traced_tolerances(self) -> SolverOptions:
+        """These options with a `diffrax.PIDController`'s `rtol` and `atol` as float64 arrays (other
+        controllers unchanged). `eqx.filter_jit` compiles Python floats into the program and traces arrays,
+        so with these one compiled solve serves every tolerance; the steps and the results are bit for bit
+        those of the floats (tests/test_compilation_cache.py)."""
+        ctrl = self.stepsize_controller
+        if not isinstance(ctrl, diffrax.PIDController):
+            return self
+        tols = tuple(jnp.asarray(x, dtype=jnp.float64) for x in (ctrl.rtol, ctrl.atol))
+        ctrl = eqx.tree_at(lambda c: (c.rtol, c.atol), ctrl, tols)
+        return eqx.tree_at(lambda o: o.stepsize_controller, self, ctrl)
 
     def replace(self, **changes) -> SolverOptions:
         """A copy with some fields changed (`eqx.tree_at` on the named fields)."""

@@ -227,5 +227,6 @@ def simulate_elastic(
     ts = jnp.asarray(ts, dtype=jnp.float64)
     with forward_mode_hint():  # jacfwd through the reverse adjoint: say to pass adjoint=diffrax.ForwardMode()
         scenario = scenario.unlabelled()  # one program for any labels
+        options = options.traced_tolerances()  # one program for any rtol and atol
         traj = _core(scenario, ts, options)(scenario, ts, options)
     return _raise_on_failure(traj) if throw else traj

@@ -249,6 +249,7 @@ def _solve_elastic(args, scenario, ts, options, progress):
     import jax
 
     scenario = scenario.unlabelled()  # one compiled program for any scenario's labels
+    options = options.traced_tolerances()  # and for any --rtol and --atol, as `simulate`'s
     solve_fn = _compiled_solve(scenario, ts, options, progress)
     with (
         progress("solving", bar=True),
