@@ -56,7 +56,8 @@ class SolverOptions(eqx.Module):
     """Numerical settings of a solve. A change of the solver, the controller's kind or settings, the adjoint,
     `dt0` or `max_steps` compiles anew; `simulate` passes the tolerances `rtol` and `atol` of the default
     `PIDController` to its compiled program as values (`traced_tolerances`), so that one program serves any
-    tolerances (a scan still compiles one per tolerance).
+    tolerances (not for forward-mode derivatives with the default solver; a scan compiles one per
+    tolerance).
 
     - `solver`: a diffrax solver. Default (None): `jaxhoist.RosenbrockW()`, the linearly implicit solver that
       treats the model's stiff contact, rope and boom forces implicitly (`numerics.rosenbrock`); any diffrax
