@@ -53,11 +53,11 @@ def _positive(name: str, v) -> float:
 
 
 class SolverOptions(eqx.Module):
-    """Numerical settings of a solve. A change of the solver, the controller's kind or settings, the adjoint,
-    `dt0` or `max_steps` compiles anew; `simulate` passes the tolerances `rtol` and `atol` of the default
-    `PIDController` to its compiled program as values (`traced_tolerances`), so that one program serves any
-    tolerances (not for forward-mode derivatives with the default solver; a scan compiles one per
-    tolerance).
+    """Numerical settings of a solve. A change of the solver, the step-size controller (but for the tolerances
+    below), the adjoint, `dt0` or `max_steps` compiles anew; `simulate` passes the tolerances `rtol` and
+    `atol` of the default `PIDController` to its compiled program as values (`traced_tolerances`), so that
+    one program serves any tolerances (not for forward-mode derivatives with the default solver; a scan
+    compiles one per tolerance).
 
     - `solver`: a diffrax solver. Default (None): `jaxhoist.RosenbrockW()`, the linearly implicit solver that
       treats the model's stiff contact, rope and boom forces implicitly (`numerics.rosenbrock`); any diffrax
@@ -166,7 +166,7 @@ class SolverOptions(eqx.Module):
         """These options with a `diffrax.PIDController`'s `rtol` and `atol` as float64 arrays (other
         controllers unchanged). `eqx.filter_jit` compiles Python floats into the program and traces arrays,
         so with these one compiled solve serves every tolerance; the steps and the results are bit for bit
-        those of the floats (tests/test_compilation_cache.py)."""
+        those of the floats (tests/test_reference_results.py)."""
         ctrl = self.stepsize_controller
         if not isinstance(ctrl, diffrax.PIDController):
             return self
