@@ -180,6 +180,32 @@ def test_another_swept_parameter_reuses_the_group_compiled_as_for_an_accelerator
     for k in clean.data:
         np.testing.assert_array_equal(by_mu[k], clean[k], err_msg=k)
         np.testing.assert_array_equal(by_k[k][1], clean[k][2], err_msg=k)  # the box itself
+    # other tolerances: the same copy, run under them (the next test does this on the stored route)
+    loose = scan(box, {MU: MUS}, TIMES, **{**kw(chunk_size=4), "options": LOOSE})
+    assert loose.attrs["group_program"] == "reused"
+    assert loose.num_accepted_steps.sum() < 0.6 * clean.num_accepted_steps.sum()
+
+
+#: `KW`'s options (Tsit5 at its default rtol 1e-6, atol 1e-8) at 100x looser tolerances.
+LOOSE = jh.SolverOptions(diffrax.Tsit5(), rtol=1e-4, atol=1e-6, max_steps=3000)
+
+
+def test_other_tolerances_reuse_the_compiled_group(box, clean):
+    """The lock-step group program takes the step-size controller's tolerances as values
+    (`batch.group_options`): the scan of `clean` at 100x looser tolerances runs `clean`'s group program
+    without compiling, under those tolerances (under 0.6 of the steps in all, every final position within
+    1 mm of `clean`'s and not equal to it), and `clean`'s tolerances again give `clean` bit for bit."""
+    assert clean.attrs["group_program"] == "compiled"
+    loose = scan(box, {MU: MUS}, TIMES, **{**KW, "options": LOOSE, "batch": jh.BatchOptions(lanes=2)})
+    assert loose.attrs["group_program"] == "reused" and np.all(loose.ok)
+    assert loose.attrs["solver"]["rtol"] == 1e-4 and loose.attrs["solver"]["atol"] == 1e-6
+    assert loose.num_accepted_steps.sum() < 0.6 * clean.num_accepted_steps.sum()
+    np.testing.assert_allclose(loose["final_position"], clean["final_position"], rtol=0, atol=1e-3)
+    assert not np.array_equal(loose["final_position"], clean["final_position"])
+    again = scan(box, {MU: MUS}, TIMES, **kw(chunk_size=4))
+    assert again.attrs["group_program"] == "reused"
+    for k in clean.data:
+        np.testing.assert_array_equal(again[k], clean[k], err_msg=k)
 
 
 @pytest.mark.parametrize("solver", [None, diffrax.Tsit5()], ids=["default", "tsit5"])

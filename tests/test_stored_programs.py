@@ -49,18 +49,21 @@ builtin = [
 def mine(traj):
     return traj.position[-1, 0]
 
-def lock_step_keys(paths):  # the two stored programs of a scan without derivatives: (group, members)
+def lock_step_keys(paths, options=jh.SolverOptions()):  # a scan's two stored programs: (group, members)
     spec = batch.BatchSpec(paths=paths, observables=tuple(builtin), histories=("position",),
-                           options=jh.SolverOptions(), lanes=2, devices=tuple(jax.devices()))
+                           options=options, lanes=2, devices=tuple(jax.devices()))
     sc, ts = jh.load_scenario("paper-4.2").unlabelled(), jnp.linspace(0.0, 0.5, 6)
     values = jnp.full((2, len(paths)), 0.3)
     scenarios = batch.member_scenarios(sc, values, paths)
-    return [sp.program_key("scan-lock-step-group", (scenarios, ts, batch.group_spec(spec, ts))),
-            sp.program_key("scan-members", (sc, values, paths))]
+    group = (scenarios, ts, batch.group_options(spec), batch.group_spec(spec, ts))
+    members = sp.program_key("scan-members", (sc, values, paths))
+    return [sp.program_key("scan-lock-step-group", group), members]
 
 print(json.dumps({
     "lock_step": [lock_step_keys(p) for p in [("foundation.friction_coefficient",), ("foundation.stiffness",),
                                               ("foundation.friction_coefficient", "hoist.speed")]],
+    "tolerances": [lock_step_keys(("foundation.stiffness",), o)[0]
+                   for o in [jh.SolverOptions(rtol=1e-6, atol=1e-8), jh.SolverOptions(max_steps=1000)]],
     "builtin": [key(builtin), key(builtin, True)],
     "prefixes": [key(builtin[:k]) for k in range(1, len(builtin) + 1)],
     "closures": [key([obs_mod.detachment_time_difference(c, "D")]) for c in "EF"],
@@ -71,7 +74,8 @@ print(json.dumps({
 
 
 def test_scan_group_programs_have_a_stable_key_unless_an_observable_is_the_users():
-    """Without derivatives the group program's key is the same for any swept parameters. In a plain process
+    """Without derivatives the group program's key is the same for any swept parameters and any tolerances
+    of the step-size controller. In a plain process
     (pytest's jaxtyping hook wraps jaxhoist's closures in checkers the key does not cover, so that there
     they are not stored)."""
     keys = run_script(_KEY_SCRIPT)
@@ -87,6 +91,9 @@ def test_scan_group_programs_have_a_stable_key_unless_an_observable_is_the_users
     groups, members = zip(*keys["lock_step"], strict=True)
     assert None not in groups and len(set(groups)) == 1 and groups[0] != plain
     assert None not in members and len(set(members)) == 3
+    # nor on the step-size controller's tolerances (values of the program), but on the step budget
+    other_tolerances, fewer_steps = keys["tolerances"]
+    assert other_tolerances == groups[0] and fewer_steps is not None and fewer_steps != groups[0]
 
 
 # ------------------------------------------------------------------------------------ across processes

@@ -171,17 +171,30 @@ def in_lock_step(spec: BatchSpec, ts) -> bool:
 def group_spec(spec: BatchSpec, ts) -> BatchSpec:
     """The spec that the group program of `spec` is compiled for: for `in_lock_step` specs without the swept
     paths, since that program takes the members' scenarios (`member_scenarios`, a small program of its own),
-    not their values. So a scan of another parameter, or of several, with the same observables, options,
+    not their values, and without the controller's tolerances, which it takes as values (`group_options`).
+    So a scan of another parameter, or of several, at other tolerances, with the same observables, solver,
     group width and saved times runs the same compiled group program (in this process, or loaded from the
     cache folder)."""
-    return dataclasses.replace(spec, paths=()) if in_lock_step(spec, ts) else spec
+    if not in_lock_step(spec, ts):
+        return spec
+    ctrl = spec.options.stepsize_controller  # a PIDController (`in_lock_step`)
+    untoleranced = eqx.tree_at(lambda c: (c.rtol, c.atol), ctrl, (None, None), is_leaf=lambda x: x is None)
+    return dataclasses.replace(spec, paths=(), options=spec.options.replace(stepsize_controller=untoleranced))
 
 
-def lock_step_group(scenarios, ts, spec: BatchSpec):
+def group_options(spec: BatchSpec) -> SolverOptions:
+    """The options that the group program of an `in_lock_step` spec takes as an argument: `spec.options` with
+    the controller's `rtol` and `atol` as float64 arrays (`SolverOptions.traced_tolerances`; the steps and
+    results are bit for bit those of the tolerances compiled in)."""
+    return spec.options.traced_tolerances()
+
+
+def lock_step_group(scenarios, ts, options: SolverOptions, spec: BatchSpec):
     """The group program of `in_lock_step` specs: from the members' scenarios (`member_scenarios`: every
     array leaf with a leading member axis) each member's initial state, one `lockstep.solve_group` for the
-    group, then each member's outputs and observables as `member` makes them. `spec.paths` is not used."""
-    opts = spec.options
+    group under `options` (`group_options`: the tolerances are values of the program), then each member's
+    outputs and observables as `member` makes them. `spec.paths` and `spec.options` are not used."""
+    opts = options
     y0s, cs = eqx.filter_vmap(initial_state)(scenarios)
     sol = lockstep.solve_group(
         opts.solver, step_size_controller(opts, ts), ts, y0s, (scenarios, cs), opts.dt0, opts.max_steps
@@ -207,7 +220,7 @@ def group_fn(scenario, ts, values, spec: BatchSpec):
     `member_scenarios` and `lock_step_group`, so that the large one does not depend on the swept paths:
     `group_spec`.)"""
     if in_lock_step(spec, ts):
-        return lock_step_group(member_scenarios(scenario, values, spec.paths), ts, spec)
+        return lock_step_group(member_scenarios(scenario, values, spec.paths), ts, spec.options, spec)
     return jax.vmap(lambda row: member(scenario, ts, row, spec))(values)
 
 
@@ -328,7 +341,7 @@ class _LoweredChunk:
                     zip([d for d, _ in items], pool.map(lambda kv: kv[1].compile(), items), strict=True)
                 )
         if self.wrap is not None:
-            exes = {d: self.wrap(exe) for d, exe in exes.items()}
+            exes = {d: self.wrap(d, exe) for d, exe in exes.items()}
         return CompiledChunk(self.spec, exes)
 
 
@@ -356,11 +369,13 @@ class ChunkProgram:
             lowered = {d: self._fn.lower(*_to_device((scenario, ts, values[0]), d)) for d in targets}
             return _LoweredChunk(self.spec, lowered)
         group = eqx.filter_jit(functools.partial(lock_step_group, spec=group_spec(self.spec, ts)))
-        lowered = {}
+        lowered, options = {}, {}
         for d in targets:
-            sc, t, v = _to_device((scenario, ts, values[0]), d)
-            lowered[d] = group.lower(self.members(sc, v), t)
-        return _LoweredChunk(self.spec, lowered, wrap=lambda exe: _LockStepCall(self.members, exe))
+            sc, t, v, options[d] = _to_device((scenario, ts, values[0], group_options(self.spec)), d)
+            lowered[d] = group.lower(self.members(sc, v), t, options[d])
+        return _LoweredChunk(
+            self.spec, lowered, wrap=lambda d, exe: _LockStepCall(self.members, exe, options[d])
+        )
 
 
 @functools.lru_cache(maxsize=32)
@@ -397,11 +412,16 @@ def compiled_chunk(spec: BatchSpec, scenario, ts, values, active) -> tuple[Compi
         members, s_members, _ = compile_cache.program(
             "scan-members", "scan-members", member_scenarios, (sc, v, spec.paths)
         )
-        gspec = group_spec(spec, ts)
+        gspec, opts = group_spec(spec, ts), _to_device(group_options(spec), target)
         group, s_group, loaded = compile_cache.program(
-            "scan-lock-step", "scan-lock-step-group", lock_step_group, (members(sc, v, spec.paths), t, gspec)
+            "scan-lock-step",
+            "scan-lock-step-group",
+            lock_step_group,
+            (members(sc, v, spec.paths), t, opts, gspec),
         )
-        call = _LockStepCall(lambda sc, v: members(sc, v, spec.paths), lambda scs, t: group(scs, t, gspec))
+        call = _LockStepCall(
+            lambda sc, v: members(sc, v, spec.paths), lambda scs, t, o: group(scs, t, o, gspec), opts
+        )
         return CompiledChunk(spec, {target: call}), s_members + s_group, _how(s_group, loaded)
     program = chunk_fn(spec)
     if not in_lock_step(spec, ts):
@@ -417,7 +437,10 @@ def compiled_chunk(spec: BatchSpec, scenario, ts, values, active) -> tuple[Compi
     chunk, seconds = compile_cache.compiled(
         "scan-lock-step", key, lambda: program.lower(scenario, ts, values, active)
     )
-    calls = {d: _LockStepCall(program.members, call.group) for d, call in chunk.executables.items()}
+    calls = {
+        d: _LockStepCall(program.members, call.group, _to_device(group_options(spec), d))
+        for d, call in chunk.executables.items()
+    }
     return CompiledChunk(spec, calls), seconds, _how(seconds, False)
 
 
@@ -437,13 +460,14 @@ class _GroupCall:
 
 class _LockStepCall:
     """`call(scenario, ts, values)` for the lock-step route: `members(scenario, values)` gives the members'
-    scenarios (`member_scenarios`), `group(scenarios, ts)` runs the group program (`lock_step_group`)."""
+    scenarios (`member_scenarios`), `group(scenarios, ts, options)` runs the group program
+    (`lock_step_group`) under `options` (`group_options`, on the program's device)."""
 
-    def __init__(self, members, group):
-        self.members, self.group = members, group
+    def __init__(self, members, group, options):
+        self.members, self.group, self.options = members, group, options
 
     def __call__(self, scenario, ts, values):
-        return self.group(self.members(scenario, values), ts)
+        return self.group(self.members(scenario, values), ts, self.options)
 
 
 def flatten_out(out: Mapping, n: int) -> dict[str, np.ndarray]:
