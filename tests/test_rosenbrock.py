@@ -383,12 +383,12 @@ TS_HALF = jnp.asarray(np.linspace(0.0, 0.5, 11))
 OPTS_F = jh.SolverOptions(rtol=1e-7, atol=1e-9, adjoint=diffrax.ForwardMode())
 
 
-def _forward(paper42, mu, d_mu, d_ts):
+def _forward(paper42, mu, d_mu, d_ts, options=OPTS_F):
     """The solve of paper-4.2 at μ = `mu` on `TS_HALF` and its forward derivative along (d_mu, d_ts)."""
 
     def traj(m, ts):
         sc = eqx.tree_at(lambda s: s.foundation.friction_coefficient, paper42, m)
-        return jh.simulate(sc, jh.Times(ts=ts), options=OPTS_F)
+        return jh.simulate(sc, jh.Times(ts=ts), options=options)
 
     return jax.jvp(traj, (mu, TS_HALF), (d_mu, d_ts))
 
@@ -480,6 +480,32 @@ def test_forward_derivative_in_the_saved_times_is_the_rate(paper42):
     # the velocity on the plain solve's: they agree to the solver's tolerance, not bit for bit
     np.testing.assert_allclose(np.asarray(dtraj.position), v, rtol=0, atol=1e-3 * np.max(np.abs(v)))
     assert np.all(np.isfinite(np.asarray(dtraj.euler)))
+
+
+def test_forward_derivatives_at_other_tolerances_compile_nothing(paper42):
+    """The tangent solve takes the step-size controller's tolerances as inputs, as the plain solve does
+    (`sensitivity.solve_forward`, `solve.program_options`): `_forward`'s jvp program (rtol 1e-7, the tests
+    above) runs at rtol 1e-5, atol 1e-7 without compiling, under those tolerances (fewer steps, a
+    derivative within 1e-3 of the tight one's largest component, not equal to it)."""
+    mu, one = jnp.asarray(paper42.foundation.friction_coefficient, dtype=jnp.float64), jnp.asarray(1.0)
+    tight, d_tight = _forward(paper42, mu, one, jnp.zeros_like(TS_HALF))  # compiled here, or by a test above
+    compiled = []
+
+    def listener(event, duration, **kw):
+        if event == "/jax/core/compile/backend_compile_duration":
+            compiled.append(kw.get("fun_name"))
+
+    loose_options = jh.SolverOptions(rtol=1e-5, atol=1e-7, adjoint=diffrax.ForwardMode())
+    jax.monitoring.register_event_duration_secs_listener(listener)
+    try:
+        loose, d_loose = _forward(paper42, mu, one, jnp.zeros_like(TS_HALF), loose_options)
+    finally:
+        jax.monitoring.unregister_event_duration_listener(listener)
+    assert not [name for name in compiled if "solve" in str(name)], compiled
+    assert int(loose.status) == 0 and int(loose.num_accepted_steps) < int(tight.num_accepted_steps)
+    a, b = np.asarray(d_loose.position), np.asarray(d_tight.position)
+    assert not np.array_equal(a, b)
+    np.testing.assert_allclose(a, b, rtol=0, atol=1e-3 * np.max(np.abs(b)))
 
 
 def test_joint_solve_keeps_the_tangent_and_the_values(paper42):

@@ -69,12 +69,16 @@ else:
     )
     dyn, static = eqx.partition(jh.load_scenario("paper-4.2").unlabelled(), eqx.is_array)
     values = jnp.linspace(0.1, 0.6, lanes).reshape(lanes, 1)
+    # the options as the scan passes them: the tolerances are inputs of the program (batch.group_options)
+    o_dyn, o_static = eqx.partition(batch.group_options(spec), eqx.is_array)
     if program.endswith("-member"):
-        f = jax.jit(lambda dyn, ts, row: batch.member(eqx.combine(dyn, static), ts, row, spec))
-        args = (dyn, ts, values[0])
+        f = jax.jit(lambda dyn, ts, row, o: batch.member(
+            eqx.combine(dyn, static), ts, row, eqx.combine(o, o_static), spec))
+        args = (dyn, ts, values[0], o_dyn)
     else:
-        f = jax.jit(lambda dyn, ts, v: batch.group_fn(eqx.combine(dyn, static), ts, v, spec))
-        args = (dyn, ts, values)
+        f = jax.jit(lambda dyn, ts, v, o: batch.group_fn(
+            eqx.combine(dyn, static), ts, v, eqx.combine(o, o_static), spec))
+        args = (dyn, ts, values, o_dyn)
 res = {}
 def timed(name, fn):
     c0, t0 = time.process_time(), time.perf_counter()

@@ -13,6 +13,7 @@ import enum
 import functools
 from collections.abc import Mapping
 
+import diffrax
 import equinox as eqx
 import jax
 import jax.numpy as jnp
@@ -106,11 +107,13 @@ def member_scenarios(scenario, values, paths: tuple[str, ...]):
     return eqx.filter_vmap(lambda row: member_scenario(scenario, row, paths))(values)
 
 
-def member(scenario, ts, row, spec: BatchSpec):
-    """One member's outputs. With `spec.derivatives` and the Rosenbrock-W solver in forward mode, its values
-    and sensitivities come from one augmented solve per parameter (`solve_joint`), the values from the first
-    parameter's: they agree with a scan without derivatives to the solver's tolerance, not bit for bit."""
-    opts = spec.options
+def member(scenario, ts, row, options: SolverOptions, spec: BatchSpec):
+    """One member's outputs, solved under `options` (`group_options`: the spec's, the tolerances as values;
+    `spec.options` is not used). With `spec.derivatives` and the Rosenbrock-W solver in forward mode, its
+    values and sensitivities come from one augmented solve per parameter (`solve_joint`), the values from the
+    first parameter's: they agree with a scan without derivatives to the solver's tolerance, not bit for
+    bit."""
+    opts = options
     joint = spec.derivatives and uses_tangent_solve(opts)  # Rosenbrock-W: never the lean loop's explicit RK
     lean = opts.fixed_step and fixed_mod.supports(opts.solver)
     core = fixed_mod.solve_fixed if lean else solve_joint if joint else solve
@@ -169,22 +172,22 @@ def in_lock_step(spec: BatchSpec, ts) -> bool:
 
 
 def group_spec(spec: BatchSpec, ts) -> BatchSpec:
-    """The spec that the group program of `spec` is compiled for: for `in_lock_step` specs without the swept
-    paths, since that program takes the members' scenarios (`member_scenarios`, a small program of its own),
-    not their values, and without the controller's tolerances, which it takes as values (`group_options`).
-    So a scan of another parameter, or of several, at other tolerances, with the same observables, solver,
-    group width and saved times runs the same compiled group program (in this process, or loaded from the
-    cache folder)."""
-    if not in_lock_step(spec, ts):
-        return spec
-    ctrl = spec.options.stepsize_controller  # a PIDController (`in_lock_step`)
-    untoleranced = eqx.tree_at(lambda c: (c.rtol, c.atol), ctrl, (None, None), is_leaf=lambda x: x is None)
-    return dataclasses.replace(spec, paths=(), options=spec.options.replace(stepsize_controller=untoleranced))
+    """The spec that the group program of `spec` is compiled for: without the step-size controller's
+    tolerances, which the program takes as values (`group_options`), and for `in_lock_step` specs without
+    the swept paths, since that program takes the members' scenarios (`member_scenarios`, a small program
+    of its own), not their values. So a scan at other tolerances, and without derivatives a scan of another
+    parameter or of several, with the same observables, solver, group width and saved times runs the same
+    compiled group program (in this process, or loaded from the cache folder)."""
+    ctrl = spec.options.stepsize_controller
+    if isinstance(ctrl, diffrax.PIDController):
+        ctrl = eqx.tree_at(lambda c: (c.rtol, c.atol), ctrl, (None, None), is_leaf=lambda x: x is None)
+        spec = dataclasses.replace(spec, options=spec.options.replace(stepsize_controller=ctrl))
+    return dataclasses.replace(spec, paths=()) if in_lock_step(spec, ts) else spec
 
 
 def group_options(spec: BatchSpec) -> SolverOptions:
-    """The options that the group program of an `in_lock_step` spec takes as an argument: `spec.options` with
-    the controller's `rtol` and `atol` as float64 arrays (`SolverOptions.traced_tolerances`; the steps and
+    """The options that the group program of `spec` takes as an argument: `spec.options` with a
+    `PIDController`'s `rtol` and `atol` as float64 arrays (`SolverOptions.traced_tolerances`; the steps and
     results are bit for bit those of the tolerances compiled in)."""
     return spec.options.traced_tolerances()
 
@@ -212,16 +215,17 @@ def lock_step_group(scenarios, ts, options: SolverOptions, spec: BatchSpec):
     )
 
 
-def group_fn(scenario, ts, values, spec: BatchSpec):
-    """values (L, P) -> outputs with leading (L,): one lock-step group. Without derivatives, with the
+def group_fn(scenario, ts, values, options: SolverOptions, spec: BatchSpec):
+    """values (L, P) -> outputs with leading (L,): one lock-step group, solved under `options`
+    (`group_options`; `spec.options` is not used). Without derivatives, with the
     default adaptive solve, one while loop over the lanes (`lock_step_group` of `member_scenarios`,
     `in_lock_step`): a `jax.vmap` of `member` would batch the solve's while loop several times in tracing.
     Otherwise a `jax.vmap` of `member`. (A scan compiles the lock-step route as two programs,
     `member_scenarios` and `lock_step_group`, so that the large one does not depend on the swept paths:
     `group_spec`.)"""
     if in_lock_step(spec, ts):
-        return lock_step_group(member_scenarios(scenario, values, spec.paths), ts, spec.options, spec)
-    return jax.vmap(lambda row: member(scenario, ts, row, spec))(values)
+        return lock_step_group(member_scenarios(scenario, values, spec.paths), ts, options, spec)
+    return jax.vmap(lambda row: member(scenario, ts, row, options, spec))(values)
 
 
 def _to_device(tree, device):
@@ -355,7 +359,6 @@ class ChunkProgram:
 
     def __init__(self, spec: BatchSpec):
         self.spec = spec
-        self._fn = eqx.filter_jit(functools.partial(group_fn, spec=spec))
         self.members = eqx.filter_jit(functools.partial(member_scenarios, paths=spec.paths))
 
     def lower(self, scenario, ts, values, active) -> _LoweredChunk:
@@ -366,8 +369,12 @@ class ChunkProgram:
         values = np.asarray(values)
         targets = dict.fromkeys(execution_targets(self.spec.devices))
         if not in_lock_step(self.spec, ts):
-            lowered = {d: self._fn.lower(*_to_device((scenario, ts, values[0]), d)) for d in targets}
-            return _LoweredChunk(self.spec, lowered)
+            fn = eqx.filter_jit(functools.partial(group_fn, spec=group_spec(self.spec, ts)))
+            lowered, options = {}, {}
+            for d in targets:
+                sc, t, v, options[d] = _to_device((scenario, ts, values[0], group_options(self.spec)), d)
+                lowered[d] = fn.lower(sc, t, v, options[d])
+            return _LoweredChunk(self.spec, lowered, wrap=lambda d, exe: _GroupCall(exe, options[d]))
         group = eqx.filter_jit(functools.partial(lock_step_group, spec=group_spec(self.spec, ts)))
         lowered, options = {}, {}
         for d in targets:
@@ -406,13 +413,15 @@ def compiled_chunk(spec: BatchSpec, scenario, ts, values, active) -> tuple[Compi
     if stores_whole(spec):
         (target,) = set(execution_targets(spec.devices))
         sc, t, v = _to_device((scenario, ts, np.asarray(values)[0]), target)
+        gspec, opts = group_spec(spec, ts), _to_device(group_options(spec), target)
         if not in_lock_step(spec, ts):
-            exe, seconds, loaded = compile_cache.program("scan", "scan-group", group_fn, (sc, t, v, spec))
-            return CompiledChunk(spec, {target: _GroupCall(exe, spec)}), seconds, _how(seconds, loaded)
+            args = (sc, t, v, opts, gspec)
+            exe, seconds, loaded = compile_cache.program("scan", "scan-group", group_fn, args)
+            call = _GroupCall(exe, opts, gspec)
+            return CompiledChunk(spec, {target: call}), seconds, _how(seconds, loaded)
         members, s_members, _ = compile_cache.program(
             "scan-members", "scan-members", member_scenarios, (sc, v, spec.paths)
         )
-        gspec, opts = group_spec(spec, ts), _to_device(group_options(spec), target)
         group, s_group, loaded = compile_cache.program(
             "scan-lock-step",
             "scan-lock-step-group",
@@ -424,12 +433,14 @@ def compiled_chunk(spec: BatchSpec, scenario, ts, values, active) -> tuple[Compi
         )
         return CompiledChunk(spec, {target: call}), s_members + s_group, _how(s_group, loaded)
     program = chunk_fn(spec)
-    if not in_lock_step(spec, ts):
-        key = (spec, *compile_cache.structure_key(scenario, ts, jnp.asarray(values[0])))
+    if not in_lock_step(spec, ts):  # keyed by what it is compiled for (not the tolerances)
+        key = (group_spec(spec, ts), *compile_cache.structure_key(scenario, ts, jnp.asarray(values[0])))
         chunk, seconds = compile_cache.compiled(
             "scan", key, lambda: program.lower(scenario, ts, values, active)
         )
-        return chunk, seconds, _how(seconds, False)
+        opts = group_options(spec)
+        calls = {d: _GroupCall(c.exe, _to_device(opts, d)) for d, c in chunk.executables.items()}
+        return CompiledChunk(spec, calls), seconds, _how(seconds, False)
     # the group programs, keyed by what they are compiled for (not the paths), each device's wrapped with this
     # spec's members program
     scenarios = eqx.filter_eval_shape(program.members, scenario, np.asarray(values)[0])
@@ -449,13 +460,17 @@ def _how(seconds: float, loaded: bool) -> str:
 
 
 class _GroupCall:
-    """`exe(scenario, ts, values)` for the program of `group_fn`, which also takes the (static) spec."""
+    """`call(scenario, ts, values)` for the program of `group_fn`: `exe(scenario, ts, values, options)`
+    (`group_options`, on the program's device), with `spec` after them where the program takes it too (a
+    stored program is called with its static arguments)."""
 
-    def __init__(self, exe, spec: BatchSpec):
-        self.exe, self.spec = exe, spec
+    def __init__(self, exe, options, spec: BatchSpec | None = None):
+        self.exe, self.options, self.spec = exe, options, spec
 
     def __call__(self, scenario, ts, values):
-        return self.exe(scenario, ts, values, self.spec)
+        if self.spec is None:
+            return self.exe(scenario, ts, values, self.options)
+        return self.exe(scenario, ts, values, self.options, self.spec)
 
 
 class _LockStepCall:

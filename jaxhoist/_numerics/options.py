@@ -54,10 +54,9 @@ def _positive(name: str, v) -> float:
 
 class SolverOptions(eqx.Module):
     """Numerical settings of a solve. A change of the solver, the step-size controller (but for the tolerances
-    below), the adjoint, `dt0` or `max_steps` compiles anew; `simulate` and a scan without derivatives pass
-    the tolerances `rtol` and `atol` of a `PIDController` to their compiled programs as values
-    (`traced_tolerances`), so that one program serves any tolerances (not for forward-mode derivatives with
-    the default solver, nor for a scan with derivatives: those compile one per tolerance).
+    below), the adjoint, `dt0` or `max_steps` compiles anew; `simulate` and `scan` pass the tolerances
+    `rtol` and `atol` of a `PIDController` to their compiled programs as values (`traced_tolerances`), so
+    that one program serves any tolerances, forward-mode derivatives included.
 
     - `solver`: a diffrax solver. Default (None): `jaxhoist.RosenbrockW()`, the linearly implicit solver that
       treats the model's stiff contact, rope and boom forces implicitly (`numerics.rosenbrock`); any diffrax

@@ -158,10 +158,14 @@ def solve_forward(
 
     def solve(scenario: Scenario, ts, options: SolverOptions):
         dyn, static = eqx.partition(scenario, eqx.is_inexact_array)
+        # the options' arrays (the tolerances, where `SolverOptions.traced_tolerances` made them values of
+        # the program) are inputs of the rule like the scenario's, never differentiated: a rule that closed
+        # over them would close over the compiled program's tracers, which JAX refuses
+        o_dyn, o_static = eqx.partition(options, eqx.is_array)
 
         @jax.custom_jvp
-        def run(dyn, ts):
-            return solve_plain(eqx.combine(dyn, static), ts, options)
+        def run(dyn, ts, o_dyn):
+            return solve_plain(eqx.combine(dyn, static), ts, eqx.combine(o_dyn, o_static))
 
         # symbolic zeros: the leaves that are not differentiated (every scenario leaf but the swept ones,
         # and the saved times) stay constants of the tangent solve instead of carrying zero tangents
@@ -169,19 +173,20 @@ def solve_forward(
         # `jax.jvp` of the compiled core happens after the core's own `callback_free` block has ended
         @functools.partial(run.defjvp, symbolic_zeros=True)
         def run_jvp(primals, tangents):
-            dyn, ts = primals
-            ddyn, dts = tangents
+            dyn, ts, o_dyn = primals
+            ddyn, dts, _ = tangents  # the options' tangent: zero (tolerances are settings, not parameters)
+            opts = eqx.combine(o_dyn, o_static)
 
             def augmented():
-                return _tangent_solve(static, options, dyn, ts, ddyn, dts, controller, outputs, status_of)
+                return _tangent_solve(static, opts, dyn, ts, ddyn, dts, controller, outputs, status_of)
 
             with checks_as_nan():
                 if joint:
                     return augmented()
-                primal = solve_plain(eqx.combine(dyn, static), ts, options)
+                primal = solve_plain(eqx.combine(dyn, static), ts, opts)
                 return primal, augmented()[1]
 
-        return run(dyn, ts)
+        return run(dyn, ts, o_dyn)
 
     return solve
 

@@ -166,11 +166,11 @@ def _core(scenario: Scenario, ts, options: SolverOptions):
 
 
 def program_options(options: SolverOptions) -> SolverOptions:
-    """The options the compiled solve core takes: the tolerances as values (`SolverOptions.traced_tolerances`,
-    so that one program serves any rtol and atol), except on the route of forward-mode derivatives with the
-    Rosenbrock-W solver, whose tangent solve (`sensitivity.solve_forward`, a custom JVP rule) takes the
-    options as fixed settings of the program."""
-    return options if uses_tangent_solve(options) else options.traced_tolerances()
+    """The options the compiled solve core takes: the tolerances as values
+    (`SolverOptions.traced_tolerances`), so that one program serves any rtol and atol (on the route of
+    forward-mode derivatives with the Rosenbrock-W solver too: its tangent solve,
+    `sensitivity.solve_forward`, takes them as inputs)."""
+    return options.traced_tolerances()
 
 
 def _raise_on_failure(traj: Trajectory) -> Trajectory:
