@@ -22,7 +22,9 @@ from jaxhoist._apps.scan import accuracy as acc
 T1 = 1.0
 MU = np.linspace(0.2, 0.6, 8)
 CHECK = jh.AccuracyCheck(members=4, seed=0)
-TIMES = jh.Times(T1, n=21)  # every scan here: one program each for the default, loose and reference options
+# every scan here: one program for the default and the loose options (the tolerances are values of the
+# program), one for the reference (its step budget)
+TIMES = jh.Times(T1, n=21)
 HISTORIES = ("position",)
 
 
