@@ -430,17 +430,19 @@ def test_forward_sensitivities_match_differences(box, tmp_path):
     dampers build up over `damping_onset`, so the forces stay continuous at touch-down and the derivative
     of the solution has no jump that differentiating through the solver steps would miss). The same scan at
     looser tolerances runs the same compiled group program."""
-    res = scan(
-        box,
-        {MU: [0.29, 0.3, 0.31]},
-        TIMES,
-        derivatives=True,
-        **{
-            **KW,
-            "observables": ["final_x", "impacts", "final_position"],
-            "options": jh.SolverOptions(diffrax.Tsit5(), rtol=1e-9, atol=1e-11, max_steps=3000),
-        },
-    )
+
+    def derivative_scan(rtol, atol):
+        options = jh.SolverOptions(diffrax.Tsit5(), rtol=rtol, atol=atol, max_steps=3000)
+        observables = ["final_x", "impacts", "final_position"]
+        return scan(
+            box,
+            {MU: [0.29, 0.3, 0.31]},
+            TIMES,
+            derivatives=True,
+            **{**KW, "observables": observables, "options": options},
+        )
+
+    res = derivative_scan(1e-9, 1e-11)
     x, dx = res["final_x"], res["d_final_x"][:, 0]
     assert res["d_final_x"].shape == (3, 1) and res.units["d_final_x"] == "m per -"
     assert np.all(res["impacts"] >= 4)
@@ -452,17 +454,7 @@ def test_forward_sensitivities_match_differences(box, tmp_path):
     np.testing.assert_array_equal(res["d_final_position"][:, 0, 0], dx)
     # the group program takes the tolerances as values (`batch.group_options`): at 100x looser ones the
     # same program runs (fewer steps; the sensitivities within 1e-3 relative: measured 1.9e-4)
-    loose = scan(
-        box,
-        {MU: [0.29, 0.3, 0.31]},
-        TIMES,
-        derivatives=True,
-        **{
-            **KW,
-            "observables": ["final_x", "impacts", "final_position"],
-            "options": jh.SolverOptions(diffrax.Tsit5(), rtol=1e-7, atol=1e-9, max_steps=3000),
-        },
-    )
+    loose = derivative_scan(1e-7, 1e-9)
     assert res.attrs["group_program"] == "compiled" and loose.attrs["group_program"] == "reused"
     assert np.all(loose.num_accepted_steps < res.num_accepted_steps)
     np.testing.assert_allclose(loose["d_final_x"][:, 0], dx, rtol=1e-3)
