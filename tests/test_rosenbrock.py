@@ -484,9 +484,9 @@ def test_forward_derivative_in_the_saved_times_is_the_rate(paper42):
 
 def test_forward_derivatives_at_other_tolerances_compile_nothing(paper42):
     """The tangent solve takes the step-size controller's tolerances as inputs, as the plain solve does
-    (`sensitivity.solve_forward`, `solve.program_options`): `_forward`'s jvp program (rtol 1e-7, the tests
-    above) runs at rtol 1e-5, atol 1e-7 without compiling, under those tolerances (fewer steps, a
-    derivative within 1e-3 of the tight one's largest component, not equal to it)."""
+    (`sensitivity.solve_forward`, `SolverOptions.traced_tolerances`): `_forward`'s jvp program (rtol 1e-7,
+    the tests above) runs at rtol 1e-5, atol 1e-7 without compiling, under those tolerances (fewer steps,
+    a derivative within 1e-3 of the tight one's largest component, not equal to it)."""
     mu, one = jnp.asarray(paper42.foundation.friction_coefficient, dtype=jnp.float64), jnp.asarray(1.0)
     tight, d_tight = _forward(paper42, mu, one, jnp.zeros_like(TS_HALF))  # compiled here, or by a test above
     compiled = []

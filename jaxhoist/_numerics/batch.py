@@ -417,7 +417,7 @@ def compiled_chunk(spec: BatchSpec, scenario, ts, values, active) -> tuple[Compi
         if not in_lock_step(spec, ts):
             args = (sc, t, v, opts, gspec)
             exe, seconds, loaded = compile_cache.program("scan", "scan-group", group_fn, args)
-            call = _GroupCall(exe, opts, gspec)
+            call = _GroupCall(lambda sc, t, v, o: exe(sc, t, v, o, gspec), opts)
             return CompiledChunk(spec, {target: call}), seconds, _how(seconds, loaded)
         members, s_members, _ = compile_cache.program(
             "scan-members", "scan-members", member_scenarios, (sc, v, spec.paths)
@@ -461,16 +461,13 @@ def _how(seconds: float, loaded: bool) -> str:
 
 class _GroupCall:
     """`call(scenario, ts, values)` for the program of `group_fn`: `exe(scenario, ts, values, options)`
-    (`group_options`, on the program's device), with `spec` after them where the program takes it too (a
-    stored program is called with its static arguments)."""
+    (`group_options`, on the program's device)."""
 
-    def __init__(self, exe, options, spec: BatchSpec | None = None):
-        self.exe, self.options, self.spec = exe, options, spec
+    def __init__(self, exe, options):
+        self.exe, self.options = exe, options
 
     def __call__(self, scenario, ts, values):
-        if self.spec is None:
-            return self.exe(scenario, ts, values, self.options)
-        return self.exe(scenario, ts, values, self.options, self.spec)
+        return self.exe(scenario, ts, values, self.options)
 
 
 class _LockStepCall:

@@ -165,14 +165,6 @@ def _core(scenario: Scenario, ts, options: SolverOptions):
     return compile_cache.program("simulate", "solve", solve, args)[0]
 
 
-def program_options(options: SolverOptions) -> SolverOptions:
-    """The options the compiled solve core takes: the tolerances as values
-    (`SolverOptions.traced_tolerances`), so that one program serves any rtol and atol (on the route of
-    forward-mode derivatives with the Rosenbrock-W solver too: its tangent solve,
-    `sensitivity.solve_forward`, takes them as inputs)."""
-    return options.traced_tolerances()
-
-
 def _raise_on_failure(traj: Trajectory) -> Trajectory:
     return raise_on_status(traj, traj.status, SolveStatus.OK, [s.message for s in SolveStatus])
 
@@ -235,6 +227,6 @@ def simulate_elastic(
     ts = jnp.asarray(ts, dtype=jnp.float64)
     with forward_mode_hint():  # jacfwd through the reverse adjoint: say to pass adjoint=diffrax.ForwardMode()
         scenario = scenario.unlabelled()  # one program for any labels
-        options = program_options(options)  # one program for any rtol and atol
+        options = options.traced_tolerances()  # one program for any rtol and atol
         traj = _core(scenario, ts, options)(scenario, ts, options)
     return _raise_on_failure(traj) if throw else traj

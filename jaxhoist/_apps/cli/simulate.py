@@ -248,10 +248,8 @@ def _solve_elastic(args, scenario, ts, options, progress):
     cache is on) and solve, drawn as a bar; (trajectory, solve time [s])."""
     import jax
 
-    from ..._numerics.solve import program_options
-
     scenario = scenario.unlabelled()  # one compiled program for any scenario's labels
-    options = program_options(options)  # and for any --rtol and --atol, as `simulate`'s
+    options = options.traced_tolerances()  # and for any --rtol and --atol, as `simulate`'s
     solve_fn = _compiled_solve(scenario, ts, options, progress)
     with (
         progress("solving", bar=True),
