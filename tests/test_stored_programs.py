@@ -199,6 +199,7 @@ _SIMULATE_SCRIPT = r"""
 import json, sys, warnings
 import equinox as eqx, jax, numpy as np
 jax.config.update("jax_enable_x64", True)
+jax.config.update("jax_num_cpu_devices", int(sys.argv[4]))
 import jaxhoist as jh
 from jaxhoist._numerics import compile_cache, solve
 
@@ -213,7 +214,7 @@ warnings.simplefilter("always")
 out = {}
 with warnings.catch_warnings(record=True) as caught:
     jh.enable_compilation_cache(sys.argv[1])
-    for mu in sys.argv[4:]:
+    for mu in sys.argv[5:]:
         sc = jh.load_scenario("paper-4.2")
         sc = eqx.tree_at(lambda s: s.foundation.friction_coefficient, sc, float(mu))
         traj = jh.simulate(sc, jh.Times(0.3, n=int(sys.argv[3])))
@@ -221,23 +222,26 @@ with warnings.catch_warnings(record=True) as caught:
             out[f"{k}@{mu}"] = np.asarray(getattr(traj, k))
 np.savez(sys.argv[2], **out)
 print(json.dumps({"traced": len(traced), "programs": compile_cache.count("simulate"),
-                  "warnings": [str(w.message) for w in caught]}))
+                  "warnings": [str(w.message) for w in caught], "devices": len(jax.devices())}))
 """
 
 
-def _run_simulate(cache: Path, out: Path, *mus: str) -> dict:
-    return run_script(_SIMULATE_SCRIPT, cache, out, N_SAVE, *mus)
+def _run_simulate(cache: Path, out: Path, devices: int, *mus: str) -> dict:
+    return run_script(_SIMULATE_SCRIPT, cache, out, N_SAVE, devices, *mus)
 
 
 def test_a_second_process_loads_simulates_solve_core_untraced_with_the_same_bits(tmp_path, paper42):
     """With the default solver (Rosenbrock-W) and N_SAVE saved times: the in-process solve below is the
-    program of the default solver that tests/test_rosenbrock.py compiles (`default_run`), shared."""
+    program of the default solver that tests/test_rosenbrock.py compiles (`default_run`), shared. The
+    first process has two host devices (as the command line on two cores), the second one (as a script
+    that leaves JAX's default): the stored single-device program is the same for both."""
     cache = tmp_path / "cache"
-    first = _run_simulate(cache, tmp_path / "a.npz", "0.25")  # paper-4.2's own μ
-    assert first["traced"] > 0 and first["programs"] == 1
+    first = _run_simulate(cache, tmp_path / "a.npz", 2, "0.25")  # paper-4.2's own μ
+    assert first["traced"] > 0 and first["programs"] == 1 and first["devices"] == 2
     [stored] = sorted((cache / sp.SUBFOLDER).glob("solve-*-cache"))
-    second = _run_simulate(cache, tmp_path / "b.npz", "0.25", "0.3")  # another value: the same program
+    second = _run_simulate(cache, tmp_path / "b.npz", 1, "0.25", "0.3")  # another value: the same program
     assert second["traced"] == 0 and second["programs"] == 1 and not second["warnings"]
+    assert second["devices"] == 1
     a, b = np.load(tmp_path / "a.npz"), np.load(tmp_path / "b.npz")
     for k in a.files:
         np.testing.assert_array_equal(a[k], b[k], err_msg=k, strict=True)

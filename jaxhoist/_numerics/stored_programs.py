@@ -12,12 +12,13 @@ pytree structure, the array leaves' shapes and dtypes, the static (non-array) le
 a scan's `BatchSpec` field by field; a function of jaxhoist by its name, or, where it is a lambda or made
 inside another function such as an observable's factory, by its code and the values it captured), the
 versions of jaxhoist (a digest of its source files), JAX, jaxlib, equinox, diffrax, lineax, optimistix and
-numpy, the backend and its devices and the JAX settings that change a trace. A hit deserialises the
-executable (`jax.experimental.serialize_executable`); a miss traces, lowers and compiles and stores the
-result instead of JAX's cache entry (which would only double the folder's size). Where JAX's cache already
-holds the program (written by plain `jit` use), its executable is used but not stored: loaded from JAX's
-cache, it serialises without its machine code. A loaded program needs nothing set up by lowering except
-jaxlib's CPU LAPACK routines, which `load` sets up.
+numpy, the backend and its kind of device (not the number of devices: a stored program runs on one, and
+its compiled form is the same in a process of one host device or several) and the JAX settings that change
+a trace. A hit deserialises the executable (`jax.experimental.serialize_executable`); a miss traces,
+lowers and compiles and stores the result instead of JAX's cache entry (which would only double the
+folder's size). Where JAX's cache already holds the program (written by plain `jit` use), its executable
+is used but not stored: loaded from JAX's cache, it serialises without its machine code. A loaded program
+needs nothing set up by lowering except jaxlib's CPU LAPACK routines, which `load` sets up.
 
 A stored program is never trusted blindly: each file carries a SHA-256 digest of its content and the full
 key it was compiled for; a file whose digest or key does not match, or that fails to load, is compiled
@@ -186,12 +187,11 @@ def program_key(name: str, args: tuple) -> str | None:
     structure = [_describe(in_def), _describe(static_def)]
     if None in texts or None in structure:
         return None
-    devices = jax.devices()
     config = ("jax_enable_x64", "jax_default_matmul_precision", "jax_numpy_dtype_promotion")
     lines = [
         f"program {name}",
         _versions(),
-        f"backend {jax.default_backend()} {devices[0].device_kind} x{len(devices)}",
+        f"backend {jax.default_backend()} {jax.devices()[0].device_kind}",
         *(f"{c} {getattr(jax.config, c, None)!r}" for c in config),
         *(f"env {k}={v}" for k, v in sorted(os.environ.items()) if k.startswith(("EQX_", "DIFFRAX_"))),
         *map(str, structure),
