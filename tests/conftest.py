@@ -34,9 +34,9 @@ CACHE_ENV = {
     "JAX_COMPILATION_CACHE_DIR": os.environ["JAXHOIST_TEST_CACHE_DIR"],
     "JAX_PERSISTENT_CACHE_MIN_COMPILE_TIME_SECS": "0",
     "JAX_PERSISTENT_CACHE_MIN_ENTRY_SIZE_BYTES": "-1",
-    # The workers run with two CPU devices (below); a process with another device count never loads their
-    # programs (the count is part of the compiled program's key), so subprocesses that do not set the count
-    # themselves get the same two.
+    # The workers run with two CPU devices (below), and so do subprocesses that do not set the count
+    # themselves: JAX's own cache key holds the device count (jaxhoist's stored programs' key does not), and
+    # a scan chooses its group width from the devices, so a process with another count would compile anew.
     "JAX_NUM_CPU_DEVICES": "2",
 }
 os.environ.update(CACHE_ENV)
