@@ -1,11 +1,11 @@
 """Compiled programs stored whole (`stored_programs`, through `compile_cache.program`): a second process with
 the same cache folder loads the scan's group program (plain and with forward-mode sensitivities),
-`simulate`'s solve core, the bifurcation locator's solves, `identify`'s fit pieces and the rigid model's
-phase-driver pieces without tracing them, and returns the same bits; programs whose key has no stable text
-(a user's lambda observable) are not stored. (A damaged stored file, compiled again with a warning, is
-tested once, on a small program, on the route every program here takes, `stored_programs.load_or_compile`:
-tests/test_compilation_cache.py.) Short horizons and few members: the compile is what is tested, not the
-physics."""
+`simulate`'s solve core and the derivative's program of a caller's `jax.jvp`, the bifurcation locator's
+solves, `identify`'s fit pieces and the rigid model's phase-driver pieces without tracing them, and returns
+the same bits; programs whose key has no stable text (a user's lambda observable) are not stored. (A damaged
+stored file, compiled again with a warning, is tested once, on a small program, on the route every program
+here takes, `stored_programs.load_or_compile`: tests/test_compilation_cache.py.) Short horizons and few
+members: the compile is what is tested, not the physics."""
 
 from pathlib import Path
 
@@ -309,6 +309,52 @@ def listen(event, duration, **kwargs):
         traced[kwargs.get("fun_name", "?")] += 1
 jax.monitoring.register_event_duration_secs_listener(listen)
 """
+
+_JVP_SCRIPT = (
+    _TRACE_LOG
+    + r"""
+import json, sys
+import diffrax, numpy as np
+jax.config.update("jax_enable_x64", True)
+import jaxhoist as jh
+from jaxhoist._numerics import compile_cache
+
+jh.enable_compilation_cache(sys.argv[1])
+forward = jh.SolverOptions(adjoint=diffrax.ForwardMode())
+def x_end(mu):  # docs/getting-started.md's derivative, over 0.3 s
+    sc = jh.load_scenario("paper-4.2").replace(**{"foundation.friction_coefficient": mu})
+    return jh.simulate(sc, jh.Times(0.3, n=2), options=forward).position[-1]
+out = [np.asarray(v).tolist() for mu in sys.argv[2:] for v in jax.jvp(x_end, (float(mu),), (1.0,))]
+print(json.dumps({"traced": dict(traced), "programs": compile_cache.count("simulate-jvp"), "out": out}))
+"""
+)
+
+
+def test_a_second_process_loads_the_derivative_of_a_callers_jvp_untraced_with_the_same_bits(tmp_path):
+    """`jax.jvp` of a function that calls `simulate` with forward-mode options (getting-started.md's first
+    derivative): the first process compiles and stores the derivative's program, a second one loads it for
+    other values without tracing the solve; the values and derivatives are, bit for bit, those of the
+    program JAX builds with the cache off (a `jax.custom_jvp` rule that held no leaf as a symbolic zero
+    would round differently)."""
+    cache = tmp_path / "cache"
+    first = run_script(_JVP_SCRIPT, cache, "0.3")
+    assert first["traced"].get("solve_jvp", 0) == 1 and first["programs"] == 1
+    [stored] = sorted((cache / sp.SUBFOLDER).glob("*-cache"))
+    assert stored.name.startswith("solve_jvp-")  # the derivative's program, its primal included
+    second = run_script(_JVP_SCRIPT, cache, "0.3", "0.35")
+    assert not {"solve_jvp", "solve"} & set(second["traced"]) and second["programs"] == 1
+    assert second["out"][:2] == first["out"]
+    assert second["out"][1] != second["out"][3]  # another μ, another derivative
+    assert sorted((cache / sp.SUBFOLDER).glob("*-cache")) == [stored]
+
+    def x_end(mu):  # the cache off: the program JAX builds from the caller's jax.jvp
+        sc = jh.load_scenario("paper-4.2").replace(**{MU: mu})
+        opts = jh.SolverOptions(adjoint=diffrax.ForwardMode())
+        return jh.simulate(sc, jh.Times(0.3, n=2), options=opts).position[-1]
+
+    x, dx = jax.jvp(x_end, (0.3,), (1.0,))
+    assert [np.asarray(x).tolist(), np.asarray(dx).tolist()] == first["out"]
+
 
 _IDENTIFY_SCRIPT = (
     _TRACE_LOG

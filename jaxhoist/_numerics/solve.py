@@ -9,6 +9,7 @@ import equinox as eqx
 import jax
 import jax.numpy as jnp
 import numpy as np
+from jax.custom_derivatives import SymbolicZero
 from jaxtyping import Array, Float, Int
 
 from .._errors import SolveStatus, forward_mode_hint
@@ -149,18 +150,83 @@ def solve_joint(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOpt
 _solve_jit = eqx.filter_jit(solve)
 
 
+def _is_float0(x) -> bool:
+    return getattr(x, "dtype", None) == jax.dtypes.float0
+
+
+def _jvp_of_solve(scenario: Scenario, ts, options: SolverOptions, moved: tuple[bool, ...], d_moved: list):
+    """`jax.jvp` of `_solve_jit` along the leaves of `(scenario, ts)` marked in `moved` (their tangents
+    `d_moved`; every other leaf held, a symbolic zero): the program JAX builds for a caller's `jax.jvp` of a
+    function that calls `simulate`, the same bit for bit (explicit zero tangents on the held leaves give
+    another program, which rounds differently)."""
+    leaves, tree = jax.tree_util.tree_flatten((scenario, ts))
+
+    def moving(xs):
+        it = iter(xs)
+        s, t = jax.tree_util.tree_unflatten(tree, [next(it) if m else x for x, m in zip(leaves, moved)])
+        return _solve_jit(s, t, options)
+
+    return jax.jvp(moving, ([x for x, m in zip(leaves, moved) if m],), (list(d_moved),))
+
+
+def solve_jvp(scenario: Scenario, ts, options: SolverOptions, moved: tuple[bool, ...], d_moved: list):
+    """`_jvp_of_solve` as one program, as `compile_cache.program` stores it. **Returns** `(trajectory,
+    tangent leaves)`: the tangent's leaves in `Trajectory` order without those of its integer fields (their
+    tangents are `float0`, which a compiled program does not return)."""
+    out, d_out = _jvp_of_solve(scenario, ts, options, moved, d_moved)
+    return out, [x for x in jax.tree_util.tree_leaves(d_out) if not _is_float0(x)]
+
+
+def _stored_forward(options: SolverOptions):
+    """`_solve_jit` with forward-mode `options` bound, for a call under a caller's transformation, as a
+    `jax.custom_jvp` whose rule runs `solve_jvp` as the stored program of `compile_cache.program` where the
+    primals and tangents are concrete: a `jax.jvp` of a function that calls `simulate`, outside `jax.jit`.
+    A later process then loads the derivative's program instead of tracing the solve and its tangent solve
+    again. Anywhere else (under `jax.jit` or `jax.vmap`, as in `jax.jacfwd`) the rule is `_jvp_of_solve`
+    traced in place. Both are the program JAX builds without the rule, the same numbers bit for bit."""
+
+    @jax.custom_jvp
+    def core(scenario, ts):
+        return _solve_jit(scenario, ts, options)
+
+    def core_jvp(primals, tangents):
+        scenario, ts = primals
+        d_leaves = jax.tree_util.tree_leaves(tangents, is_leaf=lambda x: isinstance(x, SymbolicZero))
+        moved = tuple(not isinstance(d, SymbolicZero) for d in d_leaves)
+        d_moved = [d for d, m in zip(d_leaves, moved) if m]
+        if any(map(is_tracer, jax.tree_util.tree_leaves((primals, d_moved)))):
+            return _jvp_of_solve(scenario, ts, options, moved, d_moved)
+        args = (scenario, ts, options, moved, d_moved)
+        out, d_floats = compile_cache.program("simulate-jvp", "solve_jvp", solve_jvp, args)[0](*args)
+        d_floats = iter(d_floats)
+        leaves, tree = jax.tree_util.tree_flatten(out)
+        d_out = [
+            next(d_floats)
+            if jnp.issubdtype(jnp.result_type(x), jnp.inexact)
+            else np.zeros(np.shape(x), jax.dtypes.float0)
+            for x in leaves
+        ]
+        return out, jax.tree_util.tree_unflatten(tree, d_out)
+
+    core.defjvp(core_jvp, symbolic_zeros=True)
+    return lambda scenario, ts, options: core(scenario, ts)
+
+
 def _core(scenario: Scenario, ts, options: SolverOptions):
     """The compiled solve core for these inputs: with the persistent compilation cache on and concrete inputs,
     the one program of `compile_cache.program` (stored whole in the cache folder, so that a later process
     loads it without tracing or lowering it; the command line's `simulate` shares it); under a caller's
-    trace (`jax.jit`, `jax.vmap`, `jax.grad`), with an in-loop progress meter (a host callback, which no
-    stored program carries) or with the cache off, `_solve_jit`."""
+    `jax.jvp` with forward-mode `options`, `_stored_forward` (the derivative's program stored too); under
+    other transformations (`jax.jit`, `jax.vmap`, `jax.grad`), with an in-loop progress meter (a host
+    callback, which no stored program carries) or with the cache off, `_solve_jit`."""
     args = (scenario, ts, options)
-    if (
-        persistent_cache.enabled_folder() is None
-        or not isinstance(options.progress_meter, diffrax.NoProgressMeter)
-        or any(map(is_tracer, jax.tree_util.tree_leaves(args)))
+    if persistent_cache.enabled_folder() is None or not isinstance(
+        options.progress_meter, diffrax.NoProgressMeter
     ):
+        return _solve_jit
+    if any(map(is_tracer, jax.tree_util.tree_leaves(args))):
+        if uses_tangent_solve(options) and not any(map(is_tracer, jax.tree_util.tree_leaves(options))):
+            return _stored_forward(options)
         return _solve_jit
     return compile_cache.program("simulate", "solve", solve, args)[0]
 
