@@ -216,9 +216,10 @@ def _core(scenario: Scenario, ts, options: SolverOptions):
     """The compiled solve core for these inputs: with the persistent compilation cache on and concrete inputs,
     the one program of `compile_cache.program` (stored whole in the cache folder, so that a later process
     loads it without tracing or lowering it; the command line's `simulate` shares it); under a caller's
-    `jax.jvp` with forward-mode `options`, `_stored_forward` (the derivative's program stored too); under
-    other transformations (`jax.jit`, `jax.vmap`, `jax.grad`), with an in-loop progress meter (a host
-    callback, which no stored program carries) or with the cache off, `_solve_jit`."""
+    transformation with forward-mode `options`, `_stored_forward` (`_solve_jit` in a `jax.custom_jvp` whose
+    rule stores the derivative's program where a `jax.jvp` brings concrete values); under a caller's
+    transformation with other `options` (`jax.jit`, `jax.vmap`, `jax.grad`), with an in-loop progress meter
+    (a host callback, which no stored program carries) or with the cache off, `_solve_jit`."""
     args = (scenario, ts, options)
     if persistent_cache.enabled_folder() is None or not isinstance(
         options.progress_meter, diffrax.NoProgressMeter
