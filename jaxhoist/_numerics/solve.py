@@ -150,8 +150,10 @@ def solve_joint(scenario: Scenario, ts: Float[Array, " n_t"], options: SolverOpt
 _solve_jit = eqx.filter_jit(solve)
 
 
-def _is_float0(x) -> bool:
-    return getattr(x, "dtype", None) == jax.dtypes.float0
+def _has_tangent(x) -> bool:
+    """Whether an output leaf `x` has a tangent a compiled program returns: a float one (an integer or bool
+    leaf's tangent is `float0`, which none returns)."""
+    return bool(jnp.issubdtype(jnp.result_type(x), jnp.inexact))
 
 
 def _jvp_of_solve(scenario: Scenario, ts, options: SolverOptions, moved: tuple[bool, ...], d_moved: list):
@@ -171,10 +173,10 @@ def _jvp_of_solve(scenario: Scenario, ts, options: SolverOptions, moved: tuple[b
 
 def solve_jvp(scenario: Scenario, ts, options: SolverOptions, moved: tuple[bool, ...], d_moved: list):
     """`_jvp_of_solve` as one program, as `compile_cache.program` stores it. **Returns** `(trajectory,
-    tangent leaves)`: the tangent's leaves in `Trajectory` order without those of its integer fields (their
-    tangents are `float0`, which a compiled program does not return)."""
+    tangent leaves)`: the tangent's leaves in `Trajectory` order, those of `_has_tangent` leaves only."""
     out, d_out = _jvp_of_solve(scenario, ts, options, moved, d_moved)
-    return out, [x for x in jax.tree_util.tree_leaves(d_out) if not _is_float0(x)]
+    leaves = jax.tree_util.tree_leaves(out)
+    return out, [d for x, d in zip(leaves, jax.tree_util.tree_leaves(d_out)) if _has_tangent(x)]
 
 
 def _stored_forward(options: SolverOptions):
@@ -201,10 +203,7 @@ def _stored_forward(options: SolverOptions):
         d_floats = iter(d_floats)
         leaves, tree = jax.tree_util.tree_flatten(out)
         d_out = [
-            next(d_floats)
-            if jnp.issubdtype(jnp.result_type(x), jnp.inexact)
-            else np.zeros(np.shape(x), jax.dtypes.float0)
-            for x in leaves
+            next(d_floats) if _has_tangent(x) else np.zeros(np.shape(x), jax.dtypes.float0) for x in leaves
         ]
         return out, jax.tree_util.tree_unflatten(tree, d_out)
 
