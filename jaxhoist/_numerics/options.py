@@ -69,7 +69,9 @@ class SolverOptions(eqx.Module):
     - `adjoint`: how derivatives are taken: `diffrax.RecursiveCheckpointAdjoint()` (default; `jax.grad`) or
       `diffrax.ForwardMode()` (`jax.jacfwd`/`jax.jvp`, cheaper for a few parameters). With the default
       solver, forward mode solves the derivatives under error control; `jax.grad` differentiates the steps
-      and can be far off at the default tolerances (`RosenbrockW`): use it at tight tolerances.
+      and can be far off at the default tolerances (`RosenbrockW`): use it at tight tolerances. Reverse mode
+      does not go through `ForwardMode`: `jax.grad` of a solve with it stops with an error of JAX's
+      (an `AssertionError` from its transpose of the step-size control, which watches the derivatives).
     - `dt0`: first step [s] (None: chosen by the controller); the constant step with `ConstantStepSize`.
     - `max_steps`: the step budget; reaching it is reported as `SolveStatus.MAX_STEPS`.
     - `progress_meter`: a diffrax progress meter (default `diffrax.NoProgressMeter()`).
