@@ -37,6 +37,7 @@ from ._apps.planning import slide as slide
 from ._apps.planning import strike as strike
 from ._apps.planning import swing as swing
 from ._apps.planning import tilt as tilt
+from ._apps.planning import tip as tip
 from ._apps.scan import AccuracyCheck as AccuracyCheck
 from ._apps.scan import BatchOptions as BatchOptions
 from ._apps.scan import Grid as Grid

@@ -1,5 +1,5 @@
 """`jaxhoist.lift_risk` (`_apps/planning/`): uncertain inputs, hazards and risk maps, and the observables they
-read (`ground_slide`, `swing_amplitude`).
+read (`ground_slide`, `ground_tilt`, `swing_amplitude`).
 
 The load is a low 2 m x 2 m x 0.5 m box of 1000 kg with the rope at the middle of its top face, hoisted at
 0.2 m/s through a soft rope (30 kN/m) from a boom tip 8 m above it and `tip_x - 1` m to the side: with the
@@ -155,6 +155,26 @@ def test_swing_amplitude_is_the_release_offset_of_a_pendulum(solves):
     # and mirrored tips give the same swing
     a, b = (_obs("swing_amplitude", solves[x], x) for x in (0.5, 1.5))
     assert a == pytest.approx(b, rel=1e-3)
+
+
+def test_ground_tilt_is_the_tilt_while_a_corner_touches_the_ground(solves):
+    """`ground_tilt` against the same quantity from the trajectory's public outputs: the tilt from the Euler
+    angles (R = R_Z(ψ) R_Y(ϑ) R_X(φ): body ζ makes the angle arccos(cos φ cos ϑ) with the vertical) at the
+    saved times at which some N_i > 0. Pulled 0.5 m aside the box barely rolls on the ground but swings
+    after lift-off, so `max_tilt` (which `tilt` reads) sees the swing and `ground_tilt` (which `tip` reads)
+    does not."""
+    for x in (1.0, 1.5, 4.0):
+        tr = solves[x]
+        phi, _, theta = np.asarray(tr.euler).T
+        angle = np.arccos(np.clip(np.cos(phi) * np.cos(theta), -1.0, 1.0))
+        on = np.max(np.asarray(tr.normal_forces), axis=-1) > 0.0
+        assert on.any()
+        assert _obs("ground_tilt", tr, x) == pytest.approx(np.max(angle[on]), rel=1e-6, abs=1e-9)
+    assert _obs("ground_tilt", solves[1.0], 1.0) < 1e-9  # straight up: level until it leaves the ground
+    tr = solves[1.5]
+    assert not np.all(np.max(np.asarray(tr.normal_forces), axis=-1) > 0.0)  # it does leave the ground
+    assert _obs("ground_tilt", tr, 1.5) < math.radians(0.5) < math.radians(3.0) < _obs("max_tilt", tr, 1.5)
+    assert jh.tip(degrees=3.0) == jh.Hazard("tip", "ground_tilt", math.radians(3.0))
 
 
 # ------------------------------------------------------------------------------------------ risk
@@ -341,6 +361,9 @@ GOOD_UNC = {MU: jh.Uniform(0.2, 0.4)}
         (lambda: jh.slide(-0.5), "distance"),
         (lambda: jh.tilt(degrees=0.0), "degrees"),
         (lambda: jh.tilt(0.1, degrees=5.0), "degrees"),
+        (lambda: jh.tip(degrees=190.0), "below pi"),
+        (lambda: jh.tip(-0.1), "angle"),
+        (lambda: jh.Hazard("t", "ground_tilt", -0.1), "threshold"),
         (lambda: jh.overload(float("nan")), "safe_working_load"),
         (lambda: jh.Hazard("t", "max_tilt", -0.1), "threshold"),
         (lambda: jh.Hazard("t", "max_tlt", 0.1), "max_tlt"),
@@ -474,6 +497,8 @@ def test_cli_specs_parse_to_the_library_objects():
     assert parse_hazard("slide=0.5") == jh.slide(0.5)
     assert parse_hazard("tilt=10deg") == jh.tilt(degrees=10.0)
     assert parse_hazard("tilt=0.1") == jh.tilt(0.1)
+    assert parse_hazard("tip=30deg") == jh.tip(degrees=30.0)
+    assert parse_hazard("tip=0.5") == jh.tip(0.5)
     assert parse_hazard("strike") == jh.strike()
     assert parse_hazard("overload=12000") == jh.overload(12000.0)
     assert parse_hazard("no-liftoff=2.5") == jh.no_liftoff(2.5)
@@ -488,7 +513,12 @@ def test_cli_specs_parse_to_the_library_objects():
     ]:
         with pytest.raises(jh.ScenarioError, match=re.escape(field)):
             parse_distribution(bad)
-    for bad, field in [("slide", "expected"), ("tilt=xdeg", "not a number"), ("x:max_tilt>-1", "threshold")]:
+    for bad, field in [
+        ("slide", "expected"),
+        ("tilt=xdeg", "not a number"),
+        ("tip=", "expected"),
+        ("x:max_tilt>-1", "threshold"),
+    ]:
         with pytest.raises(jh.ScenarioError, match=field):
             parse_hazard(bad)
 

@@ -8,7 +8,7 @@ constant-speed lift and against a grid search over the same design family and sa
 Uncertain inputs: the friction coefficient μ ~ U(0.2, 0.5) and the mass centre's ξ_C (`load.mass_centre[0]`)
 ~ N(1.0 m, 0.1 m). Hazards:
 - `slide`: the container is dragged more than 0.5 m over the ground (`ground_slide`);
-- `tip`: it tilts more than 70° while a corner still touches the ground (`ground_tilt`, defined here: the
+- `tip`: it tilts more than 70° while a corner still touches the ground (`jh.tip`, on `ground_tilt`: the
   largest angle between the body ζ axis and the vertical at the saved times with a corner in contact). The
   corner fixture lifts the container by a corner: it hangs at 61° (nominal mass centre), so every lift
   tilts it that far on its way up; beyond 70° it has rolled further over an edge than the lift needs;
@@ -56,24 +56,12 @@ import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
-from jaxhoist._numerics.observables import _tilt, contact_function  # noqa: E402  (internal helpers)
 
 TIP_X, TIP_Y = "boom.tip_position[0]", "boom.tip_position[1]"
 KNOT_TIMES = (0.0, 8.0, 20.0)  # [s]
 KNOTS = tuple(f"hoist.speeds[{k}]" for k in range(len(KNOT_TIMES)))
 SPEED_BOUNDS = (0.15, 0.45)  # [m/s]; the upper one is the hoist's maximum speed
 MU, XI = "foundation.friction_coefficient", "load.mass_centre[0]"
-
-
-def _ground_tilt(traj, scenario):
-    """Largest tilt [rad] at the saved times at which some corner touches the ground."""
-    on = jnp.max(contact_function(traj, scenario), axis=-1) > 0.0
-    return jnp.max(jnp.where(on, _tilt(traj), 0.0))
-
-
-GROUND_TILT = jh.Observable(
-    "ground_tilt", _ground_tilt, "rad", "largest tilt while a corner touches the ground (saved times)"
-)
 
 
 def settings(quick: bool) -> dict:
@@ -108,7 +96,7 @@ def main(argv=None) -> int:
     uncertain = {MU: jh.Uniform(0.2, 0.5), XI: jh.Normal(1.0, 0.1)}
     hazards = [
         jh.slide(0.5),
-        jh.Hazard("tip", GROUND_TILT, math.radians(70.0)),
+        jh.tip(degrees=70.0),
         jh.strike(),
         jh.overload(1.2 * weight),
     ]

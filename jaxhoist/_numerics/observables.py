@@ -253,6 +253,13 @@ def _ground_slide(traj, scenario):
     return jnp.max(d)
 
 
+def _ground_tilt(traj, scenario):
+    """Largest angle between body ζ and the vertical [rad] over the saved times at which some corner is in
+    contact (max_i f_i > 0): how far the load rolls over on the ground, not how it hangs in the air."""
+    on = jnp.max(contact_function(traj, scenario), axis=-1) > 0.0
+    return jnp.max(jnp.where(on, _tilt(traj), 0.0))
+
+
 def _swing_amplitude(traj, scenario):
     """Largest horizontal distance [m] of C from the boom tip A at the saved times after the last contact
     (0 if the load is still on the ground at t1)."""
@@ -421,6 +428,15 @@ _register(
         "m",
         "largest horizontal distance of C from its start while some corner touches the ground (on the saved "
         "grid): the drag over the ground, not the swing in the air",
+    )
+)
+_register(
+    Observable(
+        "ground_tilt",
+        _ground_tilt,
+        "rad",
+        "largest angle between body ζ and the vertical while some corner touches the ground (on the saved "
+        "grid): how far the load rolls over on the ground, not how it hangs in the air",
     )
 )
 _register(

@@ -32,6 +32,7 @@ from ..planning import (
     strike,
     swing,
     tilt,
+    tip,
 )
 from ..scan import Grid, Sweep
 from .common import (
@@ -84,8 +85,9 @@ def parse_distribution(text: str, flag: str = "--uncertain"):
 
 
 def parse_hazard(text: str, flag: str = "--hazard") -> Hazard:
-    """`slide=0.5`, `tilt=10deg` (or radians: `tilt=0.17`), `strike`, `overload=12000`, `swing=0.3`,
-    `no-liftoff=2.5`, or `NAME:OBSERVABLE>THRESHOLD` / `NAME:OBSERVABLE<THRESHOLD` -> a `Hazard`."""
+    """`slide=0.5`, `tilt=10deg` (or radians: `tilt=0.17`), `tip=30deg` (or radians), `strike`,
+    `overload=12000`, `swing=0.3`, `no-liftoff=2.5`, or `NAME:OBSERVABLE>THRESHOLD` /
+    `NAME:OBSERVABLE<THRESHOLD` -> a `Hazard`."""
     text = text.strip()
     m = re.match(r"^([\w-]+):([\w\[\]]+)\s*([<>])\s*(\S+)$", text)
     if m:
@@ -100,13 +102,14 @@ def parse_hazard(text: str, flag: str = "--hazard") -> Hazard:
     if kind == "strike" and not eq:
         return strike()
     makers = {"slide": slide, "overload": overload, "swing": swing, "no_liftoff": no_liftoff}
-    if kind not in (*makers, "tilt") or not arg.strip():
+    angles = {"tilt": tilt, "tip": tip}
+    if kind not in (*makers, *angles) or not arg.strip():
         raise ScenarioError(
-            f"{flag} {text!r}: expected slide=M, tilt=RAD or tilt=DEGdeg, strike, overload=N, swing=M, "
-            f"no-liftoff=S or NAME:OBSERVABLE>THRESHOLD"
+            f"{flag} {text!r}: expected slide=M, tilt=RAD or tilt=DEGdeg, tip=RAD or tip=DEGdeg, strike, "
+            f"overload=N, swing=M, no-liftoff=S or NAME:OBSERVABLE>THRESHOLD"
         )
     arg = arg.strip()
-    if kind == "tilt" and arg.lower().endswith("deg"):
+    if kind in angles and arg.lower().endswith("deg"):
         number, unit = arg[:-3], "degrees"
     else:
         number, unit = arg, None
@@ -114,8 +117,8 @@ def parse_hazard(text: str, flag: str = "--hazard") -> Hazard:
         value = float(number)
     except ValueError:
         raise ScenarioError(f"{flag} {text!r}: {number!r} is not a number") from None
-    if kind == "tilt":
-        return tilt(degrees=value) if unit else tilt(value)
+    if kind in angles:
+        return angles[kind](degrees=value) if unit else angles[kind](value)
     return makers[kind](value)
 
 
@@ -134,8 +137,8 @@ def configure_parser(subparsers) -> None:
         action="append",
         required=True,
         metavar="SPEC",
-        help="a hazard (repeatable): slide=M, tilt=RAD or tilt=DEGdeg, strike, overload=N, swing=M, "
-        "no-liftoff=S, or NAME:OBSERVABLE>THRESHOLD (or <)",
+        help="a hazard (repeatable): slide=M, tilt=RAD or tilt=DEGdeg, tip=RAD or tip=DEGdeg, strike, "
+        "overload=N, swing=M, no-liftoff=S, or NAME:OBSERVABLE>THRESHOLD (or <)",
     )
     p.add_argument(
         "--design",

@@ -9,6 +9,7 @@ from .hazards import slide as slide
 from .hazards import strike as strike
 from .hazards import swing as swing
 from .hazards import tilt as tilt
+from .hazards import tip as tip
 from .optimise import OptimisedLift as OptimisedLift
 from .optimise import optimise_lift as optimise_lift
 from .risk import LiftRisk as LiftRisk

@@ -3,7 +3,8 @@
     import jaxhoist as jh
     hazards = [
         jh.slide(0.5),                 # the load is dragged more than 0.5 m over the ground
-        jh.tilt(degrees=10.0),         # it tilts more than 10 degrees
+        jh.tilt(degrees=10.0),         # it tilts more than 10 degrees, on the ground or in the air
+        jh.tip(degrees=30.0),          # it rolls over more than 30 degrees while a corner is on the ground
         jh.strike(),                   # a corner lands again after it left the ground
         jh.overload(12e3),             # the rope tension exceeds a safe working load of 12 kN
         jh.swing(0.3),                 # after lift-off it swings more than 0.3 m from under the boom tip
@@ -35,6 +36,7 @@ NONNEGATIVE = EVENTS | {
     "max_tilt",
     "slide_distance",
     "ground_slide",
+    "ground_tilt",
     "swing_amplitude",
     "max_rope_tension",
     "contact_time",
@@ -122,21 +124,35 @@ def slide(distance: float, name: str = "slide") -> Hazard:
 
 
 def tilt(angle: float | None = None, *, degrees: float | None = None, name: str = "tilt") -> Hazard:
-    """The load tilts more than `angle` [rad] (or `degrees` [deg]; give one): the `max_tilt` observable
-    (the largest angle between the body ζ axis and the vertical). A tip-over is a tilt beyond the angle at
-    which the mass centre passes over the edge it pivots about.
+    """The load tilts more than `angle` [rad] (or `degrees` [deg]; give one) at any time, on the ground or
+    hanging in the air: the `max_tilt` observable (the largest angle between the body ζ axis and the
+    vertical). A load lifted off-centre hangs tilted; for a roll-over on the ground use `tip`.
 
     **Raises** `ScenarioError` unless exactly one of `angle`, `degrees` is given, > 0 and below π rad."""
+    return Hazard(name, "max_tilt", _angle("tilt", angle, degrees))
+
+
+def tip(angle: float | None = None, *, degrees: float | None = None, name: str = "tip") -> Hazard:
+    """The load tips: it tilts more than `angle` [rad] (or `degrees` [deg]; give one) while a corner still
+    touches the ground (the `ground_tilt` observable). It has tipped over once its mass centre has passed
+    over the edge it pivots about; the tilt it hangs at after lift-off does not count.
+
+    **Raises** `ScenarioError` unless exactly one of `angle`, `degrees` is given, > 0 and below π rad."""
+    return Hazard(name, "ground_tilt", _angle("tip", angle, degrees))
+
+
+def _angle(kind: str, angle, degrees) -> float:
+    """The angle [rad] of `tilt` or `tip` from `angle` [rad] or `degrees` [deg], checked."""
     if (angle is None) == (degrees is None):
-        raise ScenarioError("tilt: give exactly one of angle [rad] or degrees [deg]")
+        raise ScenarioError(f"{kind}: give exactly one of angle [rad] or degrees [deg]")
     rad = (
-        _positive("tilt", "angle", angle, "rad")
+        _positive(kind, "angle", angle, "rad")
         if degrees is None
-        else math.radians(_positive("tilt", "degrees", degrees, "deg"))
+        else math.radians(_positive(kind, "degrees", degrees, "deg"))
     )
     if rad >= math.pi:
-        raise ScenarioError(f"tilt: the angle must be below pi rad (180 deg), got {rad} rad")
-    return Hazard(name, "max_tilt", rad)
+        raise ScenarioError(f"{kind}: the angle must be below pi rad (180 deg), got {rad} rad")
+    return rad
 
 
 def strike(name: str = "strike") -> Hazard:
