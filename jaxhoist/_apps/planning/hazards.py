@@ -134,8 +134,9 @@ def tilt(angle: float | None = None, *, degrees: float | None = None, name: str 
 
 def tip(angle: float | None = None, *, degrees: float | None = None, name: str = "tip") -> Hazard:
     """The load tips: it tilts more than `angle` [rad] (or `degrees` [deg]; give one) while a corner still
-    touches the ground (the `ground_tilt` observable). It has tipped over once its mass centre has passed
-    over the edge it pivots about; the tilt it hangs at after lift-off does not count.
+    touches the ground (the `ground_tilt` observable); the tilt it hangs at after lift-off does not count.
+    A load pivoting on an edge falls over beyond the tilt at which its mass centre passes over that edge:
+    atan(b / h) from level, b [m] the mass centre's horizontal distance from the edge, h [m] its height.
 
     **Raises** `ScenarioError` unless exactly one of `angle`, `degrees` is given, > 0 and below π rad."""
     return Hazard(name, "ground_tilt", _angle("tip", angle, degrees))
