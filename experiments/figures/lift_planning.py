@@ -8,8 +8,8 @@ constant-speed lift and against a grid search over the same design family and sa
 Uncertain inputs: the friction coefficient μ ~ U(0.2, 0.5) and the mass centre's ξ_C (`load.mass_centre[0]`)
 ~ N(1.0 m, 0.1 m). Hazards:
 - `slide`: the container is dragged more than 0.5 m over the ground (`ground_slide`);
-- `tip`: it tilts more than 70° while a corner still touches the ground (`jh.tip`, on `ground_tilt`: the
-  largest angle between the body ζ axis and the vertical at the saved times with a corner in contact). The
+- `tip`: it tilts more than 70° while a corner still touches the ground (`ground_tilt`: the largest angle
+  between the body ζ axis and the vertical at the saved times with a corner in contact). The
   corner fixture lifts the container by a corner: it hangs at 61° (nominal mass centre), so every lift
   tilts it that far on its way up; beyond 70° it has rolled further over an edge than the lift needs;
 - `strike`: a corner lands again after it left the ground (`impacts`);
@@ -62,6 +62,13 @@ KNOT_TIMES = (0.0, 8.0, 20.0)  # [s]
 KNOTS = tuple(f"hoist.speeds[{k}]" for k in range(len(KNOT_TIMES)))
 SPEED_BOUNDS = (0.15, 0.45)  # [m/s]; the upper one is the hoist's maximum speed
 MU, XI = "foundation.friction_coefficient", "load.mass_centre[0]"
+# The tip hazard reads the built-in `ground_tilt` under a name of this script's own: `optimise_lift`
+# penalises every limited hazard on a built-in smooth observable (found by its name), and this lift's J,
+# that of the run in docs/lift-optimisation.md, penalises the slide and the overload only; the tip limit is
+# still checked on the fresh sample.
+TILT_ON_GROUND = jh.Observable(
+    "tilt_on_ground", jh.get_observable("ground_tilt").fn, "rad", "ground_tilt, not penalised in J"
+)
 
 
 def settings(quick: bool) -> dict:
@@ -96,7 +103,7 @@ def main(argv=None) -> int:
     uncertain = {MU: jh.Uniform(0.2, 0.5), XI: jh.Normal(1.0, 0.1)}
     hazards = [
         jh.slide(0.5),
-        jh.tip(degrees=70.0),
+        jh.Hazard("tip", TILT_ON_GROUND, math.radians(70.0)),
         jh.strike(),
         jh.overload(1.2 * weight),
     ]
@@ -127,7 +134,7 @@ def main(argv=None) -> int:
         "solves": int(risk.samples * np.prod(risk.shape)),
         "failed": int(np.sum(risk.n_failed)),
         "max_accepted_steps": int(np.max(risk.scan.num_accepted_steps)),
-        "median_ground_tilt_deg": np.degrees(risk.quantile("ground_tilt", 0.5)).round(1).tolist(),
+        "median_ground_tilt_deg": np.degrees(risk.quantile("tilt_on_ground", 0.5)).round(1).tolist(),
     }
     print(f"map: {report['map']}")
 
@@ -282,7 +289,7 @@ def plot_outcomes(path, res, weight, sc_knots, t1) -> None:
     series = [
         ("max_rope_tension", 1.0 / weight, "peak rope tension / (m g) [-]", 1.2),
         ("ground_slide", 1.0, "ground slide [m]", 0.5),
-        ("ground_tilt", 180.0 / math.pi, "largest tilt on the ground [deg]", 70.0),
+        ("tilt_on_ground", 180.0 / math.pi, "largest tilt on the ground [deg]", 70.0),
     ]
     fig, axes = plt.subplots(1, 4, figsize=(18, 4.3), constrained_layout=True)
     tips = {k: (d[TIP_X], d[TIP_Y]) for k, d in (("start", res.start), ("opt", res.design))}
