@@ -242,10 +242,15 @@ def _slide_distance(traj):
     return jnp.sqrt(jnp.sum(d**2) + 1e-300)
 
 
+def _on_ground(traj, scenario):
+    """At each saved time: whether some corner is in contact (max_i f_i > 0)."""
+    return jnp.max(contact_function(traj, scenario), axis=-1) > 0.0
+
+
 def _ground_slide(traj, scenario):
     """Largest horizontal distance of C from its start [m] over the saved times at which some corner is in
     contact (max_i f_i > 0): how far the load is dragged over the ground, not how far it swings when free."""
-    on = jnp.max(contact_function(traj, scenario), axis=-1) > 0.0
+    on = _on_ground(traj, scenario)
     d2 = jnp.sum((traj.position[:, :2] - traj.position[0, :2]) ** 2, axis=-1)
     d2 = jnp.where(on, d2, 0.0)
     pos = d2 > 0.0
@@ -256,7 +261,7 @@ def _ground_slide(traj, scenario):
 def _ground_tilt(traj, scenario):
     """Largest angle between body ζ and the vertical [rad] over the saved times at which some corner is in
     contact (max_i f_i > 0): how far the load rolls over on the ground, not how it hangs in the air."""
-    on = jnp.max(contact_function(traj, scenario), axis=-1) > 0.0
+    on = _on_ground(traj, scenario)
     return jnp.max(jnp.where(on, _tilt(traj), 0.0))
 
 
