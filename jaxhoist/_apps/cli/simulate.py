@@ -19,6 +19,7 @@ from .common import (
     claim_out_dir,
     default_out,
     enable_x64,
+    import_matplotlib_meanwhile,
     prepare_out_dir,
 )
 from .progress import LineSink, StepTimer, percent_to_bar, phase_to_bar, tqdm_bar
@@ -147,6 +148,7 @@ def run_simulate(args: argparse.Namespace) -> int:
         scenario, overrides, t1, options, ts = _load_checked(args)
     out_dir = Path(args.out) if args.out else default_out(args.scenario)
     prepare_out_dir(out_dir, "simulate", overwrite=args.overwrite)
+    plotting = None if args.no_plots else import_matplotlib_meanwhile()  # while the solve loads or compiles
     progress.note(
         f"scenario {scenario.name}: t1 = {t1:g} s, {args.n_save} saved times, "
         f"{type(options.solver).__name__}, rtol = {options.rtol:g}, atol = {options.atol:g}"
@@ -159,10 +161,11 @@ def run_simulate(args: argparse.Namespace) -> int:
 
     arrays, written = _write_results(args, out_dir, traj, scenario, options, t1, overrides, progress)
     pngs = []
-    if not args.no_plots:
+    if plotting is not None:  # not --no-plots
         from ..plots import trajectory as plots
 
         with progress("plotting"):
+            plotting.join()
             pngs = plots.save_all(arrays, out_dir, title_prefix=scenario.name)
     animation = []
     if args.animate:
