@@ -376,6 +376,10 @@ def test_bad_objects_are_refused_on_construction(make, field):
     assert "\n" not in str(info.value)
 
 
+# an observable of the caller's called like the built-in `ground_slide`: the final x of C [m]
+OWN_SLIDE = jh.Observable("ground_slide", lambda traj: traj.position[-1, 0], "m")
+
+
 @pytest.mark.parametrize(
     ("kwargs", "field"),
     [
@@ -392,6 +396,7 @@ def test_bad_objects_are_refused_on_construction(make, field):
         (dict(confidence=1.0), "confidence"),
         (dict(quantiles=[0.5, 1.5]), "quantiles"),
         (dict(hazards=[jh.no_liftoff(5.0)]), "t1"),
+        (dict(hazards=[jh.slide(0.5), jh.Hazard("x_end", OWN_SLIDE, 0.5)]), "called 'ground_slide'; rename"),
     ],
 )
 def test_bad_lift_risk_inputs_fail_before_compiling(box, kwargs, field):

@@ -265,7 +265,7 @@ def _prepare(
     starts = _integer("starts", starts, low=1)
     tol = _number("tolerance", tolerance, low=0.0)
     t1 = float(np.asarray(as_times(times).resolve(scenario, 201)[1])[-1])
-    penalised = tuple(h for h in hz if pen > 0 and _smooth_scalar(h.observable_name))
+    penalised = tuple(h for h in hz if pen > 0 and _smooth_builtin_scalar(h))
     obs = hazard_observables(hz, tuple(weights))
     problem = _Problem(
         scenario=scenario,
@@ -368,6 +368,16 @@ def _smooth_scalar(name: str) -> bool:
         return obs_mod.get(name).components is None
     except ValueError:
         return False
+
+
+def _smooth_builtin_scalar(hazard) -> bool:
+    """Whether `hazard` reads a smooth built-in scalar observable, given by its name (or as the built-in's
+    own `Observable`, `jh.get_observable(name)`, for a name without an index); never an `Observable` of the
+    caller's, whatever its name."""
+    name, o = hazard.observable_name, hazard.observable
+    if not _smooth_scalar(name):
+        return False
+    return isinstance(o, str) or o == obs_mod.get(name)
 
 
 def _check_objective(objective) -> tuple[dict[str, float], float]:

@@ -13,6 +13,7 @@ from typing import Any
 import numpy as np
 
 from ..._errors import ScenarioError, require_x64
+from ..._numerics import observables as obs_mod
 from ..._numerics.batch import ScanStatus
 from ..._numerics.solve import checked_scenario
 from ..._numerics.times import TimesLike, as_times
@@ -248,10 +249,19 @@ def hazard_observables(hazards, extra) -> dict[str, Any]:
             raise ScenarioError(f"observables: give names or Observables, got {type(o).__name__}")
         items.append((name, o, "observables"))
     for name, o, where in items:
-        if name in out and out[name] is not o and not (isinstance(o, str) and out[name] == o):
+        if name in out and not _same_observable(out[name], o):
             raise ScenarioError(f"{where}: two different observables are called {name!r}; rename one")
         out[name] = o
     return out
+
+
+def _same_observable(a, b) -> bool:
+    """Whether two observables given as names or `Observable`s are one: the same name, the same object, or a
+    built-in's name and its own `Observable` (`jh.get_observable(name)`)."""
+    if a is b or (isinstance(a, str) and isinstance(b, str)):
+        return a == b
+    a, b = (obs_mod.get(o) if isinstance(o, str) else o for o in (a, b))
+    return a == b
 
 
 # ------------------------------------------------------------------------------------------ statistics
