@@ -62,10 +62,10 @@ KNOT_TIMES = (0.0, 8.0, 20.0)  # [s]
 KNOTS = tuple(f"hoist.speeds[{k}]" for k in range(len(KNOT_TIMES)))
 SPEED_BOUNDS = (0.15, 0.45)  # [m/s]; the upper one is the hoist's maximum speed
 MU, XI = "foundation.friction_coefficient", "load.mass_centre[0]"
-# The tip hazard reads the built-in `ground_tilt` under a name of this script's own: `optimise_lift`
-# penalises every limited hazard on a built-in smooth observable (found by its name), and this lift's J,
-# that of the run in docs/lift-optimisation.md, penalises the slide and the overload only; the tip limit is
-# still checked on the fresh sample.
+# The tip hazard reads the built-in `ground_tilt`'s function in an `Observable` of this script's own:
+# `optimise_lift` penalises the limited hazards on built-in smooth observables, never on a caller's own, and
+# this lift's J, that of the run in docs/lift-optimisation.md, penalises the slide and the overload only;
+# the tip limit is still checked on the fresh sample.
 TILT_ON_GROUND = jh.Observable(
     "tilt_on_ground", jh.get_observable("ground_tilt").fn, "rad", "ground_tilt, not penalised in J"
 )
