@@ -260,7 +260,10 @@ def _same_observable(a, b) -> bool:
     built-in's name and its own `Observable` (`jh.get_observable(name)`)."""
     if a is b or (isinstance(a, str) and isinstance(b, str)):
         return a == b
-    a, b = (obs_mod.get(o) if isinstance(o, str) else o for o in (a, b))
+    try:
+        a, b = (obs_mod.get(o) if isinstance(o, str) else o for o in (a, b))
+    except ValueError:  # a name that is no built-in's: not the caller's Observable of that name
+        return False
     return a == b
 
 
