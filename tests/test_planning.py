@@ -378,6 +378,7 @@ def test_bad_objects_are_refused_on_construction(make, field):
 
 # an observable of the caller's called like the built-in `ground_slide`: the final x of C [m]
 OWN_SLIDE = jh.Observable("ground_slide", lambda traj: traj.position[-1, 0], "m")
+OWN_X_END = jh.Observable("x_end", lambda traj: traj.position[-1, 0], "m")  # a name no built-in has
 
 
 @pytest.mark.parametrize(
@@ -397,6 +398,7 @@ OWN_SLIDE = jh.Observable("ground_slide", lambda traj: traj.position[-1, 0], "m"
         (dict(quantiles=[0.5, 1.5]), "quantiles"),
         (dict(hazards=[jh.no_liftoff(5.0)]), "t1"),
         (dict(hazards=[jh.slide(0.5), jh.Hazard("x_end", OWN_SLIDE, 0.5)]), "called 'ground_slide'; rename"),
+        (dict(hazards=[jh.Hazard("x_end", OWN_X_END, 0.5)], observables=["x_end"]), "called 'x_end'; rename"),
     ],
 )
 def test_bad_lift_risk_inputs_fail_before_compiling(box, kwargs, field):
