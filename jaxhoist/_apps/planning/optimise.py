@@ -23,7 +23,7 @@ from ..._physics.params import Scenario
 from ..._physics.paths import check_path, get_param, param_unit, set_param
 from ..scan import BatchOptions, Points, scan
 from .hazards import EVENTS, Hazard
-from .risk import LiftRisk, check_hazards, check_inputs, hazard_observables, lift_risk
+from .risk import LiftRisk, check_hazards, check_inputs, hazard_observables, lift_risk, same_observable
 from .uncertain import sample
 
 #: The objective's pseudo-observable: the time [s] the hoist takes to reel in `hoist_distance` metres.
@@ -374,10 +374,8 @@ def _smooth_builtin_scalar(hazard) -> bool:
     """Whether `hazard` reads a smooth built-in scalar observable, given by its name (or as the built-in's
     own `Observable`, `jh.get_observable(name)`, for a name without an index); never an `Observable` of the
     caller's, whatever its name."""
-    name, o = hazard.observable_name, hazard.observable
-    if not _smooth_scalar(name):
-        return False
-    return isinstance(o, str) or o == obs_mod.get(name)
+    name = hazard.observable_name
+    return _smooth_scalar(name) and same_observable(hazard.observable, name)
 
 
 def _check_objective(objective) -> tuple[dict[str, float], float]:

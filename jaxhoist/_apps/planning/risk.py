@@ -249,13 +249,13 @@ def hazard_observables(hazards, extra) -> dict[str, Any]:
             raise ScenarioError(f"observables: give names or Observables, got {type(o).__name__}")
         items.append((name, o, "observables"))
     for name, o, where in items:
-        if name in out and not _same_observable(out[name], o):
+        if name in out and not same_observable(out[name], o):
             raise ScenarioError(f"{where}: two different observables are called {name!r}; rename one")
         out[name] = o
     return out
 
 
-def _same_observable(a, b) -> bool:
+def same_observable(a, b) -> bool:
     """Whether two observables given as names or `Observable`s are one: the same name, the same object, or a
     built-in's name and its own `Observable` (`jh.get_observable(name)`)."""
     if a is b or (isinstance(a, str) and isinstance(b, str)):
