@@ -125,10 +125,12 @@ def test_penalty_is_the_softplus_of_the_limited_hazards_and_its_gradient_agrees(
     that, each term is that average of the members' values v in the same scan, and the tilt term's gradient
     agrees with central differences of the term over the same sample (h = 0.01, in the unit box, 6 % of the
     norm as in `test_gradient_agrees_with_central_differences`, whose kinks it shares). The slide term's
-    gradient is not compared: `ground_slide` jumps where a member's contact state at a saved time changes,
-    which its sensitivity does not see (docs/lift-optimisation.md, "Limits of the optimiser"; here central
-    differences give -0.71 in the unit box along the speed where the sensitivities give +1.38). The same
-    paths, observables and saved times as `problem`: the compiled scans are shared.
+    gradient is not compared: each member's `ground_slide` is continuous and its sensitivity is its
+    derivative (tests/test_hoist_profile.py), but it is read at the end of contact interpolated between the
+    saved times, which curves it on the scale of h (docs/lift-optimisation.md, "Limits of the optimiser";
+    here the sensitivities give (1.26, -1.76) in the unit box, central differences (1.03, -0.71) with
+    h = 0.01 and (2.12, -0.90) with h = 0.003). The same paths, observables and saved times as `problem`:
+    the compiled scans are shared.
 
     Which hazards: by the observable itself, not its name: an `Observable` of the caller's named like a
     built-in is never penalised (nothing is known of its smoothness), the built-in's own `Observable` is,

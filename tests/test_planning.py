@@ -19,6 +19,7 @@ import re  # noqa: E402
 from unittest import mock  # noqa: E402
 
 import _inputs  # noqa: E402
+import jax.numpy as jnp  # noqa: E402
 import numpy as np  # noqa: E402
 import pytest  # noqa: E402
 from scipy import stats  # noqa: E402
@@ -131,12 +132,51 @@ def test_ground_slide_is_the_drag_over_the_ground(solves):
     assert math.isinf(_obs("liftoff_time", tr, 4.0))
     assert 0.9 < _obs("ground_slide", tr, 4.0) == pytest.approx(_obs("slide_distance", tr, 4.0), rel=1e-12)
     assert np.all(np.diff(np.asarray(tr.position[:, 0])) >= -1e-9)
-    # 0.5 m aside: dragged a little, then it swings: the drag is the distance up to the last contact only
+    # 0.5 m aside: dragged a little, then it swings: the drag is the distance up to the last contact only,
+    # there included (interpolated linearly between the saved times)
     tr = solves[1.5]
-    t_off = _obs("last_contact_time", tr, 1.5)
-    ts, x = np.asarray(tr.ts), np.asarray(tr.position[:, 0]) - float(tr.position[0, 0])
-    assert _obs("ground_slide", tr, 1.5) == pytest.approx(np.max(np.abs(x[ts <= t_off])), rel=1e-6)
+    ts, on, t_cross = _contact_events(tr, 1.5)
+    assert t_cross.size == 1 and t_cross[0] == pytest.approx(_obs("last_contact_time", tr, 1.5), rel=1e-12)
+    d = np.linalg.norm(np.asarray(tr.position[:, :2] - tr.position[0, :2]), axis=-1)
+    ref = max(np.max(d[on]), np.interp(t_cross[0], ts, d))
+    assert _obs("ground_slide", tr, 1.5) == pytest.approx(ref, rel=1e-12)
     assert _obs("ground_slide", tr, 1.5) < 0.1 < _obs("slide_distance", tr, 1.5)
+
+
+def _contact_events(tr, tip_x):
+    """(saved times, whether some corner is in contact at each, the times at which that changes): the
+    zeros of max_i f_i (the public contact function), interpolated linearly between the saved times."""
+    ts = np.asarray(tr.ts)
+    f = np.max(np.asarray(jh.observables.contact_function(tr, drag_box(tip_x))), axis=-1)
+    on = f > 0.0
+    assert np.array_equal(on, np.max(np.asarray(tr.normal_forces), axis=-1) > 0.0)
+    k = np.flatnonzero(on[:-1] != on[1:])
+    return ts, on, ts[k] + f[k] / (f[k] - f[k + 1]) * (ts[k + 1] - ts[k])
+
+
+def test_contact_observables_are_continuous_and_differentiable_across_the_saved_times():
+    """The largest value while on the ground includes the contact's end between saved times, interpolated
+    linearly: for a signal x(t) = t and a contact function F(t) = a - t (contact until t = a), both linear,
+    the interpolation is exact, so the value is a and its derivative in a is 1 wherever a lies among the
+    saved times; read at the saved times alone it would be the last saved time before a, a staircase with
+    derivative 0."""
+    from jaxhoist._numerics.observables import _max_on_ground
+
+    ts = jnp.linspace(0.0, 1.0, 11)
+
+    def value(a):
+        return _max_on_ground(ts, a - ts)
+
+    for a in (0.123, 0.3, 0.3 + 1e-12, 0.3 - 1e-12, 0.95):
+        v, dv = jax.jvp(value, (jnp.asarray(a),), (jnp.asarray(1.0),))
+        assert float(v) == pytest.approx(a, rel=1e-12) and float(dv) == pytest.approx(1.0, rel=1e-12)
+
+    # a second contact, from t = 0.62 s to b, linear in t across both its ends: its end counts, exactly
+    def two_episodes(b):
+        return _max_on_ground(ts, jnp.maximum(0.25 - ts, jnp.minimum(ts - 0.62, b - ts)))
+
+    v, dv = jax.jvp(two_episodes, (jnp.asarray(0.88),), (jnp.asarray(1.0),))
+    assert float(v) == pytest.approx(0.88, rel=1e-12) and float(dv) == pytest.approx(1.0, rel=1e-12)
 
 
 def test_swing_amplitude_is_the_release_offset_of_a_pendulum(solves):
@@ -167,9 +207,10 @@ def test_ground_tilt_is_the_tilt_while_a_corner_touches_the_ground(solves):
         tr = solves[x]
         phi, _, theta = np.asarray(tr.euler).T
         angle = np.arccos(np.clip(np.cos(phi) * np.cos(theta), -1.0, 1.0))
-        on = np.max(np.asarray(tr.normal_forces), axis=-1) > 0.0
+        ts, on, t_cross = _contact_events(tr, x)
         assert on.any()
-        assert _obs("ground_tilt", tr, x) == pytest.approx(np.max(angle[on]), rel=1e-6, abs=1e-9)
+        ref = max([np.max(angle[on]), *np.interp(t_cross, ts, angle)])
+        assert _obs("ground_tilt", tr, x) == pytest.approx(ref, rel=1e-6, abs=1e-9)
     assert _obs("ground_tilt", solves[1.0], 1.0) < 1e-9  # straight up: level until it leaves the ground
     tr = solves[1.5]
     assert not np.all(np.max(np.asarray(tr.normal_forces), axis=-1) > 0.0)  # it does leave the ground

@@ -126,16 +126,20 @@ def last_down_crossing(ts, f):
     """Last time [s] at which the continuous signal `f` (n_t,) goes from > 0 to <= 0, interpolated linearly
     between saved times; `+inf` if f > 0 at the last saved time (still in contact at t1), `ts[0]` if f <= 0
     at every saved time."""
+    found, j, s = _last_down_step(f)
+    t = jnp.where(found, ts[j] + s * (ts[j + 1] - ts[j]), ts[0])
+    return jnp.where(f[-1] > 0.0, jnp.inf, t)
+
+
+def _last_down_step(f):
+    """(whether `f` (n_t,) goes from > 0 to <= 0 at all, the saved-time step j of the last such crossing,
+    its fraction s in (0, 1] of the step from ts[j]: f interpolated linearly is 0 there). Safe under jvp."""
     on = f > 0.0
     down = on[:-1] & ~on[1:]
-    rev = down[::-1]
     found = jnp.any(down)
-    j = down.size - 1 - jnp.argmax(rev)  # the last step with a down-crossing
+    j = down.size - 1 - jnp.argmax(down[::-1])  # the last step with a down-crossing
     f0, f1 = f[j], f[j + 1]
-    denom = jnp.where(found, f0 - f1, 1.0)
-    t = ts[j] + (f0 / denom) * (ts[j + 1] - ts[j])
-    t = jnp.where(found, t, ts[0])
-    return jnp.where(on[-1], jnp.inf, t)
+    return found, j, f0 / jnp.where(found, f0 - f1, 1.0)
 
 
 def _down_crossings(ts, F):
@@ -242,38 +246,56 @@ def _slide_distance(traj):
     return jnp.sqrt(jnp.sum(d**2) + 1e-300)
 
 
-def _on_ground(traj, scenario):
-    """At each saved time: whether some corner is in contact (max_i f_i > 0)."""
-    return jnp.max(contact_function(traj, scenario), axis=-1) > 0.0
+def _max_on_ground(x, F):
+    """Largest value of the continuous signal `x` (n_t,) while some corner is in contact (F = max_i f_i > 0,
+    (n_t,)): over the saved times with F > 0 and over the zero crossings of F between saved times, where `x`
+    is interpolated linearly at the crossing found as the contact events are (0 if F <= 0 throughout).
+
+    With the crossings, the value is continuous where a saved time's contact state changes: as F at a saved
+    time falls through 0 its value leaves the set and the crossing's interpolated value, which has reached
+    it, takes its place; so the sensitivities of the solve give the value's derivative, the event's motion
+    included."""
+    on = F > 0.0
+    cross = on[:-1] != on[1:]
+    f0, f1 = F[:-1], F[1:]
+    s = f0 / jnp.where(cross, f0 - f1, 1.0)  # in [0, 1] where F changes sign across the step
+    x_cross = x[:-1] + s * (x[1:] - x[:-1])
+    return jnp.maximum(jnp.max(jnp.where(on, x, 0.0)), jnp.max(jnp.where(cross, x_cross, 0.0)))
+
+
+def _horizontal_distance(a, b):
+    """|a - b| over the first two components at each saved time [m], with a finite gradient at 0."""
+    d2 = jnp.sum((a[..., :2] - b[..., :2]) ** 2, axis=-1)
+    pos = d2 > 0.0
+    return jnp.where(pos, jnp.sqrt(jnp.where(pos, d2, 1.0)), 0.0)
 
 
 def _ground_slide(traj, scenario):
-    """Largest horizontal distance of C from its start [m] over the saved times at which some corner is in
-    contact (max_i f_i > 0): how far the load is dragged over the ground, not how far it swings when free."""
-    on = _on_ground(traj, scenario)
-    d2 = jnp.sum((traj.position[:, :2] - traj.position[0, :2]) ** 2, axis=-1)
-    d2 = jnp.where(on, d2, 0.0)
-    pos = d2 > 0.0
-    d = jnp.where(pos, jnp.sqrt(jnp.where(pos, d2, 1.0)), 0.0)  # finite gradient where C has not moved
-    return jnp.max(d)
+    """Largest horizontal distance of C from its start [m] while some corner is in contact (max_i f_i > 0;
+    at the saved times and at the contact events between them, `_max_on_ground`): how far the load is
+    dragged over the ground, not how far it swings when free."""
+    F = jnp.max(contact_function(traj, scenario), axis=-1)
+    return _max_on_ground(_horizontal_distance(traj.position, traj.position[:1]), F)
 
 
 def _ground_tilt(traj, scenario):
-    """Largest angle between body ζ and the vertical [rad] over the saved times at which some corner is in
-    contact (max_i f_i > 0): how far the load rolls over on the ground, not how it hangs in the air."""
-    on = _on_ground(traj, scenario)
-    return jnp.max(jnp.where(on, _tilt(traj), 0.0))
+    """Largest angle between body ζ and the vertical [rad] while some corner is in contact (max_i f_i > 0; at
+    the saved times and at the contact events between them, `_max_on_ground`): how far the load rolls over
+    on the ground, not how it hangs in the air."""
+    return _max_on_ground(_tilt(traj), jnp.max(contact_function(traj, scenario), axis=-1))
 
 
 def _swing_amplitude(traj, scenario):
-    """Largest horizontal distance [m] of C from the boom tip A at the saved times after the last contact
-    (0 if the load is still on the ground at t1)."""
-    t_free = _last_contact_time(traj, scenario)
-    d2 = jnp.sum((traj.position[:, :2] - traj.tip_position[:, :2]) ** 2, axis=-1)
-    d2 = jnp.where(traj.ts > t_free, d2, 0.0)
-    pos = d2 > 0.0
-    d = jnp.where(pos, jnp.sqrt(jnp.where(pos, d2, 1.0)), 0.0)
-    return jnp.max(d)
+    """Largest horizontal distance [m] of C from the boom tip A after the last contact: at the saved times
+    after it and at the last contact itself, interpolated linearly (so the value is continuous where the
+    last contact passes a saved time); 0 if the load is still on the ground at t1."""
+    F = jnp.max(contact_function(traj, scenario), axis=-1)
+    d = _horizontal_distance(traj.position, traj.tip_position)
+    found, j, s = _last_down_step(F)
+    free = F[-1] <= 0.0
+    at_release = jnp.where(found & free, d[j] + s * (d[j + 1] - d[j]), 0.0)
+    after = jnp.arange(d.size) > jnp.where(found, j, 0)  # never on the ground: the saved times after t0
+    return jnp.maximum(jnp.max(jnp.where(after & free, d, 0.0)), at_release)
 
 
 def _component(fn, i):
@@ -431,8 +453,8 @@ _register(
         "ground_slide",
         _ground_slide,
         "m",
-        "largest horizontal distance of C from its start while some corner touches the ground (on the saved "
-        "grid): the drag over the ground, not the swing in the air",
+        "largest horizontal distance of C from its start while some corner touches the ground (at the saved "
+        "times and the contact's events between them): the drag over the ground, not the swing in the air",
     )
 )
 _register(
@@ -440,8 +462,9 @@ _register(
         "ground_tilt",
         _ground_tilt,
         "rad",
-        "largest angle between body ζ and the vertical while some corner touches the ground (on the saved "
-        "grid): how far the load rolls over on the ground, not how it hangs in the air",
+        "largest angle between body ζ and the vertical while some corner touches the ground (at the saved "
+        "times and the contact's events between them): how far the load rolls over on the ground, not how it "
+        "hangs in the air",
     )
 )
 _register(
@@ -449,8 +472,8 @@ _register(
         "swing_amplitude",
         _swing_amplitude,
         "m",
-        "largest horizontal distance of C from the boom tip A after the last contact (on the saved grid; 0 "
-        "if still on the ground at t1)",
+        "largest horizontal distance of C from the boom tip A after the last contact (at the saved times "
+        "after it and at the contact's end; 0 if still on the ground at t1)",
     )
 )
 
