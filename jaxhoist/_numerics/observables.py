@@ -116,10 +116,15 @@ def _first_zero(ts, f, steps):
     True (f changes sign across it); `+inf` if there is none. Safe under jvp: no 0/0 where none is found."""
     found = jnp.any(steps)
     j = jnp.argmax(steps)
-    f0, f1 = f[j], f[j + 1]
-    denom = jnp.where(found, f0 - f1, 1.0)  # != 0 where found: f0 and f1 lie on opposite sides of 0
-    t = ts[j] + (f0 / denom) * (ts[j + 1] - ts[j])
+    t = ts[j] + _zero_fraction(f[j], f[j + 1], found) * (ts[j + 1] - ts[j])
     return jnp.where(found, t, jnp.inf)
+
+
+def _zero_fraction(f0, f1, crosses):
+    """The fraction s of a saved-time step at which a signal going linearly from `f0` to `f1` is 0, where
+    `crosses` (they lie on opposite sides of 0: s in [0, 1]); elsewhere a finite stand-in, with no 0/0
+    under jvp. Every contact event and every value read at one is placed by it."""
+    return f0 / jnp.where(crosses, f0 - f1, 1.0)
 
 
 def last_down_crossing(ts, f):
@@ -138,8 +143,7 @@ def _last_down_step(f):
     down = on[:-1] & ~on[1:]
     found = jnp.any(down)
     j = down.size - 1 - jnp.argmax(down[::-1])  # the last step with a down-crossing
-    f0, f1 = f[j], f[j + 1]
-    return found, j, f0 / jnp.where(found, f0 - f1, 1.0)
+    return found, j, _zero_fraction(f[j], f[j + 1], found)
 
 
 def _down_crossings(ts, F):
@@ -191,14 +195,17 @@ def _max_tilt(traj):
     return jnp.max(_tilt(traj))
 
 
+def _ground_contact(traj, scenario):
+    """max_i f_i [N] at the saved times, (n_t,): > 0 exactly while some corner touches the ground."""
+    return jnp.max(contact_function(traj, scenario), axis=-1)
+
+
 def _liftoff_time(traj, scenario):
-    F = contact_function(traj, scenario)
-    return first_down_crossing(traj.ts, jnp.max(F, axis=-1))
+    return first_down_crossing(traj.ts, _ground_contact(traj, scenario))
 
 
 def _last_contact_time(traj, scenario):
-    F = contact_function(traj, scenario)
-    return last_down_crossing(traj.ts, jnp.max(F, axis=-1))
+    return last_down_crossing(traj.ts, _ground_contact(traj, scenario))
 
 
 def _detachment_times(traj, scenario):
@@ -257,8 +264,7 @@ def _max_on_ground(x, F):
     included."""
     on = F > 0.0
     cross = on[:-1] != on[1:]
-    f0, f1 = F[:-1], F[1:]
-    s = f0 / jnp.where(cross, f0 - f1, 1.0)  # in [0, 1] where F changes sign across the step
+    s = _zero_fraction(F[:-1], F[1:], cross)
     x_cross = x[:-1] + s * (x[1:] - x[:-1])
     return jnp.maximum(jnp.max(jnp.where(on, x, 0.0)), jnp.max(jnp.where(cross, x_cross, 0.0)))
 
@@ -274,22 +280,23 @@ def _ground_slide(traj, scenario):
     """Largest horizontal distance of C from its start [m] while some corner is in contact (max_i f_i > 0;
     at the saved times and at the contact events between them, `_max_on_ground`): how far the load is
     dragged over the ground, not how far it swings when free."""
-    F = jnp.max(contact_function(traj, scenario), axis=-1)
-    return _max_on_ground(_horizontal_distance(traj.position, traj.position[:1]), F)
+    return _max_on_ground(
+        _horizontal_distance(traj.position, traj.position[:1]), _ground_contact(traj, scenario)
+    )
 
 
 def _ground_tilt(traj, scenario):
     """Largest angle between body ζ and the vertical [rad] while some corner is in contact (max_i f_i > 0; at
     the saved times and at the contact events between them, `_max_on_ground`): how far the load rolls over
     on the ground, not how it hangs in the air."""
-    return _max_on_ground(_tilt(traj), jnp.max(contact_function(traj, scenario), axis=-1))
+    return _max_on_ground(_tilt(traj), _ground_contact(traj, scenario))
 
 
 def _swing_amplitude(traj, scenario):
     """Largest horizontal distance [m] of C from the boom tip A after the last contact: at the saved times
     after it and at the last contact itself, interpolated linearly (so the value is continuous where the
     last contact passes a saved time); 0 if the load is still on the ground at t1."""
-    F = jnp.max(contact_function(traj, scenario), axis=-1)
+    F = _ground_contact(traj, scenario)
     d = _horizontal_distance(traj.position, traj.tip_position)
     found, j, s = _last_down_step(F)
     free = F[-1] <= 0.0
