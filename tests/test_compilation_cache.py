@@ -1,7 +1,8 @@
 """The persistent compilation cache: compiled cores without host callbacks (which JAX refuses to store), a
 second process that loads instead of compiling and returns the same bits (JAX's cache, for a user's own
 `jax.jit` around `simulate`; jaxhoist's own programs stored whole: also tests/test_stored_programs.py), a
-damaged entry recompiled rather than trusted, `--no-cache`, and the cache folder's location and size bound.
+damaged entry recompiled rather than trusted, `--no-cache`, the cache folder's location and size bound,
+and the compiler options of jaxhoist's own programs.
 Every test uses a folder under `tmp_path`, never the user's cache."""
 
 import hashlib
@@ -25,8 +26,9 @@ from jaxhoist._apps.identify import core as identify_core
 from jaxhoist._apps.identify import fit as identify_fit
 from jaxhoist._apps.identify.options import fit_solver_options
 from jaxhoist._io.measurement import Measurement
-from jaxhoist._numerics import batch
+from jaxhoist._numerics import batch, compile_cache, xla_options
 from jaxhoist._numerics import persistent_cache as pc
+from jaxhoist._numerics import solve as solve_mod
 from jaxhoist._numerics import stored_programs as sp
 from jaxhoist._numerics.observables import get as get_observable
 from jaxhoist._numerics.solve import _solve_jit, as_float64_leaves
@@ -55,6 +57,31 @@ def tiny():
 def test_default_simulate_core_has_no_host_callback(tiny):
     sc, ts = tiny
     _assert_no_host_callback(_solve_jit.lower(sc, ts, jh.SolverOptions()))
+
+
+def test_jaxhoists_programs_compile_with_its_compiler_options(monkeypatch, tiny):
+    """On CPU this jaxlib takes jaxhoist's compiler options (`xla_options`), no other backend gets them, and
+    the programs jaxhoist compiles itself (`compile_cache.program`: `simulate`'s core with concrete inputs,
+    the cache on or off) are compiled with them."""
+    assert xla_options.compiler_options("cpu") == xla_options.CPU_OPTIONS
+    assert xla_options.compiler_options("gpu") == {}
+    seen = []
+    compile_lowered = jax.stages.Lowered.compile
+
+    def spy(self, compiler_options=None, **kwargs):
+        seen.append(compiler_options)
+        return compile_lowered(self, compiler_options, **kwargs)
+
+    monkeypatch.setattr(jax.stages.Lowered, "compile", spy)
+    x = jnp.arange(3.0)
+    exe = compile_cache.program("test-options", "x", jnp.cumsum, (x,))[0]
+    np.testing.assert_array_equal(exe(x), [0.0, 1.0, 3.0])
+    assert seen == [xla_options.CPU_OPTIONS]
+    sc, ts = tiny
+    monkeypatch.setattr(
+        compile_cache, "program", lambda kind, *args, **kwargs: (seen.append(kind), (None,))[1]
+    )
+    assert solve_mod._core(sc, ts, jh.SolverOptions()) is None and seen[-1] == "simulate"
 
 
 def test_simulate_compiles_one_program_for_any_tolerances(paper42):

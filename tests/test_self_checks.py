@@ -224,7 +224,7 @@ def test_each_range_refuses_outside_and_admits_its_ends(paper42, path):
         outside.append(rng.low * 10.0)
     for value in outside:
         bad = _with_value(sc, path, value)
-        with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
+        with mock.patch.object(solve_mod, "_core", _core_must_not_run):
             with pytest.raises(jh.ScenarioError) as info:
                 jh.simulate(bad, 0.1)
         msg = str(info.value)
@@ -277,7 +277,7 @@ def test_zero_is_a_switch_where_the_range_says_so(paper42):
     [("rope.stiffness", 1e16), ("boom.tip_mass", 1e-12), ("foundation.friction_coefficient", 1e4)],
 )
 def test_absurd_values_are_refused_and_solved_with_the_opt_in(paper42, path, value):
-    with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
+    with mock.patch.object(solve_mod, "_core", _core_must_not_run):
         with pytest.raises(jh.ScenarioError, match=_named(path)):
             jh.simulate(paper42.replace(**{path: value}), 0.1)
     opted = paper42.replace(**{path: value}, allow_implausible=True)

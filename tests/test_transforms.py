@@ -14,6 +14,7 @@ from conftest import N_SAVE, TSIT5_CAPPED, stiff_member
 
 import jaxhoist as jh
 import jaxhoist._numerics.solve as solve_mod
+from jaxhoist._numerics import compile_cache
 from jaxhoist._physics.paths import get_leaf
 
 # Tight solves of the derivative tests (one compile per transform: the forward-mode one also gives the
@@ -135,14 +136,18 @@ def test_derivative_across_damped_touch_down(paper42, x0):
 # ---------------------------------------------------------------------------- recompilation
 
 
-# The jitted core of `simulate`, wrapped to raise if traced a second time. Module-level, so that the tests
-# below share its one compile (the guard counts traces, and cache hits are not traces).
-_GUARDED = eqx.filter_jit(eqx.debug.assert_max_traces(solve_mod.solve, max_traces=1))
-
-
 @pytest.fixture
 def guarded_core(monkeypatch):
-    monkeypatch.setattr(solve_mod, "_solve_jit", _GUARDED)
+    """`simulate`'s solve core (compiled through `compile_cache.program`) wrapped to raise if traced a second
+    time while the test runs: the process's compiled `simulate` programs are set aside, so the test's first
+    call traces once (its compile is loaded from JAX's cache where another test compiled it), and put back
+    afterwards. Cache hits are not traces."""
+    saved = {k: v for k, v in compile_cache._CACHE.items() if k[0] == "simulate"}
+    compile_cache.clear("simulate")
+    monkeypatch.setattr(solve_mod, "solve", eqx.debug.assert_max_traces(solve_mod.solve, max_traces=1))
+    yield
+    compile_cache.clear("simulate")
+    compile_cache._CACHE.update(saved)
 
 
 def _mu(s):
@@ -214,9 +219,9 @@ def test_max_steps_reported_or_raised(paper42):
 
 def test_nan_leaf_rejected_before_compiling(paper42, monkeypatch):
     def boom(*a, **k):
-        raise AssertionError("the jitted core must not be reached with an invalid scenario")
+        raise AssertionError("the compiled core must not be reached with an invalid scenario")
 
-    monkeypatch.setattr(solve_mod, "_solve_jit", boom)
+    monkeypatch.setattr(solve_mod, "_core", boom)
     for path in ("foundation.friction_coefficient", "rope.damping", "boom.tip_mass"):
         with pytest.raises(jh.ScenarioError, match=path.replace(".", r"\.")):
             jh.simulate(paper42.replace(**{path: float("nan")}), 0.1)

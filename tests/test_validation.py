@@ -95,7 +95,7 @@ def _core_must_not_run(*args, **kwargs):
 
 def load_and_simulate(d: dict):
     """What a user does: dict -> Scenario -> simulate, with the compiled core replaced by a trap."""
-    with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
+    with mock.patch.object(solve_mod, "_core", _core_must_not_run):
         jh.simulate(jh.scenario_from_dict(d, "test.toml"), 0.1)
 
 
@@ -289,7 +289,7 @@ LEAVES = (
 def test_replace_with_bad_value_is_caught_by_simulate(paper42, path, value):
     """`Scenario.replace` (like `eqx.tree_at`) skips `__init__`, so the checks must run again in simulate."""
     sc = paper42.replace(**{path: value * np.ones(np.shape(get_leaf(paper42, path)))})
-    with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
+    with mock.patch.object(solve_mod, "_core", _core_must_not_run):
         with pytest.raises(jh.ScenarioError, match=_named(path)):
             jh.simulate(sc, 0.1)
 
@@ -299,7 +299,7 @@ def test_float32_leaf_refused(paper42, path):
     leaf = get_leaf(paper42, path)
     getter = leaf_getter(path)
     sc = eqx.tree_at(getter, paper42, jnp.asarray(leaf, dtype=jnp.float32))
-    with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
+    with mock.patch.object(solve_mod, "_core", _core_must_not_run):
         with pytest.raises(jh.ScenarioError, match=_named(path)) as info:
             jh.simulate(sc, 0.1)
     assert "float32" in str(info.value) and "jax_enable_x64" in str(info.value)
@@ -314,7 +314,7 @@ def test_without_x64_a_clear_error(paper42):
 
 
 def test_bad_times_and_options(paper42):
-    with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
+    with mock.patch.object(solve_mod, "_core", _core_must_not_run):
         for kw, word in [
             (dict(times=-1.0), "t1"),
             (dict(times=float("nan")), "t1"),
@@ -433,7 +433,7 @@ def test_error_messages_are_capped_and_on_one_line():
 def _set_error(paper42, item: str) -> str:
     from jaxhoist._io.scenario import apply_overrides
 
-    with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
+    with mock.patch.object(solve_mod, "_core", _core_must_not_run):
         with pytest.raises(jh.ScenarioError) as info:
             apply_overrides(paper42, [item])
     return _one_bounded_line(str(info.value))
@@ -485,7 +485,7 @@ def test_bad_override_names_its_field(paper42, item, field):
     ],
 )
 def test_absurd_but_finite_values_are_flagged(paper42, path, value, field):
-    with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
+    with mock.patch.object(solve_mod, "_core", _core_must_not_run):
         with pytest.raises(jh.ScenarioError) as info:
             jh.simulate(paper42.replace(**{path: value}), 0.1)
     msg = _one_bounded_line(str(info.value))
@@ -521,7 +521,7 @@ def test_plausible_extremes_still_accepted(paper42):
 )
 def test_api_and_cli_give_the_same_message(paper42, path, value):
     cli_msg = _set_error(paper42, f"{path}={value}")
-    with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
+    with mock.patch.object(solve_mod, "_core", _core_must_not_run):
         with pytest.raises(jh.ScenarioError) as info:
             jh.simulate(paper42.replace(**{path: value}), 0.1)
     assert cli_msg == f"{info.value} [from --set]"
@@ -563,7 +563,7 @@ def test_t1_contradicting_ts_is_refused():
 
 
 def test_simulate_refuses_t1_contradicting_ts(paper42):
-    with mock.patch.object(solve_mod, "_solve_jit", _core_must_not_run):
+    with mock.patch.object(solve_mod, "_core", _core_must_not_run):
         with pytest.raises(jh.ScenarioError, match=r"t1.*ts"):
             jh.simulate(paper42, jh.Times(1.0, ts=np.array([0.0, 0.02, 0.05])))
 

@@ -1,9 +1,11 @@
 """Where the cold time of a first call goes: Python tracing, lowering to StableHLO and XLA's compile, timed
 apart (`jax.jit(f).trace(...)`, `.lower()`, `.compile()`) for each core program, with the size of what is
-compiled.
+compiled. Compiled with the compiler options jaxhoist compiles its programs with
+(`jaxhoist._numerics.xla_options`); `--options xla-defaults` compiles with XLA's defaults instead, `--options
+both` each program both ways in turn (the comparison behind that module's choice).
 
     python experiments/benchmarks/bench_compile_phases.py [--program NAME ...] [--t1 25] [--n-save 501]
-        [--lanes 16] [--run] [--out DIR] [--quick]
+        [--lanes 16] [--run] [--options jaxhoist|xla-defaults|both] [--out DIR] [--quick]
 
 Programs: `simulate` (the elastic core of `jaxhoist simulate` / `jh.simulate`, default solver),
 `scan` (one lock-step group of `jh.scan` of the friction coefficient, `numerics.batch.group_fn`: one while
@@ -44,11 +46,13 @@ import jax.numpy as jnp
 import numpy as np
 import jaxhoist as jh
 from jaxhoist._apps.scan.layout import scan_solver_options
-from jaxhoist._numerics import batch, observables, solve
+from jaxhoist._numerics import batch, observables, solve, xla_options
 from jaxhoist._numerics.options import SolverOptions
 
 program, t1, n_save, lanes, do_run = sys.argv[1], float(sys.argv[2]), int(sys.argv[3]), int(sys.argv[4]), \\
     sys.argv[5] == "1"
+# the compiler options jaxhoist compiles its programs with, or XLA's defaults (the comparison)
+options = xla_options.compiler_options() if sys.argv[6] == "jaxhoist" else {}
 ts = jnp.linspace(0.0, t1, n_save)
 if program == "simulate":
     sc = solve.as_float64_leaves(jh.load_scenario("paper-4.2")).unlabelled()
@@ -87,7 +91,7 @@ def timed(name, fn):
     return out
 traced = timed("trace", lambda: f.trace(*args))
 lowered = timed("lower", traced.lower)
-compiled = timed("compile", lowered.compile)
+compiled = timed("compile", lambda: lowered.compile(compiler_options=options))
 hlo = compiled.as_text() or ""
 res["lines"] = lowered.as_text().count("\\n")
 res["fusions"] = len(re.findall(r"= \\S+ fusion\\(", hlo))
@@ -101,9 +105,9 @@ PROGRAMS = ("simulate", "scan", "scan-derivatives")  # the default set
 MEMBERS = ("scan-member", "scan-derivatives-member")  # on request (--program)
 
 
-def run_program(name: str, t1: float, n_save: int, lanes: int, run: bool) -> dict:
+def run_program(name: str, t1: float, n_save: int, lanes: int, run: bool, options: str) -> dict:
     env = {**os.environ, "PYTHONPATH": str(ROOT), "JAXHOIST_CACHE_DIR": ""}
-    argv = [sys.executable, "-c", CHILD, name, str(t1), str(n_save), str(lanes), "1" if run else "0"]
+    argv = [sys.executable, "-c", CHILD, name, str(t1), str(n_save), str(lanes), "1" if run else "0", options]
     # run in the repository root: `python -c` puts the working folder first on sys.path
     proc = subprocess.run(argv, env=env, capture_output=True, text=True, cwd=ROOT)
     if proc.returncode != 0:
@@ -119,24 +123,32 @@ def main() -> int:
     p.add_argument("--n-save", type=int, default=501, help="saved times (default 501)")
     p.add_argument("--lanes", type=int, default=16, help="members of a scan group (default 16)")
     p.add_argument("--run", action="store_true", help="also time a second call (the run alone)")
+    p.add_argument(
+        "--options",
+        choices=("jaxhoist", "xla-defaults", "both"),
+        default="jaxhoist",
+        help="compile with jaxhoist's compiler options (default), XLA's defaults, or both, alternating",
+    )
     p.add_argument("--out", default=None, help="folder for compile_phases.txt (optional)")
     p.add_argument("--quick", action="store_true", help="the scan group only, 1 s, 11 saved times, 2 lanes")
     a = p.parse_args()
     if a.quick:  # a smoke check that the script runs: its numbers are not the programs'
         a.program, a.t1, a.n_save, a.lanes = ["scan"], 1.0, 11, 2
     head = (
-        f"{'program':<18} {'trace':>13} {'lower':>13} {'compile':>15} {'lines':>7} {'fusions':>8} {'run':>15}"
+        f"{'program':<31} {'trace':>13} {'lower':>13} {'compile':>15} {'lines':>7} {'fusions':>8} {'run':>15}"
     )
     lines = [head]
     print(head, flush=True)
-    for name in a.program or PROGRAMS:
-        r = run_program(name, a.t1, a.n_save, a.lanes, a.run)
+    variants = ("jaxhoist", "xla-defaults") if a.options == "both" else (a.options,)
+    for name, variant in [(n, v) for n in a.program or PROGRAMS for v in variants]:
+        r = run_program(name, a.t1, a.n_save, a.lanes, a.run, variant)
 
         def both(k, w):  # wall (CPU) seconds
             return f"{r[k]:{w}.2f} ({r[k + '_cpu']:{w}.2f})" if k in r else f"{'-':>{2 * w + 3}}"
 
+        label = name + ("" if variant == "jaxhoist" else " (XLA defaults)")
         line = (
-            f"{name:<18} {both('trace', 5)} {both('lower', 5)} {both('compile', 6)} {r['lines']:7d} "
+            f"{label:<31} {both('trace', 5)} {both('lower', 5)} {both('compile', 6)} {r['lines']:7d} "
             f"{r['fusions']:8d} {both('run', 6)}"
         )
         lines.append(line)

@@ -22,7 +22,7 @@ import numpy as np
 from .._errors import SolveStatus
 from .._physics.equilibrium import initial_state
 from .._physics.paths import set_param
-from . import compile_cache, lockstep
+from . import compile_cache, lockstep, xla_options
 from . import fixed_step as fixed_mod
 from .options import SolverOptions
 from .sensitivity import uses_tangent_solve
@@ -337,13 +337,16 @@ class _LoweredChunk:
 
     def compile(self) -> CompiledChunk:
         items = list(self.lowered.items())
+
+        def compile_one(item):
+            device, lowered = item
+            return lowered.compile(compiler_options=xla_options.compiler_options(device.platform))
+
         if len(items) == 1:
-            exes = {items[0][0]: items[0][1].compile()}
+            exes = {items[0][0]: compile_one(items[0])}
         else:  # XLA compiles without holding the GIL: one thread per accelerator
             with concurrent.futures.ThreadPoolExecutor(len(items)) as pool:
-                exes = dict(
-                    zip([d for d, _ in items], pool.map(lambda kv: kv[1].compile(), items), strict=True)
-                )
+                exes = dict(zip([d for d, _ in items], pool.map(compile_one, items), strict=True))
         if self.wrap is not None:
             exes = {d: self.wrap(d, exe) for d, exe in exes.items()}
         return CompiledChunk(self.spec, exes)

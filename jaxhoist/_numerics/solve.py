@@ -4,6 +4,9 @@ times. It knows nothing of the rigid model (`_apps/simulate.py` dispatches on th
 
 from __future__ import annotations
 
+import functools
+from collections.abc import Callable
+
 import diffrax
 import equinox as eqx
 import jax
@@ -18,7 +21,7 @@ from .._physics import kinematics
 from .._physics.elastic import Constants, State, snapshot, vector_field
 from .._physics.equilibrium import initial_state
 from .._physics.params import Scenario
-from . import compile_cache, persistent_cache
+from . import compile_cache, xla_options
 from .callback_free import callback_free, raise_on_status
 from .options import SolverOptions
 from .sensitivity import solve_forward, uses_tangent_solve
@@ -159,8 +162,8 @@ def _has_tangent(x) -> bool:
 def _jvp_of_solve(scenario: Scenario, ts, options: SolverOptions, moved: tuple[bool, ...], d_moved: list):
     """`jax.jvp` of `_solve_jit` along the leaves of `(scenario, ts)` marked in `moved` (their tangents
     `d_moved`; every other leaf held, a symbolic zero): the program JAX builds for a caller's `jax.jvp` of a
-    function that calls `simulate`, the same bit for bit (explicit zero tangents on the held leaves give
-    another program, which rounds differently)."""
+    function that calls `simulate` (explicit zero tangents on the held leaves give another program, which
+    rounds differently)."""
     leaves, tree = jax.tree_util.tree_flatten((scenario, ts))
 
     def moving(xs):
@@ -185,7 +188,9 @@ def _stored_forward(options: SolverOptions):
     primals and tangents are concrete: a `jax.jvp` of a function that calls `simulate`, outside `jax.jit`.
     A later process then loads the derivative's program instead of tracing the solve and its tangent solve
     again. Anywhere else (under `jax.jit` or `jax.vmap`, as in `jax.jacfwd`) the rule is `_jvp_of_solve`
-    traced in place. Both are the program JAX builds without the rule, the same numbers bit for bit."""
+    traced in place. Both are the program JAX builds without the rule; the stored one is compiled with
+    jaxhoist's compiler options (`xla_options`), the one traced in place with the caller's, so the two
+    agree to rounding (and to the solver's local error where rounding flips a step's acceptance)."""
 
     @jax.custom_jvp
     def core(scenario, ts):
@@ -212,23 +217,31 @@ def _stored_forward(options: SolverOptions):
 
 
 def _core(scenario: Scenario, ts, options: SolverOptions):
-    """The compiled solve core for these inputs: with the persistent compilation cache on and concrete inputs,
-    the one program of `compile_cache.program` (stored whole in the cache folder, so that a later process
-    loads it without tracing or lowering it; the command line's `simulate` shares it); under a caller's
+    """The compiled solve core for these inputs: with concrete inputs, the one program of
+    `compile_cache.program`, compiled with jaxhoist's compiler options (`xla_options`) and, with the
+    persistent compilation cache on, stored whole in the cache folder, so that a later process loads it
+    without tracing or lowering it (the command line's `simulate` shares it); under a caller's
     transformation with forward-mode `options`, `_stored_forward` (`_solve_jit` in a `jax.custom_jvp` whose
-    rule stores the derivative's program where a `jax.jvp` brings concrete values); under a caller's
-    transformation with other `options` (`jax.jit`, `jax.vmap`, `jax.grad`), with an in-loop progress meter
-    (a host callback, which no stored program carries) or with the cache off, `_solve_jit`."""
+    rule runs the derivative's program of `compile_cache.program` where a `jax.jvp` brings concrete
+    values); under a caller's transformation with other `options` (`jax.jit`, `jax.vmap`, `jax.grad`),
+    `_solve_jit`, traced into the caller's program; with an in-loop progress meter (a host callback, which
+    no stored program carries), `_solve_jit` compiled with jaxhoist's compiler options."""
     args = (scenario, ts, options)
-    if persistent_cache.enabled_folder() is None or not isinstance(
-        options.progress_meter, diffrax.NoProgressMeter
-    ):
-        return _solve_jit
+    if not isinstance(options.progress_meter, diffrax.NoProgressMeter):
+        return _solve_jit_with(tuple(xla_options.compiler_options().items()))
     if any(map(is_tracer, jax.tree_util.tree_leaves(args))):
         if uses_tangent_solve(options) and not any(map(is_tracer, jax.tree_util.tree_leaves(options))):
             return _stored_forward(options)
         return _solve_jit
     return compile_cache.program("simulate", "solve", solve, args)[0]
+
+
+@functools.cache
+def _solve_jit_with(compiler_options: tuple) -> Callable:
+    """`solve` as `eqx.filter_jit` compiles it at the top level with the XLA options `compiler_options`
+    ((name, value) pairs)."""
+    # filter_jit passes jax.jit's keyword arguments on (its typed overloads leave them out)
+    return eqx.filter_jit(solve, compiler_options=dict(compiler_options))  # pyright: ignore[reportCallIssue]
 
 
 def _raise_on_failure(traj: Trajectory) -> Trajectory:

@@ -6,19 +6,20 @@ derivative), `identify`'s fit pieces (its start and one Levenberg-Marquardt step
 `compile_cache.stored_jit`, the rigid model's phase solve and phase-driver pieces.
 
 JAX's persistent cache is keyed by the lowered program's text, so every process still traces the Python
-function into JAX's form and lowers it before it can look the program up (for `simulate`'s solve core that
-is most of a warm run's time). Here the key is what decides the program before any tracing: the inputs'
-pytree structure, the array leaves' shapes and dtypes, the static (non-array) leaves (a dataclass such as
-a scan's `BatchSpec` field by field; a function of jaxhoist by its name, or, where it is a lambda or made
-inside another function such as an observable's factory, by its code and the values it captured), the
-versions of jaxhoist (a digest of its source files), JAX, jaxlib, equinox, diffrax, lineax, optimistix and
-numpy, the backend and its kind of device (not the number of devices: a stored program runs on one, and
-its compiled form is the same in a process of one host device or several) and the JAX settings that change
-a trace. A hit deserialises the executable (`jax.experimental.serialize_executable`); a miss traces,
-lowers and compiles and stores the result instead of JAX's cache entry (which would only double the
-folder's size). Where JAX's cache already holds the program (written by plain `jit` use), its executable
-is used but not stored: loaded from JAX's cache, it serialises without its machine code. A loaded program
-needs nothing set up by lowering except jaxlib's CPU LAPACK routines, which `load` sets up.
+function into JAX's form and lowers it before it can look the program up (for `simulate`'s solve core that is
+most of a warm run's time). Here the key is what decides the program before any tracing: the inputs' pytree
+structure, the array leaves' shapes and dtypes, the static (non-array) leaves (a dataclass such as a scan's
+`BatchSpec` field by field; a function of jaxhoist by its name, or, where it is a lambda or made inside
+another function such as an observable's factory, by its code and the values it captured), the versions of
+jaxhoist (a digest of its source files), JAX, jaxlib, equinox, diffrax, lineax, optimistix and numpy, the
+backend and its kind of device (not the number of devices: a stored program runs on one, and its compiled form
+is the same in a process of one host device or several), the JAX settings that change a trace, the compiler
+options it is compiled with (`xla_options`) and the environment's `XLA_FLAGS`. A hit deserialises the
+executable (`jax.experimental.serialize_executable`); a miss traces, lowers and compiles and stores the result
+instead of JAX's cache entry (which would only double the folder's size). Where JAX's cache already holds the
+program (written by plain `jit` use), its executable is used but not stored: loaded from JAX's cache, it
+serialises without its machine code. A loaded program needs nothing set up by lowering except jaxlib's CPU
+LAPACK routines, which `load` sets up.
 
 A stored program is never trusted blindly: each file carries a SHA-256 digest of its content and the full
 key it was compiled for; a file whose digest or key does not match, or that fails to load, is compiled
@@ -47,6 +48,8 @@ from typing import Any
 import equinox as eqx
 import jax
 import numpy as np
+
+from . import xla_options
 
 #: The stored programs' subfolder of the cache folder.
 SUBFOLDER = "programs"
@@ -192,6 +195,8 @@ def program_key(name: str, args: tuple) -> str | None:
         f"program {name}",
         _versions(),
         f"backend {jax.default_backend()} {jax.devices()[0].device_kind}",
+        xla_options.describe(),
+        f"env XLA_FLAGS={os.environ.get('XLA_FLAGS', '')}",
         *(f"{c} {getattr(jax.config, c, None)!r}" for c in config),
         *(f"env {k}={v}" for k, v in sorted(os.environ.items()) if k.startswith(("EQX_", "DIFFRAX_"))),
         *map(str, structure),
@@ -290,11 +295,12 @@ def compile_and_store(folder: Path | None, name: str, fn: Callable[..., Any], ar
 
     flat.__name__ = flat.__qualname__ = getattr(fn, "__name__", name)
     lowered = jax.jit(flat).lower(*leaves)
+    options = xla_options.compiler_options()
     key = program_key(name, args) if folder is not None else None
     if folder is None or key is None:
-        return StoredProgram(lowered.compile(), out_defs[0], in_def)
+        return StoredProgram(lowered.compile(compiler_options=options), out_defs[0], in_def)
     with _fresh_compile() as loaded_from_jax_cache:
-        exe = lowered.compile()
+        exe = lowered.compile(compiler_options=options)
     # An executable that JAX loaded from its own cache serialises without its machine code (it would fail
     # to run in another process): only a freshly compiled one is stored.
     if not loaded_from_jax_cache:

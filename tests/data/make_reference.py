@@ -12,7 +12,8 @@ shows, the same versions), the rigid paper-2.3 run took 3 276 accepted steps ins
 positions moved by up to 6e-9 m, and the scan's sensitivities by up to 0.07 m per unit of μ (a member near
 a contact switch). Results of one kind of machine therefore go in a file of their own,
 `reference_results.<machine>.npz` (`machine()`: architecture, CPU vendor, widest vector extension), which
-the test prefers where it exists.
+the test prefers where it exists. For the same reason each file records the XLA compiler options it was
+computed with (`STAMP`), and the test compares a file only with results of the same options.
 
     PYTHONPATH=$PWD python tests/data/make_reference.py                 # reference_results.npz
     PYTHONPATH=$PWD python tests/data/make_reference.py --this-machine  # reference_results.<machine>.npz
@@ -30,6 +31,7 @@ import jax
 import numpy as np
 
 import jaxhoist as jh
+from jaxhoist._numerics import xla_options
 
 PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2")
 T1 = 2.0  # [s]: the elastic model's horizon, short so that the comparison stays cheap
@@ -147,8 +149,20 @@ def scan() -> dict[str, np.ndarray]:
     return out
 
 
+#: The entry that records the compiler options the arrays were computed with (`xla_options.describe()`):
+#: other options round differently, so a file recorded with other ones is not compared (a file without
+#: the entry was recorded with XLA's defaults).
+STAMP = "meta/compiler_options"
+
+
+def stamp(arrays: dict[str, np.ndarray]) -> str:
+    """The compiler options a recording's arrays were computed with, as `xla_options.describe()` gives
+    them."""
+    return str(arrays[STAMP]) if STAMP in arrays else "compiler options []"
+
+
 def compute() -> dict[str, np.ndarray]:
-    return {**trajectories(), **scan()}
+    return {**trajectories(), **scan(), STAMP: np.array(xla_options.describe())}
 
 
 def _setup() -> None:
