@@ -181,6 +181,10 @@ def _split(args: tuple):
     return leaves, in_def, static
 
 
+# The environment variables that change a trace or a compile (equinox's and diffrax's settings, XLA's flags).
+_KEY_ENVIRONMENT = ("EQX_", "DIFFRAX_", "XLA_FLAGS")
+
+
 def program_key(name: str, args: tuple) -> str | None:
     """The full key of the program `name` called with `args`: everything that decides its compiled form.
     None where a part of it has no stable text (then nothing is stored)."""
@@ -196,9 +200,8 @@ def program_key(name: str, args: tuple) -> str | None:
         _versions(),
         f"backend {jax.default_backend()} {jax.devices()[0].device_kind}",
         xla_options.describe(),
-        f"env XLA_FLAGS={os.environ.get('XLA_FLAGS', '')}",
         *(f"{c} {getattr(jax.config, c, None)!r}" for c in config),
-        *(f"env {k}={v}" for k, v in sorted(os.environ.items()) if k.startswith(("EQX_", "DIFFRAX_"))),
+        *(f"env {k}={v}" for k, v in sorted(os.environ.items()) if k.startswith(_KEY_ENVIRONMENT)),
         *map(str, structure),
         *(f"leaf {x.shape} {x.dtype} weak={getattr(x, 'weak_type', False)}" for x in leaves),
         *(f"static {t}" for t in texts),

@@ -19,26 +19,24 @@ with XLA's defaults.
 
 from __future__ import annotations
 
+import functools
+
 import jax
 
 #: The options jaxhoist compiles its CPU programs with (see the module docstring).
 CPU_OPTIONS: dict[str, str | bool] = {"xla_cpu_use_fusion_emitters": False}
 
-_SUPPORTED: list[bool] = []
 
-
+@functools.cache
 def _supported() -> bool:
     """Whether this jaxlib's CPU compiler takes `CPU_OPTIONS`: a tiny program compiled with them once per
     process (a few milliseconds)."""
-    if not _SUPPORTED:
-        try:
-            cpu = jax.devices("cpu")[0]
-            with jax.default_device(cpu):
-                jax.jit(lambda x: x + 1, compiler_options=CPU_OPTIONS).lower(0.0).compile()
-            _SUPPORTED.append(True)
-        except Exception:  # noqa: BLE001  (an unknown option, or no CPU backend: XLA's defaults)
-            _SUPPORTED.append(False)
-    return _SUPPORTED[0]
+    try:
+        with jax.default_device(jax.devices("cpu")[0]):
+            jax.jit(lambda x: x + 1, compiler_options=CPU_OPTIONS).lower(0.0).compile()
+    except Exception:  # noqa: BLE001  (an unknown option, or no CPU backend: XLA's defaults)
+        return False
+    return True
 
 
 def compiler_options(platform: str | None = None) -> dict[str, str | bool]:
@@ -50,6 +48,7 @@ def compiler_options(platform: str | None = None) -> dict[str, str | bool]:
     return dict(CPU_OPTIONS)
 
 
-def describe() -> str:
-    """The options of `compiler_options()` as one line of text, for the key of a stored program."""
-    return f"compiler options {sorted(compiler_options().items())}"
+def describe(options: dict[str, str | bool] | None = None) -> str:
+    """`options` (default: those of `compiler_options()`) as one line of text, for the key of a stored
+    program and the stamp of a reference recording; `describe({})` stands for XLA's defaults."""
+    return f"compiler options {sorted((compiler_options() if options is None else options).items())}"

@@ -158,7 +158,7 @@ STAMP = "meta/compiler_options"
 def stamp(arrays: dict[str, np.ndarray]) -> str:
     """The compiler options a recording's arrays were computed with, as `xla_options.describe()` gives
     them."""
-    return str(arrays[STAMP]) if STAMP in arrays else "compiler options []"
+    return str(arrays[STAMP]) if STAMP in arrays else xla_options.describe({})
 
 
 def compute() -> dict[str, np.ndarray]:
