@@ -22,9 +22,12 @@ import jax
 # and `jh.enable_compilation_cache()`, JAX's own variables for any process that imports JAX. So a program
 # compiled once in the session is loaded, not compiled again, in the next test module (each module drops its
 # compiled code, see `_release_compiled_code`), in the other worker, or in a command's second run. Every
-# program is stored, the small ones too (as `jh.enable_compilation_cache()` sets it). The suite starts from an
-# empty cache every time; set JAXHOIST_TEST_CACHE_DIR to a folder to keep the cache between sessions instead.
-# tests/test_compilation_cache.py gives its subprocesses folders of their own, to test the cold behaviour.
+# program is stored, the small ones too (as `jh.enable_compilation_cache()` sets it), and the workers switch
+# the library's cache on (below), as the command line does: jaxhoist's own programs are stored whole and
+# loaded without tracing. The suite starts from an empty cache every time; set JAXHOIST_TEST_CACHE_DIR to a
+# folder to keep the cache between sessions instead. tests/test_compilation_cache.py gives its subprocesses
+# folders of their own, to test the cold behaviour; tests of in-process tracing and compiling switch the
+# library's cache off while they run.
 if not os.environ.get("JAXHOIST_TEST_CACHE_DIR"):
     _folder = tempfile.mkdtemp(prefix="jaxhoist-test-cache-")
     atexit.register(shutil.rmtree, _folder, ignore_errors=True)
@@ -69,6 +72,14 @@ import jax.numpy as jnp  # noqa: E402
 import pytest  # noqa: E402
 
 import jaxhoist as jh  # noqa: E402
+
+# The library's cache on, in the session's folder, in every worker: jaxhoist's own programs are stored whole
+# (`stored_programs`), so the next module, the other worker and the subprocesses load them without tracing
+# (measured: about 5 % of the suite's worker time, most of it tracing).
+jh.enable_compilation_cache(CACHE_ENV["JAXHOIST_CACHE_DIR"])
+from jaxhoist._numerics import persistent_cache  # noqa: E402
+
+_SESSION_CACHE = persistent_cache.enabled_folder()
 
 PRESETS = ("paper-2.3", "paper-4.1", "paper-4.2", "paper-4.3")
 
@@ -138,14 +149,13 @@ def _release_compiled_code():
     compile died with a segmentation fault (tests/test_statics.py, after ~250 tests). Within a module the
     compiled functions are still shared."""
     yield
-    from jaxhoist._numerics import batch, compile_cache, persistent_cache
+    from jaxhoist._numerics import batch, compile_cache
 
     compile_cache.clear()  # the bifurcation locator's solves and the rigid model's pieces among them
     batch.chunk_fn.cache_clear()
     jax.clear_caches()
-    # the command line's `main()`, run in this process, switches the library's cache on (stored programs):
-    # the next module starts with it off again, as a fresh Python process does
-    persistent_cache._ENABLED[0] = None
+    # a test may have switched the library's cache off or moved it: the next module starts with the session's
+    persistent_cache._ENABLED[0] = _SESSION_CACHE
 
 
 def pytest_collection_modifyitems(config, items):

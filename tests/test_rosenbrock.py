@@ -15,6 +15,7 @@ import pytest
 from conftest import N_SAVE, SOLVE_OPTIONS, TSIT5_CAPPED, stiff_member
 
 import jaxhoist as jh
+from jaxhoist._numerics import persistent_cache as pc
 from jaxhoist._numerics.rosenbrock import ROS34PW2, RosenbrockW, w_step
 from jaxhoist._physics import kinematics
 from jaxhoist._physics.elastic import vector_field
@@ -483,11 +484,13 @@ def test_forward_derivative_in_the_saved_times_is_the_rate(paper42):
     assert np.all(np.isfinite(np.asarray(dtraj.euler)))
 
 
-def test_forward_derivatives_at_other_tolerances_compile_nothing(paper42):
+def test_forward_derivatives_at_other_tolerances_compile_nothing(paper42, monkeypatch):
     """The tangent solve takes the step-size controller's tolerances as inputs, as the plain solve does
     (`sensitivity.solve_forward`, `SolverOptions.traced_tolerances`): `_forward`'s jvp program (rtol 1e-7,
     the tests above) runs at rtol 1e-5, atol 1e-7 without compiling, under those tolerances (fewer steps,
-    a derivative within 1e-3 of the tight one's largest component, not equal to it)."""
+    a derivative within 1e-3 of the tight one's largest component, not equal to it). The library's cache is
+    off meanwhile: a program of its own for the loose tolerances would be compiled here, not loaded."""
+    monkeypatch.setattr(pc, "_ENABLED", [None])
     mu, one = jnp.asarray(paper42.foundation.friction_coefficient, dtype=jnp.float64), jnp.asarray(1.0)
     tight, d_tight = _forward(paper42, mu, one, jnp.zeros_like(TS_HALF))  # compiled here, or by a test above
     compiled = []

@@ -15,6 +15,7 @@ from conftest import N_SAVE, TSIT5_CAPPED, stiff_member
 import jaxhoist as jh
 import jaxhoist._numerics.solve as solve_mod
 from jaxhoist._numerics import compile_cache
+from jaxhoist._numerics import persistent_cache as pc
 from jaxhoist._physics.paths import get_leaf
 
 # Tight solves of the derivative tests (one compile per transform: the forward-mode one also gives the
@@ -141,7 +142,9 @@ def guarded_core(monkeypatch):
     """`simulate`'s solve core (compiled through `compile_cache.program`) wrapped to raise if traced a second
     time while the test runs: the process's compiled `simulate` programs are set aside, so the test's first
     call traces once (its compile is loaded from JAX's cache where another test compiled it), and put back
-    afterwards. Cache hits are not traces."""
+    afterwards. Cache hits are not traces. The library's cache is off meanwhile, so that a program stored
+    whole by another test is traced here, not loaded."""
+    monkeypatch.setattr(pc, "_ENABLED", [None])
     saved = {k: v for k, v in compile_cache._CACHE.items() if k[0] == "simulate"}
     compile_cache.clear("simulate")
     monkeypatch.setattr(solve_mod, "solve", eqx.debug.assert_max_traces(solve_mod.solve, max_traces=1))
