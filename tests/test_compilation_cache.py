@@ -59,10 +59,10 @@ def test_default_simulate_core_has_no_host_callback(tiny):
     _assert_no_host_callback(_solve_jit.lower(sc, ts, jh.SolverOptions()))
 
 
-def test_jaxhoists_programs_compile_with_its_compiler_options(monkeypatch, tiny):
+def test_jaxhoists_programs_compile_with_its_compiler_options(monkeypatch, tiny, tmp_path):
     """On CPU this jaxlib takes jaxhoist's compiler options (`xla_options`), no other backend gets them, and
     the programs jaxhoist compiles itself (`compile_cache.program`: `simulate`'s core with concrete inputs,
-    the cache on or off) are compiled with them."""
+    the cache off and on) are compiled with them."""
     assert xla_options.compiler_options("cpu") == xla_options.CPU_OPTIONS
     assert xla_options.compiler_options("gpu") == {}
     seen = []
@@ -74,9 +74,12 @@ def test_jaxhoists_programs_compile_with_its_compiler_options(monkeypatch, tiny)
 
     monkeypatch.setattr(jax.stages.Lowered, "compile", spy)
     x = jnp.arange(3.0)
-    exe = compile_cache.program("test-options", "x", jnp.cumsum, (x,))[0]
-    np.testing.assert_array_equal(exe(x), [0.0, 1.0, 3.0])
-    assert seen == [xla_options.CPU_OPTIONS]
+    for folder in (None, tmp_path):
+        monkeypatch.setattr(pc, "_ENABLED", [folder])
+        compile_cache.clear("test-options")
+        exe = compile_cache.program("test-options", "x", jnp.cumsum, (x,))[0]
+        np.testing.assert_array_equal(exe(x), [0.0, 1.0, 3.0])
+    assert seen == [xla_options.CPU_OPTIONS] * 2
     sc, ts = tiny
     monkeypatch.setattr(
         compile_cache, "program", lambda kind, *args, **kwargs: (seen.append(kind), (None,))[1]
@@ -84,11 +87,13 @@ def test_jaxhoists_programs_compile_with_its_compiler_options(monkeypatch, tiny)
     assert solve_mod._core(sc, ts, jh.SolverOptions()) is None and seen[-1] == "simulate"
 
 
-def test_simulate_compiles_one_program_for_any_tolerances(paper42):
+def test_simulate_compiles_one_program_for_any_tolerances(paper42, monkeypatch):
     """`simulate` passes rtol and atol to its compiled core as values (`SolverOptions.traced_tolerances`): a
     solve at other tolerances compiles nothing, and uses the tolerances it is given (it takes other steps).
     That the values are bit for bit those of a program with the tolerances compiled in is
-    tests/test_reference_results.py's (its references were computed so)."""
+    tests/test_reference_results.py's (its references were computed so). The library's cache is off
+    meanwhile: a program of its own for the other tolerances would be compiled here, not loaded."""
+    monkeypatch.setattr(pc, "_ENABLED", [None])
     ts = jh.Times(ts=jnp.linspace(0.0, 0.5, N_SAVE))
     compiled = []
 
