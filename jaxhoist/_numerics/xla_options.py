@@ -2,15 +2,15 @@
 
 On CPU, jaxhoist compiles its programs without XLA's fusion emitters (`xla_cpu_use_fusion_emitters=False`):
 XLA then emits its fused loops the older way, which compiles the solve programs in 0.6-0.7x the time. The
-programs run about as fast on the Intel machine of our measurements; on the AMD EPYC with AVX-512 a
-lock-step scan group runs about 1.2x as long (docs/performance-design.md, "XLA's CPU fusion emitters are
-off", has the measurements). The options apply where jaxhoist compiles a program at the top level: `simulate`'s solve
-core and its forward-mode derivative, a scan's group programs, the bifurcation locator's solves,
-`identify`'s fit pieces and the rigid model's pieces (`compile_cache`, `stored_programs`, the scan's
-`batch`), whether the persistent compilation cache is on or off. A caller's own `jax.jit`, `jax.grad` or
-`jax.vmap` around `simulate` compiles the caller's program with the caller's options (JAX takes compiler
-options on the outermost `jit` only); `jax.jit(f, compiler_options={"xla_cpu_use_fusion_emitters": False})`
-gives it the same.
+programs run about as fast on the Intel machine of our measurements; on the AMD EPYC with AVX-512 a lock-step
+scan group runs about 1.2x as long (docs/performance-design.md, "XLA's CPU fusion emitters are off", has the
+measurements). The options apply where jaxhoist compiles a program at the top level: `simulate`'s solve core
+and its forward-mode derivative, a scan's group programs, the bifurcation locator's solves, `identify`'s fit
+pieces and the rigid model's pieces (`compile_cache`, `stored_programs`, the scan's `batch`), whether the
+persistent compilation cache is on or off. A caller's own `jax.jit`, `jax.grad` or `jax.vmap` around
+`simulate` compiles the caller's program with the caller's options (JAX takes compiler options on the
+outermost `jit` only); `jax.jit(f, compiler_options={"xla_cpu_use_fusion_emitters": False})` gives it the
+same.
 
 The option changes the rounding of some fused operations, and an adaptive solver's steps follow the bits, so
 a solve compiled with and without it differs by the local error (both are the same solution to the solver's
