@@ -149,8 +149,10 @@ def test_another_swept_parameter_reuses_the_compiled_group(box, clean):
     """The lock-step group program takes the members' scenarios, not their values (`batch.group_spec`): a
     scan of the foundation's stiffness instead of μ, and a scan of μ on a stiffer box, run the group program
     of `clean` without compiling it again, and a member that two of them share is bit for bit the same,
-    whichever parameter was swept (the box's own μ = 0.3 at k = 2e7 N/m, and the box itself)."""
-    assert clean.attrs["group_program"] == "compiled"
+    whichever parameter was swept (the box's own μ = 0.3 at k = 2e7 N/m, and the box itself). `clean` made
+    its group program: compiled, or loaded where the session's cache folder holds it from an earlier run
+    (JAXHOIST_TEST_CACHE_DIR kept between sessions)."""
+    assert clean.attrs["group_program"] in ("compiled", "loaded")
     stiffnesses = np.array([1.0e7, 1.5e7, 2.0e7, 2.5e7])
     by_k = scan(box, {"foundation.stiffness": stiffnesses}, TIMES, **kw(chunk_size=4))
     stiffer = box.replace(**{"foundation.stiffness": 2.0e7})
@@ -194,8 +196,9 @@ def test_other_tolerances_reuse_the_compiled_group(box, clean):
     """The lock-step group program takes the step-size controller's tolerances as values
     (`batch.group_options`): the scan of `clean` at 100x looser tolerances runs `clean`'s group program
     without compiling, under those tolerances (under 0.6 of the steps in all, every final position within
-    1 mm of `clean`'s and not equal to it), and `clean`'s tolerances again give `clean` bit for bit."""
-    assert clean.attrs["group_program"] == "compiled"
+    1 mm of `clean`'s and not equal to it), and `clean`'s tolerances again give `clean` bit for bit. `clean`
+    compiled its group program, or loaded it from a kept cache folder (the test above)."""
+    assert clean.attrs["group_program"] in ("compiled", "loaded")
     loose = scan(box, {MU: MUS}, TIMES, **{**KW, "options": LOOSE, "batch": jh.BatchOptions(lanes=2)})
     assert loose.attrs["group_program"] == "reused" and np.all(loose.ok)
     assert loose.attrs["solver"]["rtol"] == 1e-4 and loose.attrs["solver"]["atol"] == 1e-6
@@ -455,7 +458,8 @@ def test_forward_sensitivities_match_differences(box, tmp_path):
     # the group program takes the tolerances as values (`batch.group_options`): at 100x looser ones the
     # same program runs (fewer steps; the sensitivities within 1e-3 relative: measured 1.9e-4)
     loose = derivative_scan(1e-7, 1e-9)
-    assert res.attrs["group_program"] == "compiled" and loose.attrs["group_program"] == "reused"
+    assert res.attrs["group_program"] in ("compiled", "loaded")  # loaded: from a kept cache folder
+    assert loose.attrs["group_program"] == "reused"
     assert np.all(loose.num_accepted_steps < res.num_accepted_steps)
     np.testing.assert_allclose(loose["d_final_x"][:, 0], dx, rtol=1e-3)
 
